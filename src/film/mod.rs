@@ -1,0 +1,1 @@
+//! film (see DESIGN.md §2).

@@ -1,0 +1,1 @@
+//! geom (see DESIGN.md §2).

@@ -1,0 +1,16 @@
+//! arbor: a RenderMan-style scene and shading language compiler with a REYES renderer.
+//!
+//! The pipeline (DESIGN.md §1): RIB text → [`rib`] requests → [`scene`] builder → `Scene`;
+//! shaders: [`sl`] preprocess → parse → check → compile → `Program`; render: [`render`] buckets
+//! → [`geom`] split/dice → [`shade`] grids → hiders → [`film`] filter and write.
+
+pub mod diag;
+pub mod film;
+pub mod geom;
+pub mod pattern;
+pub mod render;
+pub mod rib;
+pub mod scene;
+pub mod shade;
+pub mod sl;
+pub mod texture;

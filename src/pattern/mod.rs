@@ -1,0 +1,1 @@
+//! pattern (see DESIGN.md §2).

@@ -1,0 +1,1 @@
+//! render (see DESIGN.md §2).

@@ -1,0 +1,120 @@
+//! RIB input: ASCII (pest grammar `grammar/rib.pest`), binary (RISpec C.1) and gzip.
+//!
+//! Input: bytes of a RIB stream registered in the `SourceMap`.
+//! Output: a stream of [`Request`]s, each with the span of its name and of every argument.
+//! Invariants: a syntax error costs at most one request (the reader resynchronises at the next
+//! request name, RISpec C.2.2); numbers in arrays are read without a pest pair per number.
+
+use crate::diag::Span;
+
+/// One RIB argument value. Integers stay integers (nverts, handles); a number array holding
+/// any real is a float array.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    Int(i64),
+    Float(f32),
+    Str(String),
+    IntArray(Vec<i64>),
+    FloatArray(Vec<f32>),
+    StrArray(Vec<String>),
+}
+
+impl Value {
+    /// A single number (or a one-element number array) as f32.
+    pub fn as_f32(&self) -> Option<f32> {
+        match self {
+            Value::Int(i) => Some(*i as f32),
+            Value::Float(f) => Some(*f),
+            Value::IntArray(a) if a.len() == 1 => Some(a[0] as f32),
+            Value::FloatArray(a) if a.len() == 1 => Some(a[0]),
+            _ => None,
+        }
+    }
+    /// Every number of a number or a number array, as f32.
+    pub fn to_f32s(&self) -> Option<Vec<f32>> {
+        match self {
+            Value::Int(i) => Some(vec![*i as f32]),
+            Value::Float(f) => Some(vec![*f]),
+            Value::IntArray(a) => Some(a.iter().map(|&i| i as f32).collect()),
+            Value::FloatArray(a) => Some(a.clone()),
+            _ => None,
+        }
+    }
+    /// Every number as an integer; reals with a fraction are refused.
+    pub fn to_ints(&self) -> Option<Vec<i64>> {
+        match self {
+            Value::Int(i) => Some(vec![*i]),
+            Value::IntArray(a) => Some(a.clone()),
+            Value::Float(f) if f.fract() == 0.0 => Some(vec![*f as i64]),
+            Value::FloatArray(a) if a.iter().all(|f| f.fract() == 0.0) => {
+                Some(a.iter().map(|&f| f as i64).collect())
+            }
+            _ => None,
+        }
+    }
+    pub fn as_str(&self) -> Option<&str> {
+        match self {
+            Value::Str(s) => Some(s),
+            Value::StrArray(a) if a.len() == 1 => Some(&a[0]),
+            _ => None,
+        }
+    }
+    pub fn to_strings(&self) -> Option<Vec<String>> {
+        match self {
+            Value::Str(s) => Some(vec![s.clone()]),
+            Value::StrArray(a) => Some(a.clone()),
+            _ => None,
+        }
+    }
+    /// How many values this holds (1 for a scalar).
+    pub fn len(&self) -> usize {
+        match self {
+            Value::Int(_) | Value::Float(_) | Value::Str(_) => 1,
+            Value::IntArray(a) => a.len(),
+            Value::FloatArray(a) => a.len(),
+            Value::StrArray(a) => a.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn is_string(&self) -> bool {
+        matches!(self, Value::Str(_) | Value::StrArray(_))
+    }
+    pub fn is_array(&self) -> bool {
+        matches!(self, Value::IntArray(_) | Value::FloatArray(_) | Value::StrArray(_))
+    }
+    /// A short description for error messages ("a string", "an array of 3 numbers").
+    pub fn describe(&self) -> String {
+        match self {
+            Value::Int(_) | Value::Float(_) => "a number".into(),
+            Value::Str(_) => "a string".into(),
+            Value::IntArray(a) => format!("an array of {} numbers", a.len()),
+            Value::FloatArray(a) => format!("an array of {} numbers", a.len()),
+            Value::StrArray(a) => format!("an array of {} strings", a.len()),
+        }
+    }
+}
+
+/// One argument with the span it was read from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Arg {
+    pub value: Value,
+    pub span: Span,
+}
+
+/// One RIB request: its name as written and its arguments in order (positional arguments
+/// first, then the parameter list as alternating token strings and values).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Request {
+    pub name: String,
+    pub span: Span,
+    pub args: Vec<Arg>,
+}
+
+impl Request {
+    /// The span from the name to the last argument.
+    pub fn full_span(&self) -> Span {
+        self.args.last().map(|a| self.span.to(a.span)).unwrap_or(self.span)
+    }
+}

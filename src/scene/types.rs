@@ -1,0 +1,466 @@
+//! The built scene: plain data the renderer consumes, one [`Scene`] per frame.
+//!
+//! Invariants: geometry, primitive variables and shader parameters are stored as given, in the
+//! space that was current when they were declared (object space for primitives, shader space
+//! for shader parameters) together with the transform to world space; the renderer moves them
+//! to camera space. Colours have 3 components (ColorSamples other than RGB are converted by the
+//! builder). Every value count was validated by the builder.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::Span;
+
+/// Storage class of a parameter or primitive variable (RISpec §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Class {
+    Constant,
+    Uniform,
+    Varying,
+    Vertex,
+    FaceVarying,
+    FaceVertex,
+}
+
+/// Type of a parameter or primitive variable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ParamType {
+    Float,
+    Integer,
+    String,
+    Color,
+    Point,
+    Vector,
+    Normal,
+    HPoint,
+    Matrix,
+}
+
+impl ParamType {
+    /// Numbers per element (strings count 1).
+    pub fn components(self) -> usize {
+        match self {
+            ParamType::Float | ParamType::Integer | ParamType::String => 1,
+            ParamType::Color | ParamType::Point | ParamType::Vector | ParamType::Normal => 3,
+            ParamType::HPoint => 4,
+            ParamType::Matrix => 16,
+        }
+    }
+}
+
+/// A declaration: `"varying float[2] st"`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Decl {
+    pub class: Class,
+    pub ty: ParamType,
+    /// Array length; 1 for a plain value.
+    pub array_len: usize,
+}
+
+impl Decl {
+    /// Numbers (or strings) per element, including the array length.
+    pub fn width(&self) -> usize {
+        self.ty.components() * self.array_len
+    }
+}
+
+/// The values of a parameter, flattened.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ParamData {
+    Floats(Vec<f32>),
+    Strings(Vec<String>),
+}
+
+impl ParamData {
+    pub fn floats(&self) -> &[f32] {
+        match self {
+            ParamData::Floats(f) => f,
+            ParamData::Strings(_) => &[],
+        }
+    }
+    pub fn strings(&self) -> &[String] {
+        match self {
+            ParamData::Strings(s) => s,
+            ParamData::Floats(_) => &[],
+        }
+    }
+    pub fn len(&self) -> usize {
+        match self {
+            ParamData::Floats(f) => f.len(),
+            ParamData::Strings(s) => s.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// One entry of a parameter list, its declaration resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Param {
+    pub name: String,
+    pub decl: Decl,
+    pub data: ParamData,
+    pub span: Span,
+}
+
+/// A parameter list (shader parameters or primitive variables).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParamList(pub Vec<Param>);
+
+impl ParamList {
+    pub fn get(&self, name: &str) -> Option<&Param> {
+        self.0.iter().find(|p| p.name == name)
+    }
+    pub fn floats(&self, name: &str) -> Option<&[f32]> {
+        self.get(name).map(|p| p.data.floats())
+    }
+    pub fn float(&self, name: &str) -> Option<f32> {
+        self.floats(name).and_then(|f| f.first().copied())
+    }
+    pub fn string(&self, name: &str) -> Option<&str> {
+        self.get(name).and_then(|p| p.data.strings().first().map(String::as_str))
+    }
+    pub fn iter(&self) -> impl Iterator<Item = &Param> {
+        self.0.iter()
+    }
+}
+
+/// A shader named by a request (Surface, LightSource, Imager, …) with its parameter values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShaderRef {
+    pub name: String,
+    pub params: ParamList,
+    /// The request that named it, for diagnostics.
+    pub span: Span,
+    /// "shader" space: the transform current when the shader was declared.
+    pub world_from_shader: Mat4,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    Orthographic,
+    Perspective { fov: f32 },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct PixelFilter {
+    /// box, triangle, catmull-rom, gaussian, sinc, mitchell, disk, bessel.
+    pub name: String,
+    pub xwidth: f32,
+    pub ywidth: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantize {
+    pub one: f32,
+    pub min: f32,
+    pub max: f32,
+    pub dither: f32,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Display {
+    /// File name (the leading `+` removed).
+    pub name: String,
+    /// "file", "tiff", "png", "exr", "zfile", "shadow", "framebuffer", …
+    pub kind: String,
+    /// "rgb", "rgba", "z", "rgbaz", or an output variable name.
+    pub mode: String,
+    pub params: ParamList,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hider {
+    pub name: String,
+    pub params: ParamList,
+}
+
+/// Search paths after `&` and `@` expansion, in search order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SearchPaths {
+    pub shader: Vec<String>,
+    pub texture: Vec<String>,
+    pub archive: Vec<String>,
+    pub procedural: Vec<String>,
+}
+
+/// Camera and image options (RISpec §4.1), with the spec's defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    pub xres: u32,
+    pub yres: u32,
+    pub pixel_aspect: f32,
+    /// Set explicitly by FrameAspectRatio; otherwise follows Format.
+    pub frame_aspect: Option<f32>,
+    /// Set explicitly by ScreenWindow (left, right, bottom, top); otherwise follows the aspect.
+    pub screen_window: Option<[f32; 4]>,
+    /// xmin, xmax, ymin, ymax in NDC.
+    pub crop_window: [f32; 4],
+    pub projection: Projection,
+    pub near: f32,
+    pub far: f32,
+    /// Clipping planes in world space: (point, normal); the +normal side is clipped.
+    pub clipping_planes: Vec<(Vec3, Vec3)>,
+    /// fstop, focal length, focal distance; None = pinhole.
+    pub depth_of_field: Option<[f32; 3]>,
+    pub shutter: [f32; 2],
+    pub pixel_variance: Option<f32>,
+    pub pixel_samples: [f32; 2],
+    pub pixel_filter: PixelFilter,
+    /// gain, gamma.
+    pub exposure: [f32; 2],
+    pub imager: Option<ShaderRef>,
+    pub quantize_rgba: Quantize,
+    pub quantize_z: Quantize,
+    pub displays: Vec<Display>,
+    pub hider: Hider,
+    pub relative_detail: f32,
+    pub search_paths: SearchPaths,
+    /// `Option` values not named above, keyed "category:name" (e.g. "limits:bucketsize").
+    pub user: HashMap<String, Param>,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            xres: 640,
+            yres: 480,
+            pixel_aspect: 1.0,
+            frame_aspect: None,
+            screen_window: None,
+            crop_window: [0.0, 1.0, 0.0, 1.0],
+            projection: Projection::Orthographic,
+            near: f32::EPSILON,
+            far: f32::INFINITY,
+            clipping_planes: Vec::new(),
+            depth_of_field: None,
+            shutter: [0.0, 0.0],
+            pixel_variance: None,
+            pixel_samples: [2.0, 2.0],
+            pixel_filter: PixelFilter { name: "gaussian".into(), xwidth: 2.0, ywidth: 2.0 },
+            exposure: [1.0, 1.0],
+            imager: None,
+            quantize_rgba: Quantize { one: 255.0, min: 0.0, max: 255.0, dither: 0.5 },
+            quantize_z: Quantize { one: 0.0, min: 0.0, max: 0.0, dither: 0.0 },
+            displays: Vec::new(),
+            hider: Hider { name: "hidden".into(), params: ParamList::default() },
+            relative_detail: 1.0,
+            search_paths: SearchPaths::default(),
+            user: HashMap::new(),
+        }
+    }
+}
+
+impl Options {
+    /// The frame aspect ratio in force (FrameAspectRatio, else from Format).
+    pub fn effective_frame_aspect(&self) -> f32 {
+        self.frame_aspect
+            .unwrap_or(self.xres as f32 * self.pixel_aspect / self.yres.max(1) as f32)
+    }
+    /// The screen window in force (ScreenWindow, else the spec's default from the aspect).
+    pub fn effective_screen_window(&self) -> [f32; 4] {
+        if let Some(w) = self.screen_window {
+            return w;
+        }
+        let a = self.effective_frame_aspect();
+        if a >= 1.0 {
+            [-a, a, -1.0, 1.0]
+        } else {
+            [-1.0, 1.0, -1.0 / a, 1.0 / a]
+        }
+    }
+    /// A numeric user option, e.g. `user_floats("limits:bucketsize")`.
+    pub fn user_floats(&self, key: &str) -> Option<&[f32]> {
+        self.user.get(key).map(|p| p.data.floats())
+    }
+}
+
+/// Spline basis for bicubic patches: the 4×4 matrix (row-major as in RIB) and its step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Basis {
+    pub matrix: [f32; 16],
+    pub step: u32,
+}
+
+impl Basis {
+    pub const BEZIER: Basis = Basis {
+        matrix: [-1., 3., -3., 1., 3., -6., 3., 0., -3., 3., 0., 0., 1., 0., 0., 0.],
+        step: 3,
+    };
+}
+
+/// Shading attributes (RISpec §4.2) in force for a primitive.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Attributes {
+    pub color: Vec3,
+    pub opacity: Vec3,
+    /// s1 t1 s2 t2 s3 t3 s4 t4 for the parametric corners (0,0) (1,0) (0,1) (1,1).
+    pub texture_coordinates: [f32; 8],
+    pub surface: Option<Arc<ShaderRef>>,
+    pub displacement: Option<Arc<ShaderRef>>,
+    pub atmosphere: Option<Arc<ShaderRef>>,
+    pub interior: Option<Arc<ShaderRef>>,
+    pub exterior: Option<Arc<ShaderRef>>,
+    pub shading_rate: f32,
+    /// ShadingInterpolation "smooth".
+    pub smooth_shading: bool,
+    pub matte: bool,
+    pub bound: Option<[f32; 6]>,
+    pub detail: Option<[f32; 6]>,
+    pub detail_range: [f32; 4],
+    pub sides: u32,
+    /// Orientation: true when the current orientation is "inside"/flipped relative to the
+    /// handedness of the current transform (ReverseOrientation toggles it).
+    pub reverse_orientation: bool,
+    /// Attribute "displacementbound" "sphere" (in "coordinatesystem", default object).
+    pub displacement_bound: f32,
+    pub displacement_bound_space: String,
+    pub identifier: Option<String>,
+    pub u_basis: Basis,
+    pub v_basis: Basis,
+    /// Indices into `Scene::lights` of the lights switched on for this primitive.
+    pub lights_on: Vec<usize>,
+    /// `Attribute` values not named above, keyed "category:name".
+    pub user: HashMap<String, Param>,
+    /// GeometricApproximation "flatness" etc.
+    pub geometric_approximation: HashMap<String, f32>,
+}
+
+impl Default for Attributes {
+    fn default() -> Attributes {
+        Attributes {
+            color: Vec3::ONE,
+            opacity: Vec3::ONE,
+            texture_coordinates: [0., 0., 1., 0., 0., 1., 1., 1.],
+            surface: None,
+            displacement: None,
+            atmosphere: None,
+            interior: None,
+            exterior: None,
+            shading_rate: 1.0,
+            smooth_shading: false,
+            matte: false,
+            bound: None,
+            detail: None,
+            detail_range: [0.0, 0.0, f32::INFINITY, f32::INFINITY],
+            sides: 2,
+            reverse_orientation: false,
+            displacement_bound: 0.0,
+            displacement_bound_space: "object".into(),
+            identifier: None,
+            u_basis: Basis::BEZIER,
+            v_basis: Basis::BEZIER,
+            lights_on: Vec::new(),
+            user: HashMap::new(),
+            geometric_approximation: HashMap::new(),
+        }
+    }
+}
+
+/// A light source (LightSource or AreaLightSource).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light {
+    pub shader: Arc<ShaderRef>,
+    /// The handle as written (an integer or a string).
+    pub handle: String,
+    pub area: bool,
+}
+
+/// Geometry as given by the request, in object space. Angles are in degrees as in RIB.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Geometry {
+    Sphere { radius: f32, zmin: f32, zmax: f32, thetamax: f32 },
+    Cone { height: f32, radius: f32, thetamax: f32 },
+    Cylinder { radius: f32, zmin: f32, zmax: f32, thetamax: f32 },
+    Hyperboloid { p1: Vec3, p2: Vec3, thetamax: f32 },
+    Paraboloid { rmax: f32, zmin: f32, zmax: f32, thetamax: f32 },
+    Disk { height: f32, radius: f32, thetamax: f32 },
+    Torus { rmajor: f32, rminor: f32, phimin: f32, phimax: f32, thetamax: f32 },
+    /// Polygon, GeneralPolygon, PointsPolygons and PointsGeneralPolygons in one form:
+    /// per face the number of loops, per loop the number of vertices, then vertex indices.
+    /// The first loop of a face is its outline, the others are holes.
+    Polygons { nloops: Vec<u32>, nverts: Vec<u32>, verts: Vec<u32>, nvertices: usize },
+    /// Patch "bilinear"|"bicubic" and PatchMesh: control points in `primvars` ("P"/"Pw"/"Pz").
+    PatchMesh {
+        bicubic: bool,
+        nu: usize,
+        nv: usize,
+        uperiodic: bool,
+        vperiodic: bool,
+        u_basis: Basis,
+        v_basis: Basis,
+    },
+    NuPatch {
+        nu: usize,
+        uorder: usize,
+        uknot: Vec<f32>,
+        umin: f32,
+        umax: f32,
+        nv: usize,
+        vorder: usize,
+        vknot: Vec<f32>,
+        vmin: f32,
+        vmax: f32,
+        trim: Option<Arc<TrimCurves>>,
+    },
+    SubdivisionMesh {
+        scheme: String,
+        nverts: Vec<u32>,
+        verts: Vec<u32>,
+        tags: Vec<String>,
+        nargs: Vec<u32>,
+        intargs: Vec<i64>,
+        floatargs: Vec<f32>,
+    },
+    Points { npoints: usize },
+    Curves { cubic: bool, nverts: Vec<u32>, periodic: bool, v_basis: Basis },
+    /// `Geometry "name"` (teapot, fractalterrain, …) with its parameters.
+    Named { name: String },
+}
+
+/// TrimCurve data (RISpec §5.4).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrimCurves {
+    pub ncurves: Vec<u32>,
+    pub order: Vec<u32>,
+    pub knot: Vec<f32>,
+    pub min: Vec<f32>,
+    pub max: Vec<f32>,
+    pub n: Vec<u32>,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub w: Vec<f32>,
+    /// Attribute "trimcurve" "sense": false = "inside" (default), true = "outside".
+    pub sense_outside: bool,
+}
+
+/// One primitive ready to render.
+#[derive(Clone, Debug)]
+pub struct Primitive {
+    pub geometry: Arc<Geometry>,
+    /// Primitive variables (P, N, Cs, s, t, user variables), counts validated.
+    pub primvars: Arc<ParamList>,
+    pub attributes: Arc<Attributes>,
+    pub world_from_object: Mat4,
+    pub span: Span,
+}
+
+/// One frame's scene.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// FrameBegin number, if any.
+    pub frame: Option<i32>,
+    pub options: Options,
+    /// The transform current at WorldBegin.
+    pub camera_from_world: Mat4,
+    pub lights: Vec<Light>,
+    pub primitives: Vec<Primitive>,
+    /// CoordinateSystem names: world_from_named.
+    pub coordinate_systems: HashMap<String, Mat4>,
+    /// The file the scene came from (for relative search paths).
+    pub source_dir: Option<std::path::PathBuf>,
+}

@@ -1,0 +1,102 @@
+//! The shading grid: what the dicer produces and shaders run over.
+//!
+//! Input: a diced surface patch of `nu × nv` points (point `(i, j)` at index `j * nu + i`,
+//! `u` increasing with `i`, `v` with `j`).
+//! Output: after shading, `ci`/`oi` (and output variables in `outputs`) per point.
+//! Invariants: every per-point vector has exactly `nu * nv` entries; all positions, normals and
+//! vectors are in camera space ("current" space, as RenderMan shades); `du`/`dv` are the
+//! parametric steps between neighbouring points.
+
+use glam::Vec3;
+
+use crate::scene::ParamType;
+
+/// A primitive variable (or shader output) carried on a grid.
+#[derive(Clone, Debug)]
+pub struct GridVar {
+    pub name: String,
+    pub ty: ParamType,
+    pub array_len: usize,
+    /// True when one value serves the whole grid (constant/uniform class).
+    pub uniform: bool,
+    /// Flattened: `width` numbers per point (or just `width` when uniform).
+    pub floats: Vec<f32>,
+    /// String values (uniform only).
+    pub strings: Vec<String>,
+}
+
+impl GridVar {
+    pub fn width(&self) -> usize {
+        self.ty.components() * self.array_len
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct Grid {
+    pub nu: usize,
+    pub nv: usize,
+    pub p: Vec<Vec3>,
+    pub n: Vec<Vec3>,
+    pub ng: Vec<Vec3>,
+    pub dpdu: Vec<Vec3>,
+    pub dpdv: Vec<Vec3>,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub s: Vec<f32>,
+    pub t: Vec<f32>,
+    pub du: f32,
+    pub dv: f32,
+    pub cs: Vec<Vec3>,
+    pub os: Vec<Vec3>,
+    /// Incident ray direction P − E (E is the origin for perspective views; for orthographic
+    /// views I is (0,0,1) scaled to reach P).
+    pub i: Vec<Vec3>,
+    pub ci: Vec<Vec3>,
+    pub oi: Vec<Vec3>,
+    /// Primitive variables other than the standard ones, bound to shader parameters by name.
+    pub primvars: Vec<GridVar>,
+    /// Shader output variables after shading (for arbitrary output variables in Display).
+    pub outputs: Vec<GridVar>,
+}
+
+impl Grid {
+    pub fn len(&self) -> usize {
+        self.nu * self.nv
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// A grid of `nu × nv` points with every per-point field sized and zeroed
+    /// (Cs and Os white, Oi opaque).
+    pub fn with_size(nu: usize, nv: usize) -> Grid {
+        let n = nu * nv;
+        Grid {
+            nu,
+            nv,
+            p: vec![Vec3::ZERO; n],
+            n: vec![Vec3::ZERO; n],
+            ng: vec![Vec3::ZERO; n],
+            dpdu: vec![Vec3::ZERO; n],
+            dpdv: vec![Vec3::ZERO; n],
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            s: vec![0.0; n],
+            t: vec![0.0; n],
+            du: 0.0,
+            dv: 0.0,
+            cs: vec![Vec3::ONE; n],
+            os: vec![Vec3::ONE; n],
+            i: vec![Vec3::ZERO; n],
+            ci: vec![Vec3::ZERO; n],
+            oi: vec![Vec3::ONE; n],
+            primvars: Vec::new(),
+            outputs: Vec::new(),
+        }
+    }
+    pub fn primvar(&self, name: &str) -> Option<&GridVar> {
+        self.primvars.iter().find(|v| v.name == name)
+    }
+    pub fn output(&self, name: &str) -> Option<&GridVar> {
+        self.outputs.iter().find(|v| v.name == name)
+    }
+}

@@ -1,0 +1,1 @@
+//! sl (see DESIGN.md §2).

@@ -1,0 +1,1 @@
+//! texture (see DESIGN.md §2).
