@@ -22,14 +22,22 @@ pub struct Span {
 
 impl Span {
     pub fn new(file: u32, start: usize, end: usize) -> Span {
-        Span { file, start: start as u32, end: end as u32 }
+        Span {
+            file,
+            start: start as u32,
+            end: end as u32,
+        }
     }
     /// The smallest span covering both (same file assumed; otherwise `self`).
     pub fn to(self, other: Span) -> Span {
         if self.file != other.file {
             return self;
         }
-        Span { file: self.file, start: self.start.min(other.start), end: self.end.max(other.end) }
+        Span {
+            file: self.file,
+            start: self.start.min(other.start),
+            end: self.end.max(other.end),
+        }
     }
     pub fn len(&self) -> usize {
         (self.end - self.start) as usize
@@ -59,7 +67,10 @@ impl SourceMap {
     /// Registers a file and returns its id.
     pub fn add(&self, name: impl Into<String>, text: impl Into<Arc<str>>) -> u32 {
         let mut files = self.files.write().unwrap_or_else(|e| e.into_inner());
-        files.push(Arc::new(SourceFile { name: name.into(), text: text.into() }));
+        files.push(Arc::new(SourceFile {
+            name: name.into(),
+            text: text.into(),
+        }));
         (files.len() - 1) as u32
     }
     pub fn get(&self, id: u32) -> Option<Arc<SourceFile>> {
@@ -69,16 +80,28 @@ impl SourceMap {
     /// The text a span covers ("" when out of range).
     pub fn snippet(&self, span: Span) -> String {
         self.get(span.file)
-            .and_then(|f| f.text.get(span.start as usize..span.end as usize).map(str::to_string))
+            .and_then(|f| {
+                f.text
+                    .get(span.start as usize..span.end as usize)
+                    .map(str::to_string)
+            })
             .unwrap_or_default()
     }
     /// 1-based line and column of a span's start.
     pub fn line_col(&self, span: Span) -> (usize, usize) {
-        let Some(f) = self.get(span.file) else { return (0, 0) };
+        let Some(f) = self.get(span.file) else {
+            return (0, 0);
+        };
         let pos = (span.start as usize).min(f.text.len());
         let before = &f.text.as_bytes()[..pos];
         let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
-        let col = pos - before.iter().rposition(|&b| b == b'\n').map(|p| p + 1).unwrap_or(0) + 1;
+        let col = pos
+            - before
+                .iter()
+                .rposition(|&b| b == b'\n')
+                .map(|p| p + 1)
+                .unwrap_or(0)
+            + 1;
         (line, col)
     }
 }
@@ -101,10 +124,22 @@ pub struct Diag {
 
 impl Diag {
     pub fn error(code: &'static str, message: impl Into<String>) -> Diag {
-        Diag { severity: Severity::Error, code, message: message.into(), labels: vec![], help: None }
+        Diag {
+            severity: Severity::Error,
+            code,
+            message: message.into(),
+            labels: vec![],
+            help: None,
+        }
     }
     pub fn warning(code: &'static str, message: impl Into<String>) -> Diag {
-        Diag { severity: Severity::Warning, code, message: message.into(), labels: vec![], help: None }
+        Diag {
+            severity: Severity::Warning,
+            code,
+            message: message.into(),
+            labels: vec![],
+            help: None,
+        }
     }
     pub fn label(mut self, span: Span, text: impl Into<String>) -> Diag {
         self.labels.push((span, text.into()));
@@ -155,10 +190,16 @@ impl Diag {
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
-        match self.primary_span().and_then(|s| sources.get(s.file).map(|f| (s, f))) {
+        match self
+            .primary_span()
+            .and_then(|s| sources.get(s.file).map(|f| (s, f)))
+        {
             Some((s, f)) => {
                 let (l, c) = sources.line_col(s);
-                format!("{}:{}:{}: {}[{}]: {}", f.name, l, c, sev, self.code, self.message)
+                format!(
+                    "{}:{}:{}: {}[{}]: {}",
+                    f.name, l, c, sev, self.code, self.message
+                )
             }
             None => format!("{}[{}]: {}", sev, self.code, self.message),
         }
@@ -175,7 +216,8 @@ impl SourceCode for SourceText {
         context_lines_before: usize,
         context_lines_after: usize,
     ) -> Result<Box<dyn SpanContents<'a> + 'a>, MietteError> {
-        self.0.read_span(span, context_lines_before, context_lines_after)
+        self.0
+            .read_span(span, context_lines_before, context_lines_after)
     }
 }
 
@@ -207,7 +249,9 @@ impl miette::Diagnostic for Reportable {
         })
     }
     fn help<'a>(&'a self) -> Option<Box<dyn fmt::Display + 'a>> {
-        self.help.as_ref().map(|h| Box::new(h) as Box<dyn fmt::Display>)
+        self.help
+            .as_ref()
+            .map(|h| Box::new(h) as Box<dyn fmt::Display>)
     }
     fn source_code(&self) -> Option<&dyn SourceCode> {
         self.source.as_ref().map(|s| s as &dyn SourceCode)
@@ -263,7 +307,11 @@ impl Diagnostics {
     }
     /// Every diagnostic so far with its count, in report order.
     pub fn snapshot(&self) -> Vec<(Diag, usize)> {
-        self.inner.lock().unwrap_or_else(|e| e.into_inner()).list.clone()
+        self.inner
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .list
+            .clone()
     }
     /// Removes and returns everything reported so far.
     pub fn take(&self) -> Vec<(Diag, usize)> {
@@ -276,8 +324,10 @@ impl Diagnostics {
     pub fn render_plain(&self, sources: &SourceMap) -> String {
         let mut out = String::new();
         for (d, n) in self.snapshot() {
-            let handler = miette::GraphicalReportHandler::new_themed(miette::GraphicalTheme::unicode_nocolor())
-                .with_width(100);
+            let handler = miette::GraphicalReportHandler::new_themed(
+                miette::GraphicalTheme::unicode_nocolor(),
+            )
+            .with_width(100);
             let report = d.to_report(sources, n);
             let _ = handler.render_report(&mut out, report.as_ref());
         }
@@ -286,7 +336,10 @@ impl Diagnostics {
 }
 
 /// "Did you mean" helper: the closest candidate by edit distance, if close enough.
-pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub fn did_you_mean<'a>(
+    word: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
     let lw = word.to_ascii_lowercase();
     let mut best: Option<(usize, &str)> = None;
     for c in candidates {
@@ -295,7 +348,8 @@ pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str
             best = Some((d, c));
         }
     }
-    best.filter(|&(d, c)| d <= (c.len().max(word.len()) / 3).max(2)).map(|(_, c)| c)
+    best.filter(|&(d, c)| d <= (c.len().max(word.len()) / 3).max(2))
+        .map(|(_, c)| c)
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {
@@ -340,7 +394,10 @@ mod tests {
 
     #[test]
     fn did_you_mean_finds_close_names() {
-        assert_eq!(did_you_mean("Sphre", ["Sphere", "Cone", "Disk"]), Some("Sphere"));
+        assert_eq!(
+            did_you_mean("Sphre", ["Sphere", "Cone", "Disk"]),
+            Some("Sphere")
+        );
         assert_eq!(did_you_mean("Zzzzzzzz", ["Sphere", "Cone"]), None);
     }
 }

@@ -121,7 +121,8 @@ impl ParamList {
         self.floats(name).and_then(|f| f.first().copied())
     }
     pub fn string(&self, name: &str) -> Option<&str> {
-        self.get(name).and_then(|p| p.data.strings().first().map(String::as_str))
+        self.get(name)
+            .and_then(|p| p.data.strings().first().map(String::as_str))
     }
     pub fn iter(&self) -> impl Iterator<Item = &Param> {
         self.0.iter()
@@ -241,13 +242,30 @@ impl Default for Options {
             shutter: [0.0, 0.0],
             pixel_variance: None,
             pixel_samples: [2.0, 2.0],
-            pixel_filter: PixelFilter { name: "gaussian".into(), xwidth: 2.0, ywidth: 2.0 },
+            pixel_filter: PixelFilter {
+                name: "gaussian".into(),
+                xwidth: 2.0,
+                ywidth: 2.0,
+            },
             exposure: [1.0, 1.0],
             imager: None,
-            quantize_rgba: Quantize { one: 255.0, min: 0.0, max: 255.0, dither: 0.5 },
-            quantize_z: Quantize { one: 0.0, min: 0.0, max: 0.0, dither: 0.0 },
+            quantize_rgba: Quantize {
+                one: 255.0,
+                min: 0.0,
+                max: 255.0,
+                dither: 0.5,
+            },
+            quantize_z: Quantize {
+                one: 0.0,
+                min: 0.0,
+                max: 0.0,
+                dither: 0.0,
+            },
             displays: Vec::new(),
-            hider: Hider { name: "hidden".into(), params: ParamList::default() },
+            hider: Hider {
+                name: "hidden".into(),
+                params: ParamList::default(),
+            },
             relative_detail: 1.0,
             search_paths: SearchPaths::default(),
             user: HashMap::new(),
@@ -288,7 +306,9 @@ pub struct Basis {
 
 impl Basis {
     pub const BEZIER: Basis = Basis {
-        matrix: [-1., 3., -3., 1., 3., -6., 3., 0., -3., 3., 0., 0., 1., 0., 0., 0.],
+        matrix: [
+            -1., 3., -3., 1., 3., -6., 3., 0., -3., 3., 0., 0., 1., 0., 0., 0.,
+        ],
         step: 3,
     };
 }
@@ -373,17 +393,55 @@ pub struct Light {
 /// Geometry as given by the request, in object space. Angles are in degrees as in RIB.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Geometry {
-    Sphere { radius: f32, zmin: f32, zmax: f32, thetamax: f32 },
-    Cone { height: f32, radius: f32, thetamax: f32 },
-    Cylinder { radius: f32, zmin: f32, zmax: f32, thetamax: f32 },
-    Hyperboloid { p1: Vec3, p2: Vec3, thetamax: f32 },
-    Paraboloid { rmax: f32, zmin: f32, zmax: f32, thetamax: f32 },
-    Disk { height: f32, radius: f32, thetamax: f32 },
-    Torus { rmajor: f32, rminor: f32, phimin: f32, phimax: f32, thetamax: f32 },
+    Sphere {
+        radius: f32,
+        zmin: f32,
+        zmax: f32,
+        thetamax: f32,
+    },
+    Cone {
+        height: f32,
+        radius: f32,
+        thetamax: f32,
+    },
+    Cylinder {
+        radius: f32,
+        zmin: f32,
+        zmax: f32,
+        thetamax: f32,
+    },
+    Hyperboloid {
+        p1: Vec3,
+        p2: Vec3,
+        thetamax: f32,
+    },
+    Paraboloid {
+        rmax: f32,
+        zmin: f32,
+        zmax: f32,
+        thetamax: f32,
+    },
+    Disk {
+        height: f32,
+        radius: f32,
+        thetamax: f32,
+    },
+    Torus {
+        rmajor: f32,
+        rminor: f32,
+        phimin: f32,
+        phimax: f32,
+        thetamax: f32,
+    },
     /// Polygon, GeneralPolygon, PointsPolygons and PointsGeneralPolygons in one form:
     /// per face the number of loops, per loop the number of vertices, then vertex indices.
     /// The first loop of a face is its outline, the others are holes.
-    Polygons { nloops: Vec<u32>, nverts: Vec<u32>, verts: Vec<u32>, nvertices: usize },
+    Polygons {
+        nloops: Vec<u32>,
+        nverts: Vec<u32>,
+        verts: Vec<u32>,
+        nvertices: usize,
+    },
     /// Patch "bilinear"|"bicubic" and PatchMesh: control points in `primvars` ("P"/"Pw"/"Pz").
     PatchMesh {
         bicubic: bool,
@@ -416,10 +474,19 @@ pub enum Geometry {
         intargs: Vec<i64>,
         floatargs: Vec<f32>,
     },
-    Points { npoints: usize },
-    Curves { cubic: bool, nverts: Vec<u32>, periodic: bool, v_basis: Basis },
+    Points {
+        npoints: usize,
+    },
+    Curves {
+        cubic: bool,
+        nverts: Vec<u32>,
+        periodic: bool,
+        v_basis: Basis,
+    },
     /// `Geometry "name"` (teapot, fractalterrain, …) with its parameters.
-    Named { name: String },
+    Named {
+        name: String,
+    },
 }
 
 /// TrimCurve data (RISpec §5.4).

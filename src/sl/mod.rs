@@ -1,1 +1,5 @@
-//! sl (see DESIGN.md §2).
+//! The RenderMan Shading Language compiler: preprocess → parse → check → compile.
+//!
+//! Input: `.sl` source. Output: a `Program` for the shading runtime.
+
+pub mod ast;
