@@ -1,1 +1,5 @@
-//! render (see DESIGN.md §2).
+//! The REYES renderer: camera, buckets, split/dice decisions, hiders, and the frame driver.
+
+pub mod camera;
+
+pub use camera::Camera;
