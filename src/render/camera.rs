@@ -37,7 +37,7 @@ impl Camera {
     pub fn camera_from_space(&self, name: &str) -> Option<Mat4> {
         match name {
             "camera" | "current" => Some(Mat4::IDENTITY),
-            "world" => Some(self.camera_from_world.inverse()),
+            "world" => Some(self.camera_from_world),
             "screen" => Some(self.screen_from_camera.inverse()),
             "NDC" => Some((self.ndc_from_screen * self.screen_from_camera).inverse()),
             "raster" => Some(self.raster_from_camera().inverse()),
