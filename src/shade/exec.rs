@@ -1,0 +1,615 @@
+//! The grid interpreter: runs a compiled [`Program`] over every point of a grid at once.
+//!
+//! Input: a program, its register file (globals and parameters already bound) and the
+//! shading environment. Output: the register file after the run.
+//! Invariants: computation instructions run over all points (they write temporaries);
+//! stores honour the running mask; a point leaves the mask on `break`, `continue` and
+//! `return` and rejoins where the language says it does. Faults never panic: they write a
+//! defined value and warn once per shader.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::{Diag, Diagnostics, Span};
+use crate::shade::ops;
+use crate::shade::value::*;
+use crate::sl::ir::*;
+
+/// The running mask: which points execute.
+#[derive(Clone, Debug)]
+pub struct Mask {
+    pub bits: Vec<bool>,
+    pub count: usize,
+}
+
+impl Mask {
+    pub fn all(n: usize) -> Mask {
+        Mask { bits: vec![true; n], count: n }
+    }
+    pub fn none(n: usize) -> Mask {
+        Mask { bits: vec![false; n], count: 0 }
+    }
+    pub fn from_bits(bits: Vec<bool>) -> Mask {
+        let count = bits.iter().filter(|&&b| b).count();
+        Mask { bits, count }
+    }
+    pub fn is_all(&self) -> bool {
+        self.count == self.bits.len()
+    }
+    pub fn is_none(&self) -> bool {
+        self.count == 0
+    }
+    pub fn and_not(&mut self, other: &[bool]) {
+        for (b, &o) in self.bits.iter_mut().zip(other) {
+            *b &= !o;
+        }
+        self.recount();
+    }
+    pub fn recount(&mut self) {
+        self.count = self.bits.iter().filter(|&&b| b).count();
+    }
+}
+
+/// The transforms, lights and information a program may ask for.
+pub struct Env<'a> {
+    pub nu: usize,
+    pub nv: usize,
+    /// camera_from_space by name ("object", "shader", "world", "camera", "screen", "NDC",
+    /// "raster", and CoordinateSystem names).
+    pub spaces: &'a dyn Fn(&str) -> Option<Mat4>,
+    /// Lights evaluated for this grid (surface and volume shaders).
+    pub lights: &'a [LightResult],
+    /// Whether diced normals were flipped (calculatenormal follows the same orientation).
+    pub flip_normals: bool,
+    pub near: f32,
+    pub far: f32,
+    pub shader_name: &'a str,
+    pub diags: &'a Diagnostics,
+    /// attribute()/option()/rendererinfo() answers.
+    pub info: &'a dyn Fn(&str, &str) -> Option<InfoValue>,
+    /// Texture lookups (None: textures are unavailable and return their fill value).
+    pub textures: Option<&'a dyn TextureLookup>,
+    /// Seed for random(): a hash of the grid's identity so results are deterministic.
+    pub seed: u32,
+}
+
+/// A value answered by attribute()/option()/rendererinfo()/message passing.
+#[derive(Clone, Debug)]
+pub enum InfoValue {
+    Floats(Vec<f32>),
+    Str(String),
+}
+
+/// Texture access from shaders (implemented by the texture system).
+pub trait TextureLookup: Sync {
+    /// Filtered lookup; returns `nchan` channels per point starting at `first_chan`.
+    #[allow(clippy::too_many_arguments)]
+    fn texture(
+        &self,
+        name: &str,
+        first_chan: usize,
+        nchan: usize,
+        st: &[[f32; 8]],
+        params: &TextureParams,
+        out: &mut [f32],
+    ) -> bool;
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct TextureParams {
+    pub blur: f32,
+    pub swidth: f32,
+    pub twidth: f32,
+    pub fill: f32,
+    pub filter: String,
+    pub samples: f32,
+    pub bias: f32,
+}
+
+/// One light's contribution on a grid.
+#[derive(Clone, Debug)]
+pub struct LightResult {
+    pub ambient: bool,
+    /// Points the light reaches (illuminate/solar cone).
+    pub lit: Vec<bool>,
+    /// Direction from the surface point toward the light (length = distance for local lights).
+    pub l: Vec<Vec3>,
+    pub cl: Vec<Vec3>,
+    pub ol: Vec<Vec3>,
+    pub category: String,
+    pub nondiffuse: bool,
+    pub nonspecular: bool,
+    /// The light's parameters after the run (for lightsource()).
+    pub outputs: Vec<(String, Slot)>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum FrameKind {
+    Loop,
+    Function,
+}
+
+struct Frame {
+    kind: FrameKind,
+    broken: Vec<bool>,
+    outward: Vec<bool>,
+}
+
+/// State of a light shader run: what illuminate/solar produced.
+#[derive(Default)]
+pub struct LightState {
+    pub ran: bool,
+    pub lit: Vec<bool>,
+    /// P of the surface points being lit.
+    pub ps: Vec<Vec3>,
+    /// Normal of the surface being lit (for solar() without arguments).
+    pub ns: Vec<Vec3>,
+}
+
+pub struct Exec<'a> {
+    pub prog: &'a Program,
+    pub regs: Vec<Slot>,
+    pub n: usize,
+    pub env: &'a Env<'a>,
+    frames: Vec<Frame>,
+    pub light: Option<LightState>,
+    /// The light whose illuminance body is running (for lightsource()).
+    pub current_light: Option<usize>,
+    iterations: u64,
+}
+
+const MAX_ITERATIONS: u64 = 1 << 26;
+
+impl<'a> Exec<'a> {
+    /// A register file with constants set and every other register zeroed.
+    pub fn new(prog: &'a Program, n: usize, env: &'a Env<'a>) -> Exec<'a> {
+        let mut regs: Vec<Slot> = prog
+            .regs
+            .iter()
+            .map(|r| match r.kind {
+                Kind::Float => Slot::F(0.0),
+                Kind::Triple => Slot::T(Vec3::ZERO),
+                Kind::Matrix => Slot::M(Mat4::IDENTITY),
+                Kind::Str => Slot::S(Arc::from("")),
+            })
+            .collect();
+        for (r, c) in &prog.consts {
+            regs[*r as usize] = match c {
+                Const::F(x) => Slot::F(*x),
+                Const::T(x) => Slot::T(*x),
+                Const::M(x) => Slot::M(*x),
+                Const::S(x) => Slot::S(x.clone()),
+            };
+        }
+        Exec { prog, regs, n, env, frames: Vec::new(), light: None, current_light: None, iterations: 0 }
+    }
+
+    pub fn warn(&self, span: Span, msg: impl Into<String>) {
+        self.env.diags.report(
+            Diag::warning("shade::runtime", format!("shader `{}`: {}", self.env.shader_name, msg.into()))
+                .label(span, "here"),
+        );
+    }
+
+    /// Runs parameter defaults.
+    pub fn run_init(&mut self) {
+        let mut mask = Mask::all(self.n);
+        let init = &self.prog.init;
+        self.block(init, &mut mask);
+    }
+
+    /// Runs the body over every point.
+    pub fn run_body(&mut self) {
+        let mut mask = Mask::all(self.n);
+        self.frames.push(Frame { kind: FrameKind::Function, broken: vec![false; self.n], outward: vec![false; self.n] });
+        let body = &self.prog.body;
+        self.block(body, &mut mask);
+        self.frames.pop();
+    }
+
+    /// Sets a register to a value (used to bind globals and parameters).
+    pub fn set(&mut self, reg: Reg, v: Slot) {
+        self.regs[reg as usize] = v;
+    }
+
+    fn block(&mut self, instrs: &'a [Instr], mask: &mut Mask) {
+        for i in instrs {
+            if mask.is_none() {
+                return;
+            }
+            self.instr(i, mask);
+        }
+    }
+
+    fn cond_bits(&self, reg: Reg) -> Result<bool, Vec<bool>> {
+        match &self.regs[reg as usize] {
+            Slot::VF(v) => Err(v.iter().map(|&x| x != 0.0).collect()),
+            s => Ok(s.f().first() != 0.0),
+        }
+    }
+
+    fn exit_to(&mut self, levels: usize, kind_stop: Option<FrameKind>, mask: &mut Mask) {
+        // Record the exiting points in the innermost `levels` frames.
+        let len = self.frames.len();
+        let mut k = 0;
+        while k < levels && k < len {
+            let f = &mut self.frames[len - 1 - k];
+            let last = k + 1 == levels;
+            for (i, &b) in mask.bits.iter().enumerate() {
+                if b {
+                    f.broken[i] = true;
+                    if !last {
+                        f.outward[i] = true;
+                    }
+                }
+            }
+            if Some(f.kind) == kind_stop {
+                break;
+            }
+            k += 1;
+        }
+        mask.bits.iter_mut().for_each(|b| *b = false);
+        mask.count = 0;
+    }
+
+    fn instr(&mut self, ins: &'a Instr, mask: &mut Mask) {
+        let n = self.n;
+        match ins {
+            Instr::Mov { dst, src } => self.mov(*dst, *src, mask),
+            Instr::Copy { dst, src } => {
+                let v = self.regs[*src as usize].clone();
+                let info = self.prog.regs[*dst as usize];
+                self.regs[*dst as usize] = if info.varying && !v.is_varying() { broadcast(&v, n) } else { v };
+            }
+            Instr::If { cond, then, otherwise } => match self.cond_bits(*cond) {
+                Ok(true) => self.block(then, mask),
+                Ok(false) => self.block(otherwise, mask),
+                Err(bits) => {
+                    let mut tm: Vec<bool> = mask.bits.iter().zip(&bits).map(|(&m, &c)| m && c).collect();
+                    let mut em: Vec<bool> = mask.bits.iter().zip(&bits).map(|(&m, &c)| m && !c).collect();
+                    let mut t = Mask::from_bits(std::mem::take(&mut tm));
+                    let mut e = Mask::from_bits(std::mem::take(&mut em));
+                    if !t.is_none() {
+                        self.block(then, &mut t);
+                    }
+                    if !e.is_none() && !otherwise.is_empty() {
+                        self.block(otherwise, &mut e);
+                    }
+                    for i in 0..n {
+                        mask.bits[i] = t.bits[i] || e.bits[i];
+                    }
+                    mask.recount();
+                }
+            },
+            Instr::Loop { cond_code, cond, body, step } => {
+                self.frames.push(Frame { kind: FrameKind::Loop, broken: vec![false; n], outward: vec![false; n] });
+                let mut loop_mask = mask.clone();
+                loop {
+                    self.iterations += 1;
+                    if self.iterations > MAX_ITERATIONS {
+                        self.warn(self.prog.span, "a loop ran too long and was stopped");
+                        break;
+                    }
+                    let mut cm = loop_mask.clone();
+                    self.block(cond_code, &mut cm);
+                    match self.cond_bits(*cond) {
+                        Ok(true) => {}
+                        Ok(false) => break,
+                        Err(bits) => {
+                            for (m, c) in loop_mask.bits.iter_mut().zip(bits) {
+                                *m &= c;
+                            }
+                            loop_mask.recount();
+                        }
+                    }
+                    if loop_mask.is_none() {
+                        break;
+                    }
+                    let mut bm = loop_mask.clone();
+                    self.block(body, &mut bm);
+                    let broken = self.frames.last().map(|f| f.broken.clone()).unwrap_or_default();
+                    loop_mask.and_not(&broken);
+                    if loop_mask.is_none() {
+                        break;
+                    }
+                    let mut sm = loop_mask.clone();
+                    self.block(step, &mut sm);
+                }
+                if let Some(f) = self.frames.pop() {
+                    mask.and_not(&f.outward);
+                }
+            }
+            Instr::Break(k) => self.exit_to(*k as usize, None, mask),
+            Instr::Continue(k) => {
+                let k = *k as usize;
+                // Inner loops are left; loop k skips to its step.
+                if k > 1 {
+                    let mut m = mask.clone();
+                    self.exit_to(k - 1, None, &mut m);
+                }
+                mask.bits.iter_mut().for_each(|b| *b = false);
+                mask.count = 0;
+            }
+            Instr::Return => {
+                let levels = self.frames.iter().rev().position(|f| f.kind == FrameKind::Function).map(|p| p + 1);
+                self.exit_to(levels.unwrap_or(self.frames.len()), Some(FrameKind::Function), mask);
+            }
+            Instr::Function { body } => {
+                self.frames.push(Frame { kind: FrameKind::Function, broken: vec![false; n], outward: vec![false; n] });
+                let mut m = mask.clone();
+                self.block(body, &mut m);
+                self.frames.pop();
+            }
+            Instr::Illuminance { category, pos: _, axis, body } => self.illuminance(*category, *axis, body, mask),
+            Instr::Illuminate { pos, axis, body } => self.illuminate(Some(*pos), *axis, body, mask),
+            Instr::Solar { axis, body } => self.illuminate(None, *axis, body, mask),
+            Instr::Gather { otherwise } => self.block(otherwise, mask),
+            Instr::SetIndex { kind: _, base, len, index, src, span } => {
+                let idx = self.regs[*index as usize].f();
+                let mut warned = false;
+                if !idx.is_varying() {
+                    let i = idx.first() as i64;
+                    let i = if i < 0 || i >= *len as i64 {
+                        warned = true;
+                        i.clamp(0, *len as i64 - 1)
+                    } else {
+                        i
+                    };
+                    self.mov(*base + i as Reg, *src, mask);
+                } else {
+                    for k in 0..*len {
+                        let sel: Vec<bool> = (0..n)
+                            .map(|p| {
+                                let i = idx.at(p) as i64;
+                                if i < 0 || i >= *len as i64 {
+                                    warned = true;
+                                }
+                                mask.bits[p] && i.clamp(0, *len as i64 - 1) == k as i64
+                            })
+                            .collect();
+                        let m = Mask::from_bits(sel);
+                        if !m.is_none() {
+                            self.mov(*base + k, *src, &m);
+                        }
+                    }
+                }
+                if warned {
+                    self.warn(*span, "array index out of range (clamped)");
+                }
+            }
+            other => ops::compute(self, other),
+        }
+    }
+
+    /// Masked store, broadcasting uniform sources into varying destinations.
+    pub fn mov(&mut self, dst: Reg, src: Reg, mask: &Mask) {
+        let n = self.n;
+        let dinfo = self.prog.regs[dst as usize];
+        if dst == src {
+            return;
+        }
+        if !dinfo.varying {
+            // Uniform destination: uniform source (checked at compile time).
+            let v = self.regs[src as usize].clone();
+            self.regs[dst as usize] = match v {
+                Slot::VF(x) => Slot::F(first_active(&x, mask)),
+                Slot::VT(x) => Slot::T(first_active(&x, mask)),
+                Slot::VM(x) => Slot::M(first_active(&x, mask)),
+                s => s,
+            };
+            return;
+        }
+        let mut out = std::mem::take(&mut self.regs[dst as usize]);
+        let s = &self.regs[src as usize];
+        let all = mask.is_all();
+        match dinfo.kind {
+            Kind::Float => {
+                let a = s.f();
+                let mut v = match out {
+                    Slot::VF(v) if v.len() == n => v,
+                    Slot::F(x) => vec![x; n],
+                    _ => vec![0.0; n],
+                };
+                if all {
+                    match a {
+                        F::U(x) => v.iter_mut().for_each(|o| *o = x),
+                        F::V(x) => v.copy_from_slice(x),
+                    }
+                } else {
+                    for i in 0..n {
+                        if mask.bits[i] {
+                            v[i] = a.at(i);
+                        }
+                    }
+                }
+                out = Slot::VF(v);
+            }
+            Kind::Triple => {
+                let a = s.t();
+                let mut v = match out {
+                    Slot::VT(v) if v.len() == n => v,
+                    Slot::T(x) => vec![x; n],
+                    _ => vec![Vec3::ZERO; n],
+                };
+                if all {
+                    match a {
+                        T::U(x) => v.iter_mut().for_each(|o| *o = x),
+                        T::V(x) => v.copy_from_slice(x),
+                    }
+                } else {
+                    for i in 0..n {
+                        if mask.bits[i] {
+                            v[i] = a.at(i);
+                        }
+                    }
+                }
+                out = Slot::VT(v);
+            }
+            Kind::Matrix => {
+                let a = s.m();
+                let mut v = match out {
+                    Slot::VM(v) if v.len() == n => v,
+                    Slot::M(x) => vec![x; n],
+                    _ => vec![Mat4::IDENTITY; n],
+                };
+                for i in 0..n {
+                    if all || mask.bits[i] {
+                        v[i] = a.at(i);
+                    }
+                }
+                out = Slot::VM(v);
+            }
+            Kind::Str => out = s.clone(),
+        }
+        self.regs[dst as usize] = out;
+    }
+
+    fn reg_of(&self, name: &str) -> Option<Reg> {
+        self.prog.global(name).map(|g| g.reg)
+    }
+
+    fn illuminance(&mut self, category: Option<Reg>, axis: Option<(Reg, Reg)>, body: &'a [Instr], mask: &mut Mask) {
+        let n = self.n;
+        let cat = category.map(|r| self.regs[r as usize].s());
+        let (lr, clr, olr) = (self.reg_of("L"), self.reg_of("Cl"), self.reg_of("Ol"));
+        let axis_vals = axis.map(|(a, ang)| (self.regs[a as usize].t(), self.regs[ang as usize].f()));
+        let axis_vals: Option<(Vec<Vec3>, Vec<f32>)> = axis_vals.map(|(a, ang)| {
+            ((0..n).map(|i| a.at(i)).collect(), (0..n).map(|i| ang.at(i)).collect())
+        });
+        let lights = self.env.lights;
+        for (li, light) in lights.iter().enumerate() {
+            if light.ambient {
+                continue;
+            }
+            if let Some(c) = &cat {
+                if !category_matches(c, &light.category) {
+                    continue;
+                }
+            }
+            let mut bits = vec![false; n];
+            let mut any = false;
+            for i in 0..n {
+                if !(mask.bits[i] && light.lit[i]) {
+                    continue;
+                }
+                let ok = match &axis_vals {
+                    Some((ax, ang)) => {
+                        let l = light.l[i];
+                        let (al, ll) = (ax[i].length(), l.length());
+                        if al == 0.0 || ll == 0.0 {
+                            true
+                        } else {
+                            let c = ax[i].dot(l) / (al * ll);
+                            c >= ang[i].min(std::f32::consts::PI).cos() - 1e-6
+                        }
+                    }
+                    None => true,
+                };
+                if ok {
+                    bits[i] = true;
+                    any = true;
+                }
+            }
+            if !any {
+                continue;
+            }
+            if let Some(r) = lr {
+                self.regs[r as usize] = Slot::VT(light.l.clone());
+            }
+            if let Some(r) = clr {
+                self.regs[r as usize] = Slot::VT(light.cl.clone());
+            }
+            if let Some(r) = olr {
+                self.regs[r as usize] = Slot::VT(light.ol.clone());
+            }
+            self.current_light = Some(li);
+            let mut m = Mask::from_bits(bits);
+            self.block(body, &mut m);
+            self.current_light = None;
+        }
+    }
+
+    fn illuminate(&mut self, pos: Option<Reg>, axis: Option<(Reg, Reg)>, body: &'a [Instr], mask: &mut Mask) {
+        let n = self.n;
+        let Some(state) = self.light.take() else {
+            return;
+        };
+        let lreg = self.reg_of("L");
+        let mut l = vec![Vec3::ZERO; n];
+        let mut bits = vec![false; n];
+        match pos {
+            Some(p) => {
+                let from = self.regs[p as usize].t();
+                for i in 0..n {
+                    l[i] = state.ps[i] - from.at(i);
+                }
+            }
+            None => match axis {
+                Some((a, _)) => {
+                    let ax = self.regs[a as usize].t();
+                    for (i, li) in l.iter_mut().enumerate() {
+                        *li = ax.at(i);
+                    }
+                }
+                None => {
+                    for i in 0..n {
+                        l[i] = -state.ns[i];
+                    }
+                }
+            },
+        }
+        match (pos, axis) {
+            (Some(_), Some((a, ang))) => {
+                let ax = self.regs[a as usize].t();
+                let an = self.regs[ang as usize].f();
+                for i in 0..n {
+                    let (axl, ll) = (ax.at(i).length(), l[i].length());
+                    let c = if axl == 0.0 || ll == 0.0 { 1.0 } else { ax.at(i).dot(l[i]) / (axl * ll) };
+                    bits[i] = mask.bits[i] && c >= an.at(i).min(std::f32::consts::PI).cos() - 1e-6;
+                }
+            }
+            _ => bits.copy_from_slice(&mask.bits),
+        }
+        if let Some(r) = lreg {
+            self.regs[r as usize] = Slot::VT(l);
+        }
+        let mut m = Mask::from_bits(bits.clone());
+        let mut state = state;
+        state.ran = true;
+        for (a, b) in state.lit.iter_mut().zip(&bits) {
+            *a |= *b;
+        }
+        self.light = Some(state);
+        if !m.is_none() {
+            self.block(body, &mut m);
+        }
+    }
+}
+
+fn first_active<X: Copy + Default>(v: &[X], mask: &Mask) -> X {
+    v.iter().zip(&mask.bits).find(|(_, &b)| b).map(|(x, _)| *x).or_else(|| v.first().copied()).unwrap_or_default()
+}
+
+/// A uniform slot repeated to `n` points.
+pub fn broadcast(v: &Slot, n: usize) -> Slot {
+    match v {
+        Slot::F(x) => Slot::VF(vec![*x; n]),
+        Slot::T(x) => Slot::VT(vec![*x; n]),
+        Slot::M(x) => Slot::VM(vec![*x; n]),
+        s => s.clone(),
+    }
+}
+
+/// `illuminance("cat", …)`: the light's `__category` is a comma-separated list; a leading `-`
+/// in the pattern excludes lights of that category.
+pub fn category_matches(pattern: &str, category: &str) -> bool {
+    let cats: Vec<&str> = category.split(',').map(str::trim).collect();
+    if let Some(neg) = pattern.strip_prefix('-') {
+        !cats.contains(&neg)
+    } else if pattern.is_empty() {
+        true
+    } else {
+        cats.contains(&pattern)
+    }
+}

@@ -1,0 +1,1555 @@
+//! Computation instructions and built-in functions over whole grids.
+//!
+//! Input: an instruction whose operands are registers of an [`Exec`]. Output: the destination
+//! register (and output-argument temporaries). Invariants: never panics on any value (division
+//! by zero, NaN, out-of-range): a defined value is written and a warning is reported once per
+//! shader; results are uniform when every operand is uniform.
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{IVec3, Mat3, Mat4, Vec3, Vec4};
+
+use crate::pattern::noise as pn;
+use crate::shade::color;
+use crate::shade::exec::{Exec, InfoValue, TextureParams};
+use crate::shade::value::*;
+use crate::sl::builtins::Builtin;
+use crate::sl::ir::*;
+
+fn take(ex: &mut Exec, r: Reg) -> Slot {
+    std::mem::take(&mut ex.regs[r as usize])
+}
+
+fn put(ex: &mut Exec, r: Reg, s: Slot) {
+    ex.regs[r as usize] = s;
+}
+
+#[inline]
+fn safe_div(a: f32, b: f32) -> f32 {
+    if b == 0.0 {
+        0.0
+    } else {
+        a / b
+    }
+}
+
+#[inline]
+fn safe_div3(a: Vec3, b: Vec3) -> Vec3 {
+    Vec3::new(safe_div(a.x, b.x), safe_div(a.y, b.y), safe_div(a.z, b.z))
+}
+
+#[inline]
+fn normalize(v: Vec3) -> Vec3 {
+    let l = v.length();
+    if l > 0.0 {
+        v / l
+    } else {
+        Vec3::ZERO
+    }
+}
+
+/// Runs one computation instruction.
+pub fn compute(ex: &mut Exec, ins: &Instr) {
+    let n = ex.n;
+    match ins {
+        Instr::Arith { op, kind, dst, a, b } => {
+            let mut out = take(ex, *dst);
+            let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
+            match kind {
+                Kind::Float => {
+                    let (x, y) = (ra.f(), rb.f());
+                    match op {
+                        Arith::Add => zip_ff(&mut out, n, x, y, |a, b| a + b),
+                        Arith::Sub => zip_ff(&mut out, n, x, y, |a, b| a - b),
+                        Arith::Mul => zip_ff(&mut out, n, x, y, |a, b| a * b),
+                        Arith::Div => {
+                            let zero = match y {
+                                F::U(v) => v == 0.0,
+                                F::V(v) => v.iter().any(|&z| z == 0.0),
+                            };
+                            zip_ff(&mut out, n, x, y, safe_div);
+                            if zero {
+                                put(ex, *dst, out);
+                                ex.warn(ex.prog.span, "division by zero (result set to 0)");
+                                return;
+                            }
+                        }
+                    }
+                }
+                Kind::Triple => {
+                    let (x, y) = (ra.t(), rb.t());
+                    match op {
+                        Arith::Add => zip_tt(&mut out, n, x, y, |a, b| a + b),
+                        Arith::Sub => zip_tt(&mut out, n, x, y, |a, b| a - b),
+                        Arith::Mul => zip_tt(&mut out, n, x, y, |a, b| a * b),
+                        Arith::Div => zip_tt(&mut out, n, x, y, safe_div3),
+                    }
+                }
+                Kind::Matrix => {
+                    let (x, y) = (ra.m(), rb.m());
+                    let v = x.is_varying() || y.is_varying();
+                    match op {
+                        Arith::Add => write_m(&mut out, n, v, |i| x.at(i) + y.at(i)),
+                        Arith::Sub => write_m(&mut out, n, v, |i| x.at(i) - y.at(i)),
+                        // RSL row-vector a*b is glam b*a (matrices are stored transposed).
+                        Arith::Mul => write_m(&mut out, n, v, |i| y.at(i) * x.at(i)),
+                        Arith::Div => write_m(&mut out, n, v, |i| inverse(y.at(i)) * x.at(i)),
+                    }
+                }
+                Kind::Str => out = Slot::S(Arc::from("")),
+            }
+            put(ex, *dst, out);
+        }
+        Instr::Neg { kind, dst, a } => {
+            let mut out = take(ex, *dst);
+            let ra = &ex.regs[*a as usize];
+            match kind {
+                Kind::Float => {
+                    let x = ra.f();
+                    write_f(&mut out, n, x.is_varying(), |i| -x.at(i))
+                }
+                Kind::Triple => {
+                    let x = ra.t();
+                    write_t(&mut out, n, x.is_varying(), |i| -x.at(i))
+                }
+                Kind::Matrix => {
+                    let x = ra.m();
+                    write_m(&mut out, n, x.is_varying(), |i| -x.at(i))
+                }
+                Kind::Str => {}
+            }
+            put(ex, *dst, out);
+        }
+        Instr::Promote { to, dst, a } => {
+            let mut out = take(ex, *dst);
+            let x = ex.regs[*a as usize].f();
+            match to {
+                Kind::Matrix => write_m(&mut out, n, x.is_varying(), |i| Mat4::IDENTITY * x.at(i)),
+                _ => write_t(&mut out, n, x.is_varying(), |i| Vec3::splat(x.at(i))),
+            }
+            put(ex, *dst, out);
+        }
+        Instr::Dot { dst, a, b } => {
+            let mut out = take(ex, *dst);
+            let (x, y) = (ex.regs[*a as usize].t(), ex.regs[*b as usize].t());
+            zip_tt_f(&mut out, n, x, y, |a, b| a.dot(b));
+            put(ex, *dst, out);
+        }
+        Instr::Cross { dst, a, b } => {
+            let mut out = take(ex, *dst);
+            let (x, y) = (ex.regs[*a as usize].t(), ex.regs[*b as usize].t());
+            zip_tt(&mut out, n, x, y, |a, b| a.cross(b));
+            put(ex, *dst, out);
+        }
+        Instr::Compare { op, kind, dst, a, b } => {
+            let mut out = take(ex, *dst);
+            let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
+            let c = *op;
+            match kind {
+                Kind::Float => zip_ff(&mut out, n, ra.f(), rb.f(), |x, y| b2f(cmp_f(c, x, y))),
+                Kind::Triple => {
+                    let (x, y) = (ra.t(), rb.t());
+                    let eq = c == Cmp::Eq;
+                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| b2f((x.at(i) == y.at(i)) == eq))
+                }
+                Kind::Matrix => {
+                    let (x, y) = (ra.m(), rb.m());
+                    let eq = c == Cmp::Eq;
+                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| b2f((x.at(i) == y.at(i)) == eq))
+                }
+                Kind::Str => {
+                    let eq = ra.s() == rb.s();
+                    out = Slot::F(b2f(eq == (c == Cmp::Eq)));
+                }
+            }
+            put(ex, *dst, out);
+        }
+        Instr::And { dst, a, b } => {
+            let mut out = take(ex, *dst);
+            zip_ff(&mut out, n, ex.regs[*a as usize].f(), ex.regs[*b as usize].f(), |x, y| b2f(x != 0.0 && y != 0.0));
+            put(ex, *dst, out);
+        }
+        Instr::Or { dst, a, b } => {
+            let mut out = take(ex, *dst);
+            zip_ff(&mut out, n, ex.regs[*a as usize].f(), ex.regs[*b as usize].f(), |x, y| b2f(x != 0.0 || y != 0.0));
+            put(ex, *dst, out);
+        }
+        Instr::Not { dst, a } => {
+            let mut out = take(ex, *dst);
+            let x = ex.regs[*a as usize].f();
+            write_f(&mut out, n, x.is_varying(), |i| b2f(x.at(i) == 0.0));
+            put(ex, *dst, out);
+        }
+        Instr::Select { kind, dst, cond, a, b } => {
+            let mut out = take(ex, *dst);
+            let c = ex.regs[*cond as usize].f();
+            let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
+            let v = c.is_varying() || ra.is_varying() || rb.is_varying();
+            match kind {
+                Kind::Float => {
+                    let (x, y) = (ra.f(), rb.f());
+                    write_f(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                }
+                Kind::Triple => {
+                    let (x, y) = (ra.t(), rb.t());
+                    write_t(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                }
+                Kind::Matrix => {
+                    let (x, y) = (ra.m(), rb.m());
+                    write_m(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                }
+                Kind::Str => out = if c.first() != 0.0 { ra.clone() } else { rb.clone() },
+            }
+            put(ex, *dst, out);
+        }
+        Instr::MakeTriple { dst, x, y, z } => {
+            let mut out = take(ex, *dst);
+            let (a, b, c) = (ex.regs[*x as usize].f(), ex.regs[*y as usize].f(), ex.regs[*z as usize].f());
+            let v = a.is_varying() || b.is_varying() || c.is_varying();
+            write_t(&mut out, n, v, |i| Vec3::new(a.at(i), b.at(i), c.at(i)));
+            put(ex, *dst, out);
+        }
+        Instr::MakeMatrix { dst, elems } => {
+            let mut out = take(ex, *dst);
+            let vals: Vec<F> = elems.iter().map(|r| ex.regs[*r as usize].f()).collect();
+            let v = vals.iter().any(|x| x.is_varying());
+            write_m(&mut out, n, v, |i| {
+                let mut a = [0f32; 16];
+                for (k, x) in vals.iter().enumerate() {
+                    a[k] = x.at(i);
+                }
+                Mat4::from_cols_array(&a)
+            });
+            put(ex, *dst, out);
+        }
+        Instr::ColorFrom { dst, space, a } => {
+            let mut out = take(ex, *dst);
+            let sp = ex.regs[*space as usize].s();
+            let x = ex.regs[*a as usize].t();
+            let ok = color::is_space(&sp);
+            write_t(&mut out, n, x.is_varying(), |i| color::to_rgb(&sp, x.at(i)));
+            put(ex, *dst, out);
+            if !ok {
+                ex.warn(ex.prog.span, format!("unknown colour space \"{sp}\" (treated as rgb)"));
+            }
+        }
+        Instr::SpaceMatrix { dst, space } => {
+            let sp = ex.regs[*space as usize].s();
+            let m = space_matrix(ex, &sp);
+            put(ex, *dst, Slot::M(m));
+        }
+        Instr::Transform { kind, dst, from, to, a } => {
+            let mut out = take(ex, *dst);
+            let fm = space_operand(ex, *from, true);
+            let tm = space_operand(ex, *to, false);
+            let x = ex.regs[*a as usize].t();
+            let v = x.is_varying() || fm.is_varying() || tm.is_varying();
+            let k = *kind;
+            write_t(&mut out, n, v, |i| {
+                let m = tm.at(i) * fm.at(i);
+                apply(k, m, x.at(i))
+            });
+            put(ex, *dst, out);
+        }
+        Instr::GetIndex { kind, dst, base, len, index, span } => {
+            let mut out = take(ex, *dst);
+            let idx = ex.regs[*index as usize].f();
+            let len = *len as i64;
+            let mut bad = false;
+            let pick = |i: usize, bad: &mut bool| -> usize {
+                let k = idx.at(i) as i64;
+                if k < 0 || k >= len {
+                    *bad = true;
+                }
+                (*base as i64 + k.clamp(0, len - 1)) as usize
+            };
+            let v = idx.is_varying() || ex.prog.regs[*dst as usize].varying;
+            match kind {
+                Kind::Float => {
+                    let mut o = if v { take_vf(&mut out, n) } else { vec![0.0] };
+                    for (i, oi) in o.iter_mut().enumerate() {
+                        let r = pick(i, &mut bad);
+                        *oi = ex.regs[r].f().at(i);
+                    }
+                    out = if v { Slot::VF(o) } else { Slot::F(o[0]) };
+                }
+                Kind::Triple => {
+                    let mut o = if v { take_vt(&mut out, n) } else { vec![Vec3::ZERO] };
+                    for (i, oi) in o.iter_mut().enumerate() {
+                        let r = pick(i, &mut bad);
+                        *oi = ex.regs[r].t().at(i);
+                    }
+                    out = if v { Slot::VT(o) } else { Slot::T(o[0]) };
+                }
+                Kind::Matrix => {
+                    let r = pick(0, &mut bad);
+                    out = ex.regs[r].clone();
+                }
+                Kind::Str => {
+                    let r = pick(0, &mut bad);
+                    out = ex.regs[r].clone();
+                }
+            }
+            put(ex, *dst, out);
+            if bad {
+                ex.warn(*span, "array index out of range (clamped)");
+            }
+        }
+        Instr::Call { f, dst, args, span } => call(ex, *f, *dst, args, *span),
+        _ => {}
+    }
+}
+
+#[inline]
+fn b2f(b: bool) -> f32 {
+    if b {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+#[inline]
+fn cmp_f(c: Cmp, x: f32, y: f32) -> bool {
+    match c {
+        Cmp::Eq => x == y,
+        Cmp::Ne => x != y,
+        Cmp::Lt => x < y,
+        Cmp::Le => x <= y,
+        Cmp::Gt => x > y,
+        Cmp::Ge => x >= y,
+    }
+}
+
+fn inverse(m: Mat4) -> Mat4 {
+    let d = m.determinant();
+    if d == 0.0 || !d.is_finite() {
+        Mat4::ZERO
+    } else {
+        m.inverse()
+    }
+}
+
+#[inline]
+fn apply(k: XformKind, m: Mat4, p: Vec3) -> Vec3 {
+    match k {
+        XformKind::Point => {
+            let h = m * Vec4::new(p.x, p.y, p.z, 1.0);
+            if h.w != 0.0 && h.w != 1.0 {
+                h.truncate() / h.w
+            } else {
+                h.truncate()
+            }
+        }
+        XformKind::Vector => m.transform_vector3(p),
+        XformKind::Normal => {
+            let m3 = Mat3::from_mat4(m);
+            let d = m3.determinant();
+            if d == 0.0 {
+                p
+            } else {
+                m3.inverse().transpose() * p
+            }
+        }
+    }
+}
+
+/// camera_from_space for a named space; identity with a warning when unknown.
+fn space_matrix(ex: &Exec, name: &str) -> Mat4 {
+    match (ex.env.spaces)(name) {
+        Some(m) => m,
+        None => {
+            ex.warn(ex.prog.span, format!("unknown coordinate system \"{name}\" (identity used)"));
+            Mat4::IDENTITY
+        }
+    }
+}
+
+/// The matrix for a transform operand: `from` spaces map to current (camera), `to` spaces map
+/// from current.
+fn space_operand<'a>(ex: &'a Exec, s: Space, from: bool) -> M<'a> {
+    match s {
+        Space::Current => M::U(Mat4::IDENTITY),
+        Space::Named(r) => {
+            let m = space_matrix(ex, &ex.regs[r as usize].s());
+            M::U(if from { m } else { inverse(m) })
+        }
+        Space::Matrix(r) => {
+            // transform(m, p): m maps current to the target directly.
+            let m = ex.regs[r as usize].m();
+            if from {
+                M::U(Mat4::IDENTITY)
+            } else {
+                m
+            }
+        }
+    }
+}
+
+fn arg<'a>(ex: &'a Exec, args: &[Reg], i: usize) -> &'a Slot {
+    &ex.regs[args[i] as usize]
+}
+
+/// Central differences along u (`dir` 0) or v (`dir` 1) of a float field, divided by the step.
+pub fn deriv_f(x: &[f32], nu: usize, nv: usize, dir: usize, step: f32) -> Vec<f32> {
+    let n = x.len();
+    let mut out = vec![0.0; n];
+    if nu * nv != n || n == 0 {
+        return out;
+    }
+    let inv = if step != 0.0 { 1.0 / step } else { 0.0 };
+    for j in 0..nv {
+        for i in 0..nu {
+            let k = j * nu + i;
+            let (a, b, d) = if dir == 0 {
+                if nu < 2 {
+                    (k, k, 1.0)
+                } else if i == 0 {
+                    (k, k + 1, 1.0)
+                } else if i == nu - 1 {
+                    (k - 1, k, 1.0)
+                } else {
+                    (k - 1, k + 1, 2.0)
+                }
+            } else if nv < 2 {
+                (k, k, 1.0)
+            } else if j == 0 {
+                (k, k + nu, 1.0)
+            } else if j == nv - 1 {
+                (k - nu, k, 1.0)
+            } else {
+                (k - nu, k + nu, 2.0)
+            };
+            out[k] = (x[b] - x[a]) * inv / d;
+        }
+    }
+    out
+}
+
+pub fn deriv_t(x: &[Vec3], nu: usize, nv: usize, dir: usize, step: f32) -> Vec<Vec3> {
+    let xs: Vec<f32> = x.iter().map(|p| p.x).collect();
+    let ys: Vec<f32> = x.iter().map(|p| p.y).collect();
+    let zs: Vec<f32> = x.iter().map(|p| p.z).collect();
+    let (a, b, c) = (deriv_f(&xs, nu, nv, dir, step), deriv_f(&ys, nu, nv, dir, step), deriv_f(&zs, nu, nv, dir, step));
+    (0..x.len()).map(|i| Vec3::new(a[i], b[i], c[i])).collect()
+}
+
+fn global_f(ex: &Exec, name: &str) -> f32 {
+    ex.prog.global(name).map(|g| ex.regs[g.reg as usize].f().first()).unwrap_or(0.0)
+}
+
+fn du_dv(ex: &Exec) -> (f32, f32) {
+    (global_f(ex, "du"), global_f(ex, "dv"))
+}
+
+fn vec_f(s: &Slot, n: usize) -> Vec<f32> {
+    let f = s.f();
+    (0..n).map(|i| f.at(i)).collect()
+}
+
+fn vec_t(s: &Slot, n: usize) -> Vec<Vec3> {
+    let t = s.t();
+    (0..n).map(|i| t.at(i)).collect()
+}
+
+/// Catmull-Rom style spline evaluation over knots with a basis (RISpec §15.1).
+pub fn spline_eval<V>(basis: &str, x: f32, knots: &[V]) -> V
+where
+    V: Copy + std::ops::Mul<f32, Output = V> + std::ops::Add<Output = V>,
+{
+    let (m, step): ([[f32; 4]; 4], usize) = match basis {
+        "bezier" => ([[-1., 3., -3., 1.], [3., -6., 3., 0.], [-3., 3., 0., 0.], [1., 0., 0., 0.]], 3),
+        "b-spline" | "bspline" => (
+            [
+                [-1. / 6., 3. / 6., -3. / 6., 1. / 6.],
+                [3. / 6., -6. / 6., 3. / 6., 0.],
+                [-3. / 6., 0., 3. / 6., 0.],
+                [1. / 6., 4. / 6., 1. / 6., 0.],
+            ],
+            1,
+        ),
+        "hermite" => ([[2., 1., -2., 1.], [-3., -2., 3., -1.], [0., 1., 0., 0.], [1., 0., 0., 0.]], 2),
+        "power" => ([[1., 0., 0., 0.], [0., 1., 0., 0.], [0., 0., 1., 0.], [0., 0., 0., 1.]], 4),
+        "linear" => ([[0., 0., 0., 0.], [0., 0., 0., 0.], [0., -1., 1., 0.], [0., 1., 0., 0.]], 1),
+        _ => ([[-0.5, 1.5, -1.5, 0.5], [1., -2.5, 2., -0.5], [-0.5, 0., 0.5, 0.], [0., 1., 0., 0.]], 1),
+    };
+    let nk = knots.len();
+    if nk < 4 {
+        return knots[0] * 1.0;
+    }
+    let nseg = (nk - 4) / step + 1;
+    let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+    let fx = x * nseg as f32;
+    let seg = (fx.floor() as usize).min(nseg - 1);
+    let t = fx - seg as f32;
+    let c = &knots[seg * step..seg * step + 4];
+    // power basis: coefficients are the knots directly (highest power first per RISpec).
+    let tp = [t * t * t, t * t, t, 1.0];
+    let mut w = [0f32; 4];
+    for (k, wk) in w.iter_mut().enumerate() {
+        for r in 0..4 {
+            *wk += tp[r] * m[r][k];
+        }
+    }
+    if basis == "power" {
+        return c[0] * tp[0] + c[1] * tp[1] + c[2] * tp[2] + c[3] * tp[3];
+    }
+    c[0] * w[0] + c[1] * w[1] + c[2] * w[2] + c[3] * w[3]
+}
+
+fn set_out(ex: &mut Exec, r: Reg, s: Slot) {
+    let varying = ex.prog.regs[r as usize].varying;
+    ex.regs[r as usize] = if varying && !s.is_varying() { crate::shade::exec::broadcast(&s, ex.n) } else { s };
+}
+
+fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span) {
+    use Builtin::*;
+    let n = ex.n;
+    let mut out = take(ex, dst);
+    macro_rules! f1 {
+        ($e:expr) => {{
+            let a = arg(ex, args, 0).f();
+            let g = $e;
+            write_f(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+        }};
+    }
+    macro_rules! f2 {
+        ($e:expr) => {{
+            zip_ff(&mut out, n, arg(ex, args, 0).f(), arg(ex, args, 1).f(), $e);
+        }};
+    }
+    macro_rules! f3 {
+        ($e:expr) => {{
+            let (a, b, c) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            let g = $e;
+            write_f(&mut out, n, a.is_varying() || b.is_varying() || c.is_varying(), |i| g(a.at(i), b.at(i), c.at(i)));
+        }};
+    }
+    macro_rules! t1f {
+        ($e:expr) => {{
+            let a = arg(ex, args, 0).t();
+            let g = $e;
+            write_f(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+        }};
+    }
+    macro_rules! t1t {
+        ($e:expr) => {{
+            let a = arg(ex, args, 0).t();
+            let g = $e;
+            write_t(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+        }};
+    }
+    macro_rules! varying_any {
+        () => {
+            args.iter().any(|r| ex.regs[*r as usize].is_varying())
+        };
+    }
+    match f {
+        Radians => f1!(|x: f32| x.to_radians()),
+        Degrees => f1!(|x: f32| x.to_degrees()),
+        Sin => f1!(|x: f32| x.sin()),
+        Cos => f1!(|x: f32| x.cos()),
+        Tan => f1!(|x: f32| x.tan()),
+        Asin => f1!(|x: f32| x.clamp(-1.0, 1.0).asin()),
+        Acos => f1!(|x: f32| x.clamp(-1.0, 1.0).acos()),
+        Atan1 => f1!(|x: f32| x.atan()),
+        Atan2 => f2!(|y, x| y.atan2(x)),
+        Pow => f2!(|x: f32, y: f32| {
+            let r = x.powf(y);
+            if r.is_finite() {
+                r
+            } else {
+                0.0
+            }
+        }),
+        Exp => f1!(|x: f32| x.exp()),
+        Sqrt => f1!(|x: f32| x.max(0.0).sqrt()),
+        InvSqrt => f1!(|x: f32| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 }),
+        Log => f1!(|x: f32| if x > 0.0 { x.ln() } else { -f32::MAX }),
+        LogBase => f2!(|x: f32, b: f32| if x > 0.0 && b > 0.0 && b != 1.0 { x.ln() / b.ln() } else { 0.0 }),
+        Mod => f2!(|a: f32, b: f32| if b == 0.0 { 0.0 } else { a - b * (a / b).floor() }),
+        Abs => f1!(|x: f32| x.abs()),
+        Sign => f1!(|x: f32| if x > 0.0 {
+            1.0
+        } else if x < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }),
+        Floor => f1!(|x: f32| x.floor()),
+        Ceil => f1!(|x: f32| x.ceil()),
+        Round => f1!(|x: f32| x.round()),
+        IsNan => f1!(|x: f32| b2f(x.is_nan())),
+        MinF | MaxF => {
+            let ops: Vec<F> = args.iter().map(|r| ex.regs[*r as usize].f()).collect();
+            let mx = f == MaxF;
+            write_f(&mut out, n, varying_any!(), |i| {
+                let mut r = ops[0].at(i);
+                for o in &ops[1..] {
+                    r = if mx { r.max(o.at(i)) } else { r.min(o.at(i)) };
+                }
+                r
+            });
+        }
+        MinT | MaxT => {
+            let ops: Vec<T> = args.iter().map(|r| ex.regs[*r as usize].t()).collect();
+            let mx = f == MaxT;
+            write_t(&mut out, n, varying_any!(), |i| {
+                let mut r = ops[0].at(i);
+                for o in &ops[1..] {
+                    r = if mx { r.max(o.at(i)) } else { r.min(o.at(i)) };
+                }
+                r
+            });
+        }
+        ClampF => f3!(|x: f32, a: f32, b: f32| x.max(a).min(b)),
+        ClampT => {
+            let (x, a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
+            write_t(&mut out, n, varying_any!(), |i| x.at(i).max(a.at(i)).min(b.at(i)));
+        }
+        MixF => f3!(|a: f32, b: f32, t: f32| a * (1.0 - t) + b * t),
+        MixT => {
+            let (a, b, t) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
+            write_t(&mut out, n, varying_any!(), |i| a.at(i) * (1.0 - t.at(i)) + b.at(i) * t.at(i));
+        }
+        MixTT => {
+            let (a, b, t) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
+            write_t(&mut out, n, varying_any!(), |i| a.at(i) * (Vec3::ONE - t.at(i)) + b.at(i) * t.at(i));
+        }
+        Step => f2!(|e: f32, x: f32| b2f(x >= e)),
+        SmoothStep => f3!(smoothstep),
+        FilterStep => {
+            // args: npos, edge, s1 [, s2], params…
+            let npos = arg(ex, args, 0).f().first() as usize;
+            let edge = arg(ex, args, 1).f();
+            let s1 = arg(ex, args, 2).f();
+            let s2 = if npos >= 3 { Some(arg(ex, args, 3).f()) } else { None };
+            let mut width = 1.0;
+            let mut filter: Arc<str> = Arc::from("catmull-rom");
+            let mut k = 1 + npos;
+            while k + 1 < args.len() {
+                let name = arg(ex, args, k).s();
+                match &*name {
+                    "width" | "swidth" | "twidth" => width = arg(ex, args, k + 1).f().first(),
+                    "filter" => filter = arg(ex, args, k + 1).s(),
+                    _ => {}
+                }
+                k += 2;
+            }
+            let (du, dv) = du_dv(ex);
+            let (nu, nv) = (ex.env.nu, ex.env.nv);
+            let s1v = vec_f(arg(ex, args, 2), n);
+            let fw: Vec<f32> = match s2 {
+                Some(s2) => (0..n).map(|i| (s2.at(i) - s1.at(i)).abs()).collect(),
+                None => {
+                    let a = deriv_f(&s1v, nu, nv, 0, 1.0);
+                    let b = deriv_f(&s1v, nu, nv, 1, 1.0);
+                    let _ = (du, dv);
+                    (0..n).map(|i| a[i].abs() + b[i].abs()).collect()
+                }
+            };
+            let box_filter = &*filter == "box";
+            write_f(&mut out, n, true, |i| {
+                let w = fw[i] * width;
+                let x = match s2 {
+                    Some(s2) => 0.5 * (s1.at(i) + s2.at(i)),
+                    None => s1.at(i),
+                };
+                filtered_step(edge.at(i), x, w, box_filter)
+            });
+        }
+        SplineF | SplineT | SplineBasisF | SplineBasisT | SplineArrayF | SplineArrayT | SplineBasisArrayF
+        | SplineBasisArrayT => {
+            let has_basis = matches!(f, SplineBasisF | SplineBasisT | SplineBasisArrayF | SplineBasisArrayT);
+            let basis: Arc<str> = if has_basis { arg(ex, args, 0).s() } else { Arc::from("catmull-rom") };
+            let o = usize::from(has_basis);
+            let x = arg(ex, args, o).f();
+            let knots = &args[o + 1..];
+            let v = varying_any!();
+            if knots.len() < 4 {
+                ex.warn(span, "spline needs at least 4 knots");
+            }
+            if matches!(f, SplineF | SplineBasisF | SplineArrayF | SplineBasisArrayF) {
+                let ks: Vec<F> = knots.iter().map(|r| ex.regs[*r as usize].f()).collect();
+                write_f(&mut out, n, v, |i| {
+                    let kv: Vec<f32> = ks.iter().map(|k| k.at(i)).collect();
+                    if kv.is_empty() {
+                        0.0
+                    } else {
+                        spline_eval(&basis, x.at(i), &kv)
+                    }
+                });
+            } else {
+                let ks: Vec<T> = knots.iter().map(|r| ex.regs[*r as usize].t()).collect();
+                write_t(&mut out, n, v, |i| {
+                    let kv: Vec<Vec3> = ks.iter().map(|k| k.at(i)).collect();
+                    if kv.is_empty() {
+                        Vec3::ZERO
+                    } else {
+                        spline_eval(&basis, x.at(i), &kv)
+                    }
+                });
+            }
+        }
+        DuF | DvF => {
+            let (du, dv) = du_dv(ex);
+            let x = vec_f(arg(ex, args, 0), n);
+            let d = if f == DuF { deriv_f(&x, ex.env.nu, ex.env.nv, 0, du) } else { deriv_f(&x, ex.env.nu, ex.env.nv, 1, dv) };
+            out = Slot::VF(d);
+        }
+        DuT | DvT => {
+            let (du, dv) = du_dv(ex);
+            let x = vec_t(arg(ex, args, 0), n);
+            let d = if f == DuT { deriv_t(&x, ex.env.nu, ex.env.nv, 0, du) } else { deriv_t(&x, ex.env.nu, ex.env.nv, 1, dv) };
+            out = Slot::VT(d);
+        }
+        DerivF => {
+            let (du, dv) = du_dv(ex);
+            let (nu, nv) = (ex.env.nu, ex.env.nv);
+            let num = vec_f(arg(ex, args, 0), n);
+            let den = vec_f(arg(ex, args, 1), n);
+            let (a, b) = (deriv_f(&num, nu, nv, 0, du), deriv_f(&num, nu, nv, 1, dv));
+            let (c, d) = (deriv_f(&den, nu, nv, 0, du), deriv_f(&den, nu, nv, 1, dv));
+            out = Slot::VF((0..n).map(|i| safe_div(a[i], c[i]) + safe_div(b[i], d[i])).collect());
+        }
+        DerivT => {
+            let (du, dv) = du_dv(ex);
+            let (nu, nv) = (ex.env.nu, ex.env.nv);
+            let num = vec_t(arg(ex, args, 0), n);
+            let den = vec_f(arg(ex, args, 1), n);
+            let (a, b) = (deriv_t(&num, nu, nv, 0, du), deriv_t(&num, nu, nv, 1, dv));
+            let (c, d) = (deriv_f(&den, nu, nv, 0, du), deriv_f(&den, nu, nv, 1, dv));
+            out = Slot::VT(
+                (0..n)
+                    .map(|i| {
+                        let x = if c[i] != 0.0 { a[i] / c[i] } else { Vec3::ZERO };
+                        let y = if d[i] != 0.0 { b[i] / d[i] } else { Vec3::ZERO };
+                        x + y
+                    })
+                    .collect(),
+            );
+        }
+        RandomF => {
+            let seed = ex.env.seed;
+            let base = span.start;
+            out = Slot::VF((0..n).map(|i| pn_hash(seed, base, i as u32, 0)).collect());
+        }
+        RandomT => {
+            let seed = ex.env.seed;
+            let base = span.start;
+            out = Slot::VT(
+                (0..n)
+                    .map(|i| {
+                        Vec3::new(
+                            pn_hash(seed, base, i as u32, 0),
+                            pn_hash(seed, base, i as u32, 1),
+                            pn_hash(seed, base, i as u32, 2),
+                        )
+                    })
+                    .collect(),
+            );
+        }
+        NoiseF1 => f1!(pn::noise1),
+        NoiseF2 => f2!(pn::noise2),
+        NoiseF3 => {
+            let a = arg(ex, args, 0).t();
+            match a {
+                T::V(p) => {
+                    let mut v = take_vf(&mut out, n);
+                    pn::noise3_slice(p, &mut v);
+                    out = Slot::VF(v);
+                }
+                T::U(p) => out = Slot::F(pn::noise3(p)),
+            }
+        }
+        NoiseF4 => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            write_f(&mut out, n, varying_any!(), |i| pn::noise4(a.at(i), b.at(i)));
+        }
+        NoiseT1 => {
+            let a = arg(ex, args, 0).f();
+            write_t(&mut out, n, a.is_varying(), |i| pn::vnoise1(a.at(i)));
+        }
+        NoiseT2 => {
+            let (a, b) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
+            write_t(&mut out, n, varying_any!(), |i| pn::vnoise2(a.at(i), b.at(i)));
+        }
+        NoiseT3 => t1t!(pn::vnoise3),
+        NoiseT4 => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            write_t(&mut out, n, varying_any!(), |i| pn::vnoise4(a.at(i), b.at(i)));
+        }
+        PNoiseF1 => f2!(|x, p| pn::pnoise1(x, pn::period_from_float(p))),
+        PNoiseF2 => {
+            let (x, y, px, py) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            write_f(&mut out, n, varying_any!(), |i| {
+                pn::pnoise2(x.at(i), y.at(i), pn::period_from_float(px.at(i)), pn::period_from_float(py.at(i)))
+            });
+        }
+        PNoiseF3 => {
+            let (p, per) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            write_f(&mut out, n, varying_any!(), |i| pn::pnoise3(p.at(i), iper(per.at(i))));
+        }
+        PNoiseF4 => {
+            let (p, t, per, tp) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+            write_f(&mut out, n, varying_any!(), |i| {
+                pn::pnoise4(p.at(i), t.at(i), iper(per.at(i)), pn::period_from_float(tp.at(i)))
+            });
+        }
+        PNoiseT1 => {
+            let (x, p) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
+            write_t(&mut out, n, varying_any!(), |i| pn::vpnoise1(x.at(i), pn::period_from_float(p.at(i))));
+        }
+        PNoiseT2 => {
+            let (x, y, px, py) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vpnoise2(x.at(i), y.at(i), pn::period_from_float(px.at(i)), pn::period_from_float(py.at(i)))
+            });
+        }
+        PNoiseT3 => {
+            let (p, per) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            write_t(&mut out, n, varying_any!(), |i| pn::vpnoise3(p.at(i), iper(per.at(i))));
+        }
+        PNoiseT4 => {
+            let (p, t, per, tp) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vpnoise4(p.at(i), t.at(i), iper(per.at(i)), pn::period_from_float(tp.at(i)))
+            });
+        }
+        CellF1 => f1!(pn::cellnoise1),
+        CellF2 => f2!(pn::cellnoise2),
+        CellF3 => t1f!(pn::cellnoise3),
+        CellF4 => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            write_f(&mut out, n, varying_any!(), |i| pn::cellnoise4(a.at(i), b.at(i)));
+        }
+        CellT1 => {
+            let a = arg(ex, args, 0).f();
+            write_t(&mut out, n, a.is_varying(), |i| pn::vcellnoise1(a.at(i)));
+        }
+        CellT2 => {
+            let (a, b) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
+            write_t(&mut out, n, varying_any!(), |i| pn::vcellnoise2(a.at(i), b.at(i)));
+        }
+        CellT3 => t1t!(pn::vcellnoise3),
+        CellT4 => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            write_t(&mut out, n, varying_any!(), |i| pn::vcellnoise4(a.at(i), b.at(i)));
+        }
+        XComp => t1f!(|v: Vec3| v.x),
+        YComp => t1f!(|v: Vec3| v.y),
+        ZComp => t1f!(|v: Vec3| v.z),
+        SetXComp | SetYComp | SetZComp => {
+            // args: &q (temp holding the current value), f
+            let (q, x) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            let c = match f {
+                SetXComp => 0,
+                SetYComp => 1,
+                _ => 2,
+            };
+            let mut r = Slot::default();
+            write_t(&mut r, n, varying_any!(), |i| {
+                let mut v = q.at(i);
+                v[c] = x.at(i);
+                v
+            });
+            set_out(ex, args[0], r);
+        }
+        Length => t1f!(|v: Vec3| v.length()),
+        Normalize => t1t!(normalize),
+        Distance => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            zip_tt_f(&mut out, n, a, b, |a, b| a.distance(b));
+        }
+        PtLineD => {
+            let (q, p1, p2) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
+            write_f(&mut out, n, varying_any!(), |i| ptlined(q.at(i), p1.at(i), p2.at(i)));
+        }
+        RotatePoint => {
+            let (q, ang, p1, p2) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).t());
+            write_t(&mut out, n, varying_any!(), |i| {
+                let axis = normalize(p2.at(i) - p1.at(i));
+                if axis == Vec3::ZERO {
+                    return q.at(i);
+                }
+                let r = glam::Quat::from_axis_angle(axis, ang.at(i));
+                p1.at(i) + r * (q.at(i) - p1.at(i))
+            });
+        }
+        Area => {
+            let (du, dv) = du_dv(ex);
+            let p = vec_t(arg(ex, args, 0), n);
+            let a = deriv_t(&p, ex.env.nu, ex.env.nv, 0, 1.0);
+            let b = deriv_t(&p, ex.env.nu, ex.env.nv, 1, 1.0);
+            let _ = (du, dv);
+            out = Slot::VF((0..n).map(|i| a[i].cross(b[i]).length()).collect());
+        }
+        FaceForward2 | FaceForward3 => {
+            let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            let nref = if f == FaceForward3 { arg(ex, args, 2).t() } else { nn };
+            write_t(&mut out, n, varying_any!(), |i| {
+                let nv = nn.at(i);
+                if i_.at(i).dot(nref.at(i)) < 0.0 {
+                    nv
+                } else {
+                    -nv
+                }
+            });
+        }
+        Reflect => {
+            let (i_, nn) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            zip_tt(&mut out, n, i_, nn, |i, n| i - 2.0 * i.dot(n) * n);
+        }
+        Refract => {
+            let (i_, nn, eta) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
+            write_t(&mut out, n, varying_any!(), |i| refract(i_.at(i), nn.at(i), eta.at(i)));
+        }
+        Fresnel | FresnelRT => {
+            let (i_, nn, eta) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
+            let v = varying_any!();
+            let res: Vec<(f32, f32, Vec3, Vec3)> =
+                (0..if v { n } else { 1 }).map(|i| fresnel(i_.at(i), nn.at(i), eta.at(i))).collect();
+            let pick = |k: usize| -> Slot {
+                if v {
+                    match k {
+                        0 => Slot::VF(res.iter().map(|r| r.0).collect()),
+                        1 => Slot::VF(res.iter().map(|r| r.1).collect()),
+                        2 => Slot::VT(res.iter().map(|r| r.2).collect()),
+                        _ => Slot::VT(res.iter().map(|r| r.3).collect()),
+                    }
+                } else {
+                    match k {
+                        0 => Slot::F(res[0].0),
+                        1 => Slot::F(res[0].1),
+                        2 => Slot::T(res[0].2),
+                        _ => Slot::T(res[0].3),
+                    }
+                }
+            };
+            let outs: Vec<Slot> = (0..if f == FresnelRT { 4 } else { 2 }).map(pick).collect();
+            for (k, s) in outs.into_iter().enumerate() {
+                set_out(ex, args[3 + k], s);
+            }
+        }
+        Depth => {
+            let (near, far) = (ex.env.near, ex.env.far);
+            let p = arg(ex, args, 0).t();
+            write_f(&mut out, n, p.is_varying(), |i| {
+                let z = p.at(i).z;
+                if far.is_finite() && far > near {
+                    ((z - near) / (far - near)).clamp(0.0, 1.0)
+                } else {
+                    z
+                }
+            });
+        }
+        CalculateNormal => {
+            let (du, dv) = du_dv(ex);
+            let p = vec_t(arg(ex, args, 0), n);
+            let a = deriv_t(&p, ex.env.nu, ex.env.nv, 0, du);
+            let b = deriv_t(&p, ex.env.nu, ex.env.nv, 1, dv);
+            let flip = ex.env.flip_normals;
+            out = Slot::VT(
+                (0..n)
+                    .map(|i| {
+                        let c = a[i].cross(b[i]);
+                        if flip {
+                            -c
+                        } else {
+                            c
+                        }
+                    })
+                    .collect(),
+            );
+        }
+        Comp => {
+            let (c, k) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
+            write_f(&mut out, n, varying_any!(), |i| c.at(i)[(k.at(i).max(0.0) as usize).min(2)]);
+        }
+        SetComp => {
+            let (c, k, x) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            let mut r = Slot::default();
+            write_t(&mut r, n, varying_any!(), |i| {
+                let mut v = c.at(i);
+                v[(k.at(i).max(0.0) as usize).min(2)] = x.at(i);
+                v
+            });
+            set_out(ex, args[0], r);
+        }
+        CTransform1 | CTransform2 => {
+            let (from, to, c): (Arc<str>, Arc<str>, T) = if f == CTransform1 {
+                (Arc::from("rgb"), arg(ex, args, 0).s(), arg(ex, args, 1).t())
+            } else {
+                (arg(ex, args, 0).s(), arg(ex, args, 1).s(), arg(ex, args, 2).t())
+            };
+            write_t(&mut out, n, c.is_varying(), |i| color::from_rgb(&to, color::to_rgb(&from, c.at(i))));
+        }
+        MComp => {
+            let (m, r, c) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            write_f(&mut out, n, varying_any!(), |i| {
+                let (r, c) = ((r.at(i).max(0.0) as usize).min(3), (c.at(i).max(0.0) as usize).min(3));
+                m.at(i).col(r)[c]
+            });
+        }
+        MSetComp => {
+            let (m, r, c, x) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            let mut res = Slot::default();
+            write_m(&mut res, n, varying_any!(), |i| {
+                let (r, c) = ((r.at(i).max(0.0) as usize).min(3), (c.at(i).max(0.0) as usize).min(3));
+                let mut a = m.at(i).to_cols_array();
+                a[r * 4 + c] = x.at(i);
+                Mat4::from_cols_array(&a)
+            });
+            set_out(ex, args[0], res);
+        }
+        Determinant => {
+            let m = arg(ex, args, 0).m();
+            write_f(&mut out, n, m.is_varying(), |i| m.at(i).determinant());
+        }
+        MTranslate => {
+            let (m, v) = (arg(ex, args, 0).m(), arg(ex, args, 1).t());
+            // RSL: translate(m, t) = translate(t) applied before m  (row vectors: T * m).
+            write_m(&mut out, n, varying_any!(), |i| m.at(i) * Mat4::from_translation(v.at(i)));
+        }
+        MRotate => {
+            let (m, a, v) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).t());
+            write_m(&mut out, n, varying_any!(), |i| {
+                let ax = normalize(v.at(i));
+                if ax == Vec3::ZERO {
+                    m.at(i)
+                } else {
+                    m.at(i) * Mat4::from_axis_angle(ax, a.at(i))
+                }
+            });
+        }
+        MScale => {
+            let (m, s) = (arg(ex, args, 0).m(), arg(ex, args, 1).t());
+            write_m(&mut out, n, varying_any!(), |i| m.at(i) * Mat4::from_scale(s.at(i)));
+        }
+        Concat => {
+            let s: String = args.iter().map(|r| ex.regs[*r as usize].s().to_string()).collect();
+            out = Slot::S(Arc::from(s));
+        }
+        Format | Printf => {
+            let text = format_text(ex, args);
+            if f == Printf {
+                eprint!("{text}");
+            } else {
+                out = Slot::S(Arc::from(text));
+            }
+        }
+        Match => {
+            let (pat, subj) = (arg(ex, args, 0).s(), arg(ex, args, 1).s());
+            out = Slot::F(b2f(simple_match(&pat, &subj)));
+        }
+        Ambient => {
+            let mut c = vec![Vec3::ZERO; n];
+            for l in ex.env.lights.iter().filter(|l| l.ambient) {
+                for (ci, cl) in c.iter_mut().zip(&l.cl) {
+                    *ci += *cl;
+                }
+            }
+            out = Slot::VT(c);
+        }
+        Diffuse => {
+            let nn = arg(ex, args, 0).t();
+            let mut c = vec![Vec3::ZERO; n];
+            for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nondiffuse) {
+                for i in 0..n {
+                    if !l.lit[i] {
+                        continue;
+                    }
+                    let nv = normalize(nn.at(i));
+                    let d = normalize(l.l[i]).dot(nv);
+                    if d > 0.0 {
+                        c[i] += l.cl[i] * d;
+                    }
+                }
+            }
+            out = Slot::VT(c);
+        }
+        Specular | Phong | SpecularBrdf => {
+            let mut c = vec![Vec3::ZERO; n];
+            if f == SpecularBrdf {
+                // specularbrdf(L, N, V, roughness) for one light direction.
+                let (l, nn, vv, r) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+                write_t(&mut out, n, varying_any!(), |i| {
+                    Vec3::splat(spec_brdf(normalize(l.at(i)), normalize(nn.at(i)), normalize(vv.at(i)), r.at(i)))
+                });
+                put(ex, dst, out);
+                return;
+            }
+            let (nn, vv, r) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
+            for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nonspecular) {
+                for i in 0..n {
+                    if !l.lit[i] {
+                        continue;
+                    }
+                    let nv = normalize(nn.at(i));
+                    let ln = normalize(l.l[i]);
+                    if ln.dot(nv) <= 0.0 {
+                        continue;
+                    }
+                    let w = if f == Specular {
+                        spec_brdf(ln, nv, normalize(vv.at(i)), r.at(i))
+                    } else {
+                        let rv = reflect(-normalize(vv.at(i)), nv);
+                        rv.dot(ln).max(0.0).powf(r.at(i))
+                    };
+                    c[i] += l.cl[i] * w;
+                }
+            }
+            out = Slot::VT(c);
+        }
+        Trace => {
+            out = if ex.prog.regs[dst as usize].kind == Kind::Float { Slot::F(0.0) } else { Slot::T(Vec3::ZERO) };
+            ex.warn(span, "trace() returns black: arbor does not ray trace");
+        }
+        TextureF | TextureC | EnvironmentF | EnvironmentC | Shadow | Bump => {
+            out = texture_call(ex, f, dst, args, span);
+        }
+        TextureInfo | Message => {
+            let ok = message(ex, f, args);
+            out = Slot::F(b2f(ok));
+            let v = ex.prog.regs[dst as usize].varying;
+            if v {
+                out = crate::shade::exec::broadcast(&out, n);
+            }
+        }
+        ShaderName => out = Slot::S(Arc::from(ex.env.shader_name)),
+        ArrayLength => out = Slot::F(0.0),
+    }
+    let varying = ex.prog.regs[dst as usize].varying;
+    if varying && !out.is_varying() {
+        out = crate::shade::exec::broadcast(&out, n);
+    }
+    put(ex, dst, out);
+}
+
+fn iper(p: Vec3) -> IVec3 {
+    IVec3::new(pn::period_from_float(p.x), pn::period_from_float(p.y), pn::period_from_float(p.z))
+}
+
+fn pn_hash(seed: u32, site: u32, i: u32, k: u32) -> f32 {
+    use crate::pattern::hash::{hash_combine, hash_float};
+    hash_float(hash_combine(hash_combine(hash_combine(seed, site), i), k))
+}
+
+pub fn smoothstep(a: f32, b: f32, x: f32) -> f32 {
+    if x < a {
+        0.0
+    } else if x >= b {
+        1.0
+    } else if b == a {
+        1.0
+    } else {
+        let t = (x - a) / (b - a);
+        t * t * (3.0 - 2.0 * t)
+    }
+}
+
+/// A step filtered over width `w` around `x`: box (linear ramp) or a smooth (catmull-rom-like)
+/// ramp.
+pub fn filtered_step(edge: f32, x: f32, w: f32, box_filter: bool) -> f32 {
+    if w <= 0.0 {
+        return b2f(x >= edge);
+    }
+    let t = ((x - edge) / w + 0.5).clamp(0.0, 1.0);
+    if box_filter {
+        t
+    } else {
+        t * t * (3.0 - 2.0 * t)
+    }
+}
+
+fn ptlined(q: Vec3, p1: Vec3, p2: Vec3) -> f32 {
+    let d = p2 - p1;
+    let l2 = d.length_squared();
+    if l2 == 0.0 {
+        return q.distance(p1);
+    }
+    let t = ((q - p1).dot(d) / l2).clamp(0.0, 1.0);
+    q.distance(p1 + d * t)
+}
+
+pub fn reflect(i: Vec3, n: Vec3) -> Vec3 {
+    i - 2.0 * i.dot(n) * n
+}
+
+/// RISpec refract: I and N normalised by the caller; eta = ratio of indices; 0 on total
+/// internal reflection.
+pub fn refract(i: Vec3, n: Vec3, eta: f32) -> Vec3 {
+    let idotn = i.dot(n);
+    let k = 1.0 - eta * eta * (1.0 - idotn * idotn);
+    if k < 0.0 {
+        Vec3::ZERO
+    } else {
+        eta * i - (eta * idotn + k.sqrt()) * n
+    }
+}
+
+/// Fresnel reflection and transmission coefficients for a dielectric (RISpec fresnel):
+/// returns (Kr, Kt, R, T).
+pub fn fresnel(i: Vec3, n: Vec3, eta: f32) -> (f32, f32, Vec3, Vec3) {
+    let i = normalize(i);
+    let n = normalize(n);
+    let r = reflect(i, n);
+    let c = -i.dot(n);
+    let (cos_i, n_use) = if c < 0.0 { (-c, -n) } else { (c, n) };
+    let e = if c < 0.0 { 1.0 / eta } else { eta };
+    let t = refract(i, n_use, e);
+    let sin_t2 = e * e * (1.0 - cos_i * cos_i);
+    if sin_t2 >= 1.0 {
+        return (1.0, 0.0, r, Vec3::ZERO);
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    // eta = n_i / n_t
+    let rs = (e * cos_i - cos_t) / (e * cos_i + cos_t);
+    let rp = (cos_i - e * cos_t) / (cos_i + e * cos_t);
+    let kr = 0.5 * (rs * rs + rp * rp);
+    (kr, 1.0 - kr, r, t)
+}
+
+/// RISpec's reference specular term: pow(max(0, N·H), 1/roughness).
+pub fn spec_brdf(l: Vec3, n: Vec3, v: Vec3, roughness: f32) -> f32 {
+    let h = normalize(l + v);
+    let r = if roughness > 0.0 { roughness } else { 1e-4 };
+    n.dot(h).max(0.0).powf(1.0 / r)
+}
+
+fn format_text(ex: &Exec, args: &[Reg]) -> String {
+    let fmt = arg(ex, args, 0).s();
+    let mut out = String::new();
+    let mut k = 1;
+    let mut chars = fmt.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '%' {
+            // skip flags/width
+            let mut spec = String::new();
+            while let Some(&d) = chars.peek() {
+                if d.is_ascii_digit() || d == '.' || d == '-' {
+                    spec.push(d);
+                    chars.next();
+                } else {
+                    break;
+                }
+            }
+            let Some(conv) = chars.next() else { break };
+            if conv == '%' {
+                out.push('%');
+                continue;
+            }
+            if k >= args.len() {
+                continue;
+            }
+            let s = arg(ex, args, k);
+            k += 1;
+            match conv {
+                'f' | 'd' | 'i' | 'g' | 'e' => out.push_str(&format!("{}", s.f().first())),
+                'p' | 'c' | 'n' | 'v' => {
+                    let t = s.t().first();
+                    out.push_str(&format!("{} {} {}", t.x, t.y, t.z));
+                }
+                'm' => {
+                    let m = s.m();
+                    let a = match m {
+                        M::U(m) => m.to_cols_array(),
+                        M::V(v) => v.first().copied().unwrap_or(Mat4::IDENTITY).to_cols_array(),
+                    };
+                    let parts: Vec<String> = a.iter().map(|x| x.to_string()).collect();
+                    out.push_str(&parts.join(" "));
+                }
+                _ => out.push_str(&s.s()),
+            }
+        } else if c == '\\' {
+            out.push(c);
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// `match(pattern, subject)`: a small regular-expression matcher (., *, +, ?, ^, $, [...]).
+pub fn simple_match(pat: &str, s: &str) -> bool {
+    fn m(p: &[char], s: &[char]) -> bool {
+        if p.is_empty() {
+            return true;
+        }
+        if p[0] == '$' && p.len() == 1 {
+            return s.is_empty();
+        }
+        let (atom_len, matches_first): (usize, Box<dyn Fn(char) -> bool>) = if p[0] == '[' {
+            let end = p.iter().position(|&c| c == ']').unwrap_or(p.len() - 1);
+            let set: Vec<char> = p[1..end].to_vec();
+            let neg = set.first() == Some(&'^');
+            let set = if neg { set[1..].to_vec() } else { set };
+            (
+                end + 1,
+                Box::new(move |c| {
+                    let mut hit = false;
+                    let mut i = 0;
+                    while i < set.len() {
+                        if i + 2 < set.len() && set[i + 1] == '-' {
+                            hit |= c >= set[i] && c <= set[i + 2];
+                            i += 3;
+                        } else {
+                            hit |= c == set[i];
+                            i += 1;
+                        }
+                    }
+                    hit != neg
+                }),
+            )
+        } else if p[0] == '\\' && p.len() > 1 {
+            let lit = p[1];
+            (2, Box::new(move |c| c == lit))
+        } else {
+            let lit = p[0];
+            (1, Box::new(move |c| lit == '.' || c == lit))
+        };
+        let rest = &p[atom_len.min(p.len())..];
+        match rest.first() {
+            Some('*') | Some('+') | Some('?') => {
+                let op = rest[0];
+                let rest = &rest[1..];
+                let min = usize::from(op == '+');
+                let max = if op == '?' { 1 } else { usize::MAX };
+                let mut k = 0;
+                while k < s.len() && k < max && matches_first(s[k]) {
+                    k += 1;
+                }
+                loop {
+                    if k >= min && m(rest, &s[k..]) {
+                        return true;
+                    }
+                    if k == 0 {
+                        return false;
+                    }
+                    k -= 1;
+                    if k < min {
+                        return false;
+                    }
+                }
+            }
+            _ => !s.is_empty() && matches_first(s[0]) && m(rest, &s[1..]),
+        }
+    }
+    let p: Vec<char> = pat.chars().collect();
+    let s: Vec<char> = s.chars().collect();
+    if p.first() == Some(&'^') {
+        return m(&p[1..], &s);
+    }
+    (0..=s.len()).any(|k| m(&p, &s[k..]))
+}
+
+fn texture_call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span) -> Slot {
+    use Builtin::*;
+    let n = ex.n;
+    let name = arg(ex, args, 0).s();
+    let chan = arg(ex, args, 1).f().first().max(0.0) as usize;
+    let ncoord = arg(ex, args, 2).f().first() as usize;
+    let ncoord_regs = match (f, ncoord) {
+        (TextureF | TextureC | Bump, 0) => 2,
+        (TextureF | TextureC | Bump, k) => k,
+        (_, k) => k,
+    };
+    let mut params = TextureParams { fill: 0.0, filter: "box".into(), samples: 16.0, ..Default::default() };
+    let mut k = 3 + ncoord_regs;
+    while k + 1 < args.len() {
+        let pname = arg(ex, args, k).s();
+        let v = arg(ex, args, k + 1);
+        match &*pname {
+            "blur" | "sblur" | "tblur" => params.blur = v.f().first(),
+            "width" => {
+                params.swidth = v.f().first();
+                params.twidth = params.swidth;
+            }
+            "swidth" => params.swidth = v.f().first(),
+            "twidth" => params.twidth = v.f().first(),
+            "fill" => params.fill = v.f().first(),
+            "filter" => params.filter = v.s().to_string(),
+            "samples" => params.samples = v.f().first(),
+            "bias" => params.bias = v.f().first(),
+            _ => {}
+        }
+        k += 2;
+    }
+    let is_color = matches!(f, TextureC | EnvironmentC);
+    let nchan = if is_color { 3 } else { 1 };
+    let fill = params.fill;
+    if name.is_empty() {
+        return default_texture(f, n, fill, dst, ex);
+    }
+    if let (Some(tex), TextureF | TextureC) = (ex.env.textures, f) {
+        // Build per-point (s,t) footprints: 4 corners from derivatives when only (s,t) given.
+        let (nu, nv) = (ex.env.nu, ex.env.nv);
+        let coords: Vec<Vec<f32>> = (0..ncoord_regs).map(|c| vec_f(arg(ex, args, 3 + c), n)).collect();
+        let st: Vec<[f32; 8]> = if ncoord_regs == 8 {
+            (0..n).map(|i| std::array::from_fn(|c| coords[c][i])).collect()
+        } else {
+            let (s, t) = (&coords[0], &coords[1]);
+            let (dsu, dsv) = (deriv_f(s, nu, nv, 0, 1.0), deriv_f(s, nu, nv, 1, 1.0));
+            let (dtu, dtv) = (deriv_f(t, nu, nv, 0, 1.0), deriv_f(t, nu, nv, 1, 1.0));
+            (0..n)
+                .map(|i| {
+                    let (s0, t0) = (s[i] - 0.5 * (dsu[i] + dsv[i]), t[i] - 0.5 * (dtu[i] + dtv[i]));
+                    [s0, t0, s0 + dsu[i], t0 + dtu[i], s0 + dsv[i], t0 + dtv[i], s0 + dsu[i] + dsv[i], t0 + dtu[i] + dtv[i]]
+                })
+                .collect()
+        };
+        let mut buf = vec![0f32; n * nchan];
+        if tex.texture(&name, chan, nchan, &st, &params, &mut buf) {
+            return if is_color {
+                Slot::VT((0..n).map(|i| Vec3::new(buf[i * 3], buf[i * 3 + 1], buf[i * 3 + 2])).collect())
+            } else {
+                Slot::VF(buf)
+            };
+        }
+    }
+    ex.warn(span, format!("texture \"{name}\" is not available; using the fill value {fill}"));
+    default_texture(f, n, fill, dst, ex)
+}
+
+fn default_texture(f: Builtin, n: usize, fill: f32, dst: Reg, ex: &Exec) -> Slot {
+    use Builtin::*;
+    let v = ex.prog.regs[dst as usize].varying;
+    let s = match f {
+        TextureC | EnvironmentC => Slot::T(Vec3::splat(fill)),
+        Shadow => Slot::F(0.0),
+        Bump => Slot::T(Vec3::ZERO),
+        _ => Slot::F(fill),
+    };
+    if v {
+        crate::shade::exec::broadcast(&s, n)
+    } else {
+        s
+    }
+}
+
+/// attribute/option/rendererinfo/textureinfo/lightsource/surface…: writes the output temps.
+fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
+    let which = arg(ex, args, 0).s();
+    let (name, ty_idx) = if f == Builtin::TextureInfo {
+        (format!("{}\u{0}{}", arg(ex, args, 1).s(), arg(ex, args, 2).s()), 3)
+    } else {
+        (arg(ex, args, 1).s().to_string(), 2)
+    };
+    let ty = arg(ex, args, ty_idx).s();
+    let outs: Vec<Reg> = args[ty_idx + 1..].to_vec();
+    let value: Option<InfoValue> = match &*which {
+        "lightsource" => {
+            let Some(li) = ex.current_light else { return false };
+            let light = &ex.env.lights[li];
+            match light.outputs.iter().find(|(n, _)| *n == name) {
+                Some((_, s)) => {
+                    let s = s.clone();
+                    if let Some(&r) = outs.first() {
+                        set_out(ex, r, s);
+                    }
+                    return true;
+                }
+                None => return false,
+            }
+        }
+        "attribute" | "option" | "rendererinfo" | "textureinfo" => (ex.env.info)(&which, &name),
+        other => {
+            ex.warn(ex.prog.span, format!("message passing `{other}()` is not supported; it reports \"not found\""));
+            None
+        }
+    };
+    let Some(value) = value else { return false };
+    match value {
+        InfoValue::Str(s) => {
+            if &*ty != "string" {
+                return false;
+            }
+            if let Some(&r) = outs.first() {
+                set_out(ex, r, Slot::S(Arc::from(s)));
+            }
+            true
+        }
+        InfoValue::Floats(v) => {
+            match &*ty {
+                "float" => {
+                    if outs.len() > v.len() || v.is_empty() {
+                        return false;
+                    }
+                    for (k, &r) in outs.iter().enumerate() {
+                        set_out(ex, r, Slot::F(v[k]));
+                    }
+                }
+                "color" | "point" | "vector" | "normal" => {
+                    if v.len() < 3 * outs.len() {
+                        return false;
+                    }
+                    for (k, &r) in outs.iter().enumerate() {
+                        set_out(ex, r, Slot::T(Vec3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2])));
+                    }
+                }
+                "matrix" => {
+                    if v.len() < 16 {
+                        return false;
+                    }
+                    let mut a = [0f32; 16];
+                    a.copy_from_slice(&v[..16]);
+                    if let Some(&r) = outs.first() {
+                        set_out(ex, r, Slot::M(Mat4::from_cols_array(&a)));
+                    }
+                }
+                _ => return false,
+            }
+            true
+        }
+    }
+}
+
+#[allow(dead_code)]
+fn unused() -> f32 {
+    PI
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresnel_at_normal_incidence_is_004_for_glass() {
+        let (kr, kt, _, _) = fresnel(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0), 1.0 / 1.5);
+        assert!((kr - 0.04).abs() < 1e-4, "Kr = {kr}");
+        assert!((kr + kt - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn smoothstep_is_hermite() {
+        assert_eq!(smoothstep(0.0, 1.0, -1.0), 0.0);
+        assert_eq!(smoothstep(0.0, 1.0, 2.0), 1.0);
+        assert!((smoothstep(0.0, 1.0, 0.5) - 0.5).abs() < 1e-6);
+        assert!((smoothstep(0.0, 2.0, 0.5) - 0.15625).abs() < 1e-6);
+    }
+
+    #[test]
+    fn catmull_rom_spline_interpolates_knots() {
+        let k = [0.0f32, 1.0, 2.0, 3.0, 4.0, 5.0];
+        // interior knots 1..4 reached at x = 0, 1/3, 2/3, 1
+        assert!((spline_eval("catmull-rom", 0.0, &k) - 1.0).abs() < 1e-5);
+        assert!((spline_eval("catmull-rom", 1.0 / 3.0, &k) - 2.0).abs() < 1e-5);
+        assert!((spline_eval("catmull-rom", 1.0, &k) - 4.0).abs() < 1e-5);
+        assert!((spline_eval("linear", 0.5, &[9.0, 0.0, 10.0, 9.0]) - 5.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn regex_match() {
+        assert!(simple_match("^ab*c$", "abbbc"));
+        assert!(!simple_match("^ab*c$", "abbbd"));
+        assert!(simple_match("[0-9]+", "x42"));
+    }
+
+    #[test]
+    fn derivative_of_linear_ramp_is_its_slope() {
+        let x: Vec<f32> = (0..12).map(|k| (k % 4) as f32 * 0.5).collect();
+        let d = deriv_f(&x, 4, 3, 0, 0.5);
+        assert!(d.iter().all(|&v| (v - 1.0).abs() < 1e-6));
+    }
+}

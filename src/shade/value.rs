@@ -1,0 +1,269 @@
+//! Register storage for the grid interpreter: one value per register, uniform or varying.
+//!
+//! Invariants: a varying slot holds exactly `n` values (the grid size); uniform slots hold one.
+//! Helpers read operands as [`F`]/[`T`]/[`M`] views so loops specialise on uniform/varying
+//! once per instruction, not per point.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+#[derive(Clone, Debug)]
+pub enum Slot {
+    F(f32),
+    T(Vec3),
+    M(Mat4),
+    S(Arc<str>),
+    VF(Vec<f32>),
+    VT(Vec<Vec3>),
+    VM(Vec<Mat4>),
+}
+
+impl Default for Slot {
+    fn default() -> Slot {
+        Slot::F(0.0)
+    }
+}
+
+/// A float operand.
+#[derive(Clone, Copy)]
+pub enum F<'a> {
+    U(f32),
+    V(&'a [f32]),
+}
+
+impl F<'_> {
+    #[inline(always)]
+    pub fn at(&self, i: usize) -> f32 {
+        match self {
+            F::U(x) => *x,
+            F::V(v) => v[i],
+        }
+    }
+    pub fn is_varying(&self) -> bool {
+        matches!(self, F::V(_))
+    }
+    /// The value at the first point (for uniform uses of a varying value).
+    pub fn first(&self) -> f32 {
+        match self {
+            F::U(x) => *x,
+            F::V(v) => v.first().copied().unwrap_or(0.0),
+        }
+    }
+}
+
+/// A triple operand.
+#[derive(Clone, Copy)]
+pub enum T<'a> {
+    U(Vec3),
+    V(&'a [Vec3]),
+}
+
+impl T<'_> {
+    #[inline(always)]
+    pub fn at(&self, i: usize) -> Vec3 {
+        match self {
+            T::U(x) => *x,
+            T::V(v) => v[i],
+        }
+    }
+    pub fn is_varying(&self) -> bool {
+        matches!(self, T::V(_))
+    }
+    pub fn first(&self) -> Vec3 {
+        match self {
+            T::U(x) => *x,
+            T::V(v) => v.first().copied().unwrap_or(Vec3::ZERO),
+        }
+    }
+}
+
+/// A matrix operand.
+#[derive(Clone, Copy)]
+pub enum M<'a> {
+    U(Mat4),
+    V(&'a [Mat4]),
+}
+
+impl M<'_> {
+    #[inline(always)]
+    pub fn at(&self, i: usize) -> Mat4 {
+        match self {
+            M::U(x) => *x,
+            M::V(v) => v[i],
+        }
+    }
+    pub fn is_varying(&self) -> bool {
+        matches!(self, M::V(_))
+    }
+}
+
+impl Slot {
+    pub fn f(&self) -> F<'_> {
+        match self {
+            Slot::F(x) => F::U(*x),
+            Slot::VF(v) => F::V(v),
+            Slot::T(t) => F::U(t.x),
+            _ => F::U(0.0),
+        }
+    }
+    pub fn t(&self) -> T<'_> {
+        match self {
+            Slot::T(x) => T::U(*x),
+            Slot::VT(v) => T::V(v),
+            Slot::F(x) => T::U(Vec3::splat(*x)),
+            _ => T::U(Vec3::ZERO),
+        }
+    }
+    pub fn m(&self) -> M<'_> {
+        match self {
+            Slot::M(x) => M::U(*x),
+            Slot::VM(v) => M::V(v),
+            Slot::F(x) => M::U(Mat4::IDENTITY * *x),
+            _ => M::U(Mat4::IDENTITY),
+        }
+    }
+    pub fn s(&self) -> Arc<str> {
+        match self {
+            Slot::S(s) => s.clone(),
+            _ => Arc::from(""),
+        }
+    }
+    pub fn is_varying(&self) -> bool {
+        matches!(self, Slot::VF(_) | Slot::VT(_) | Slot::VM(_))
+    }
+}
+
+/// Takes a float vector of length `n` out of a slot to reuse its allocation.
+pub fn take_vf(slot: &mut Slot, n: usize) -> Vec<f32> {
+    match std::mem::take(slot) {
+        Slot::VF(mut v) => {
+            v.resize(n, 0.0);
+            v
+        }
+        _ => vec![0.0; n],
+    }
+}
+
+pub fn take_vt(slot: &mut Slot, n: usize) -> Vec<Vec3> {
+    match std::mem::take(slot) {
+        Slot::VT(mut v) => {
+            v.resize(n, Vec3::ZERO);
+            v
+        }
+        _ => vec![Vec3::ZERO; n],
+    }
+}
+
+pub fn take_vm(slot: &mut Slot, n: usize) -> Vec<Mat4> {
+    match std::mem::take(slot) {
+        Slot::VM(mut v) => {
+            v.resize(n, Mat4::IDENTITY);
+            v
+        }
+        _ => vec![Mat4::IDENTITY; n],
+    }
+}
+
+/// Writes a float result: uniform when `varying` is false (computed at point 0).
+#[inline]
+pub fn write_f(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> f32) {
+    if varying {
+        let mut v = take_vf(out, n);
+        for (i, o) in v.iter_mut().enumerate() {
+            *o = f(i);
+        }
+        *out = Slot::VF(v);
+    } else {
+        *out = Slot::F(f(0));
+    }
+}
+
+#[inline]
+pub fn write_t(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> Vec3) {
+    if varying {
+        let mut v = take_vt(out, n);
+        for (i, o) in v.iter_mut().enumerate() {
+            *o = f(i);
+        }
+        *out = Slot::VT(v);
+    } else {
+        *out = Slot::T(f(0));
+    }
+}
+
+#[inline]
+pub fn write_m(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> Mat4) {
+    if varying {
+        let mut v = take_vm(out, n);
+        for (i, o) in v.iter_mut().enumerate() {
+            *o = f(i);
+        }
+        *out = Slot::VM(v);
+    } else {
+        *out = Slot::M(f(0));
+    }
+}
+
+/// Binary float op specialised on uniform/varying operands so the loops vectorise.
+#[inline]
+pub fn zip_ff(out: &mut Slot, n: usize, a: F, b: F, f: impl Fn(f32, f32) -> f32) {
+    match (a, b) {
+        (F::U(x), F::U(y)) => *out = Slot::F(f(x, y)),
+        (F::V(x), F::U(y)) => {
+            let mut v = take_vf(out, n);
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi, y);
+            }
+            *out = Slot::VF(v);
+        }
+        (F::U(x), F::V(y)) => {
+            let mut v = take_vf(out, n);
+            for (o, &yi) in v.iter_mut().zip(y) {
+                *o = f(x, yi);
+            }
+            *out = Slot::VF(v);
+        }
+        (F::V(x), F::V(y)) => {
+            let mut v = take_vf(out, n);
+            for ((o, &xi), &yi) in v.iter_mut().zip(x).zip(y) {
+                *o = f(xi, yi);
+            }
+            *out = Slot::VF(v);
+        }
+    }
+}
+
+#[inline]
+pub fn zip_tt(out: &mut Slot, n: usize, a: T, b: T, f: impl Fn(Vec3, Vec3) -> Vec3) {
+    match (a, b) {
+        (T::U(x), T::U(y)) => *out = Slot::T(f(x, y)),
+        (T::V(x), T::U(y)) => {
+            let mut v = take_vt(out, n);
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi, y);
+            }
+            *out = Slot::VT(v);
+        }
+        (T::U(x), T::V(y)) => {
+            let mut v = take_vt(out, n);
+            for (o, &yi) in v.iter_mut().zip(y) {
+                *o = f(x, yi);
+            }
+            *out = Slot::VT(v);
+        }
+        (T::V(x), T::V(y)) => {
+            let mut v = take_vt(out, n);
+            for ((o, &xi), &yi) in v.iter_mut().zip(x).zip(y) {
+                *o = f(xi, yi);
+            }
+            *out = Slot::VT(v);
+        }
+    }
+}
+
+#[inline]
+pub fn zip_tt_f(out: &mut Slot, n: usize, a: T, b: T, f: impl Fn(Vec3, Vec3) -> f32) {
+    let varying = a.is_varying() || b.is_varying();
+    write_f(out, n, varying, |i| f(a.at(i), b.at(i)));
+}

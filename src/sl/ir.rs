@@ -1,0 +1,302 @@
+//! The compiled form of a shader: a tree of instructions over virtual registers.
+//!
+//! Input: produced by `lower` from a checked AST. Output: executed by `shade::exec` over a whole
+//! grid at once. Invariants: every register has one storage kind and one detail for the whole
+//! program; uniform registers hold one value, varying registers one value per grid point;
+//! computation instructions write only temporaries (never a source operand) and run over every
+//! point; only `Mov`/`SetIndex` (stores to variables) honour the running mask. Control flow is
+//! structured (if/loop/function frames) so the mask can be narrowed and restored.
+
+use std::fmt;
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::Span;
+use crate::sl::ast::{BaseType, ShaderKind};
+use crate::sl::builtins::Builtin;
+
+pub type Reg = u32;
+
+/// Storage kind of a register.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Kind {
+    Float,
+    Triple,
+    Matrix,
+    Str,
+}
+
+impl Kind {
+    pub fn of(base: BaseType) -> Kind {
+        match base {
+            BaseType::Float | BaseType::Void => Kind::Float,
+            BaseType::String => Kind::Str,
+            BaseType::Matrix => Kind::Matrix,
+            _ => Kind::Triple,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RegInfo {
+    pub kind: Kind,
+    pub varying: bool,
+}
+
+/// A constant value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Const {
+    F(f32),
+    T(Vec3),
+    M(Mat4),
+    S(Arc<str>),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cmp {
+    Eq,
+    Ne,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+}
+
+/// Arithmetic on one storage kind (both operands already converted to it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Arith {
+    Add,
+    Sub,
+    Mul,
+    Div,
+}
+
+/// How a point-like value transforms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum XformKind {
+    Point,
+    Vector,
+    Normal,
+}
+
+/// A coordinate system operand: a named space (string register) or a matrix register.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Space {
+    Current,
+    Named(Reg),
+    Matrix(Reg),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Instr {
+    /// dst = src under the running mask (broadcasting a uniform source).
+    Mov { dst: Reg, src: Reg },
+    /// Unmasked copy into a temporary.
+    Copy { dst: Reg, src: Reg },
+    Arith { op: Arith, kind: Kind, dst: Reg, a: Reg, b: Reg },
+    /// triple · float / float · triple scaling is lowered as Promote + Arith.
+    Neg { kind: Kind, dst: Reg, a: Reg },
+    /// float → triple (x,x,x) or float → matrix (x·I).
+    Promote { to: Kind, dst: Reg, a: Reg },
+    Dot { dst: Reg, a: Reg, b: Reg },
+    Cross { dst: Reg, a: Reg, b: Reg },
+    Compare { op: Cmp, kind: Kind, dst: Reg, a: Reg, b: Reg },
+    And { dst: Reg, a: Reg, b: Reg },
+    Or { dst: Reg, a: Reg, b: Reg },
+    Not { dst: Reg, a: Reg },
+    /// dst = cond ? a : b (both evaluated).
+    Select { kind: Kind, dst: Reg, cond: Reg, a: Reg, b: Reg },
+    /// (x, y, z) → triple
+    MakeTriple { dst: Reg, x: Reg, y: Reg, z: Reg },
+    /// 16 floats → matrix (row-major as written).
+    MakeMatrix { dst: Reg, elems: Box<[Reg; 16]> },
+    /// Converts a triple from a colour space to rgb.
+    ColorFrom { dst: Reg, space: Reg, a: Reg },
+    /// Transforms from `from` to `to` space.
+    Transform { kind: XformKind, dst: Reg, from: Space, to: Space, a: Reg },
+    /// matrix "space" x: the matrix that maps `space` to current, times x.
+    SpaceMatrix { dst: Reg, space: Reg },
+    /// Array element read with a (possibly varying) index; `base..base+len` hold the elements.
+    GetIndex { kind: Kind, dst: Reg, base: Reg, len: u32, index: Reg, span: Span },
+    /// Array element store under the mask.
+    SetIndex { kind: Kind, base: Reg, len: u32, index: Reg, src: Reg, span: Span },
+    /// A built-in function.
+    Call { f: Builtin, dst: Reg, args: Vec<Reg>, span: Span },
+    If { cond: Reg, then: Vec<Instr>, otherwise: Vec<Instr> },
+    /// `cond_code` computes `cond`; body; step.
+    Loop { cond_code: Vec<Instr>, cond: Reg, body: Vec<Instr>, step: Vec<Instr> },
+    Break(u32),
+    Continue(u32),
+    /// An inlined function body: `return` leaves it.
+    Function { body: Vec<Instr> },
+    Return,
+    /// illuminance: for every non-ambient light, with L (surface→light), Cl, Ol bound.
+    Illuminance { category: Option<Reg>, pos: Reg, axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    /// illuminate(from [, axis, angle]) in light shaders.
+    Illuminate { pos: Reg, axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    /// solar([axis, angle]) in light shaders.
+    Solar { axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    /// gather: no ray tracing; runs the `otherwise` branch (all rays miss).
+    Gather { otherwise: Vec<Instr> },
+}
+
+/// A shader parameter as the program exposes it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamInfo {
+    pub name: String,
+    pub ty: BaseType,
+    pub array: Option<usize>,
+    pub varying: bool,
+    pub output: bool,
+    /// First register of the value (arrays occupy `array` consecutive registers).
+    pub reg: Reg,
+    /// The default as a printable value, when it is constant.
+    pub default_text: String,
+}
+
+/// The standard globals a program reads or writes, by name, with their registers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GlobalInfo {
+    pub name: &'static str,
+    pub reg: Reg,
+    pub written: bool,
+}
+
+/// A compiled shader.
+#[derive(Clone, Debug)]
+pub struct Program {
+    pub name: String,
+    pub kind: ShaderKind,
+    pub regs: Vec<RegInfo>,
+    /// Registers holding constants, set before every run.
+    pub consts: Vec<(Reg, Const)>,
+    pub params: Vec<ParamInfo>,
+    pub globals: Vec<GlobalInfo>,
+    /// Computes parameter defaults (run before instance values are bound).
+    pub init: Vec<Instr>,
+    pub body: Vec<Instr>,
+    /// The light category (`__category` parameter default), for light shaders.
+    pub span: Span,
+}
+
+impl Program {
+    pub fn global(&self, name: &str) -> Option<&GlobalInfo> {
+        self.globals.iter().find(|g| g.name == name)
+    }
+    pub fn param(&self, name: &str) -> Option<&ParamInfo> {
+        self.params.iter().find(|p| p.name == name)
+    }
+    /// Instruction count (recursively), for statistics and tests.
+    pub fn instr_count(&self) -> usize {
+        fn count(v: &[Instr]) -> usize {
+            v.iter()
+                .map(|i| {
+                    1 + match i {
+                        Instr::If { then, otherwise, .. } => count(then) + count(otherwise),
+                        Instr::Loop { cond_code, body, step, .. } => count(cond_code) + count(body) + count(step),
+                        Instr::Function { body }
+                        | Instr::Illuminance { body, .. }
+                        | Instr::Illuminate { body, .. }
+                        | Instr::Solar { body, .. } => count(body),
+                        Instr::Gather { otherwise } => count(otherwise),
+                        _ => 0,
+                    }
+                })
+                .sum()
+        }
+        count(&self.init) + count(&self.body)
+    }
+}
+
+fn r(reg: Reg) -> String {
+    format!("r{reg}")
+}
+
+fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Result {
+    for i in instrs {
+        let pad = "  ".repeat(depth);
+        match i {
+            Instr::If { cond, then, otherwise } => {
+                writeln!(f, "{pad}if {}", r(*cond))?;
+                list(f, then, depth + 1)?;
+                if !otherwise.is_empty() {
+                    writeln!(f, "{pad}else")?;
+                    list(f, otherwise, depth + 1)?;
+                }
+            }
+            Instr::Loop { cond_code, cond, body, step } => {
+                writeln!(f, "{pad}loop")?;
+                list(f, cond_code, depth + 1)?;
+                writeln!(f, "{pad}  while {}", r(*cond))?;
+                list(f, body, depth + 1)?;
+                if !step.is_empty() {
+                    writeln!(f, "{pad}  step")?;
+                    list(f, step, depth + 2)?;
+                }
+            }
+            Instr::Function { body } => {
+                writeln!(f, "{pad}function")?;
+                list(f, body, depth + 1)?;
+            }
+            Instr::Illuminance { category, pos, axis, body } => {
+                writeln!(f, "{pad}illuminance cat={:?} P={} axis={:?}", category, r(*pos), axis)?;
+                list(f, body, depth + 1)?;
+            }
+            Instr::Illuminate { pos, axis, body } => {
+                writeln!(f, "{pad}illuminate P={} axis={:?}", r(*pos), axis)?;
+                list(f, body, depth + 1)?;
+            }
+            Instr::Solar { axis, body } => {
+                writeln!(f, "{pad}solar axis={:?}", axis)?;
+                list(f, body, depth + 1)?;
+            }
+            Instr::Gather { otherwise } => {
+                writeln!(f, "{pad}gather (no rays) else")?;
+                list(f, otherwise, depth + 1)?;
+            }
+            Instr::Call { f: func, dst, args, .. } => {
+                let a: Vec<String> = args.iter().map(|&x| r(x)).collect();
+                writeln!(f, "{pad}{} = {:?}({})", r(*dst), func, a.join(", "))?;
+            }
+            Instr::Mov { dst, src } => writeln!(f, "{pad}{} <- {}", r(*dst), r(*src))?,
+            Instr::Copy { dst, src } => writeln!(f, "{pad}{} = {}", r(*dst), r(*src))?,
+            Instr::Arith { op, kind, dst, a, b } => {
+                writeln!(f, "{pad}{} = {:?}.{:?} {} {}", r(*dst), op, kind, r(*a), r(*b))?
+            }
+            other => writeln!(f, "{pad}{:?}", other)?,
+        }
+    }
+    Ok(())
+}
+
+impl fmt::Display for Program {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{} {} ({} registers)", self.kind.name(), self.name, self.regs.len())?;
+        for p in &self.params {
+            writeln!(
+                f,
+                "  param {}{}{} {} = {} -> {}",
+                if p.output { "output " } else { "" },
+                if p.varying { "varying " } else { "uniform " },
+                p.ty.name(),
+                p.name,
+                p.default_text,
+                r(p.reg)
+            )?;
+        }
+        for (reg, c) in &self.consts {
+            writeln!(f, "  const {} = {:?}", r(*reg), c)?;
+        }
+        for (i, info) in self.regs.iter().enumerate() {
+            if info.varying {
+                write!(f, "")?;
+            }
+            let _ = i;
+        }
+        writeln!(f, "init:")?;
+        list(f, &self.init, 1)?;
+        writeln!(f, "body:")?;
+        list(f, &self.body, 1)
+    }
+}
