@@ -346,7 +346,8 @@ impl<'a> Exec<'a> {
             Instr::Solar { axis, body } => self.illuminate(None, *axis, body, mask),
             Instr::Gather { otherwise } => self.block(otherwise, mask),
             Instr::SetIndex { kind: _, base, len, index, src, span } => {
-                let idx = self.regs[*index as usize].f();
+                let idx_slot = self.regs[*index as usize].clone();
+                let idx = idx_slot.f();
                 let mut warned = false;
                 if !idx.is_varying() {
                     let i = idx.first() as i64;

@@ -166,16 +166,20 @@ pub fn lower_shader(def: &ShaderDef, functions: &[FuncDef]) -> Result<(Program, 
     let mut forced: HashSet<Span> = HashSet::new();
     // Each restart marks at least one more declaration varying; bounded.
     for _ in 0..256 {
-        let mut lw = Lowerer::new(def.kind, &forced);
+        let snapshot = forced.clone();
+        let mut lw = Lowerer::new(def.kind, &snapshot);
         let prog = lw.shader(def, functions);
-        if !lw.newly_forced.is_empty() {
-            let grew = lw.newly_forced.iter().any(|s| !forced.contains(s));
-            forced.extend(lw.newly_forced.drain());
+        let newly: Vec<Span> = lw.newly_forced.drain().collect();
+        let diags = std::mem::take(&mut lw.diags);
+        drop(lw);
+        if !newly.is_empty() {
+            let grew = newly.iter().any(|s| !forced.contains(s));
+            forced.extend(newly);
             if grew {
                 continue;
             }
         }
-        let (errors, warnings): (Vec<Diag>, Vec<Diag>) = lw.diags.into_iter().partition(|d| d.is_error());
+        let (errors, warnings): (Vec<Diag>, Vec<Diag>) = diags.into_iter().partition(|d| d.is_error());
         if !errors.is_empty() {
             let mut all = errors;
             all.extend(warnings);
@@ -1532,7 +1536,7 @@ impl<'a> Lowerer<'a> {
                 let t = self.temp(want, true);
                 self.emit(Instr::Copy { dst: t.reg, src: cur.reg });
                 regs.push(t.reg);
-                outs.push((t, e.copied()));
+                outs.push((t, *e));
             } else {
                 let c = self.coerce(*v, want, sp);
                 varying |= c.varying;

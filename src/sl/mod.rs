@@ -3,3 +3,6 @@
 //! Input: `.sl` source. Output: a `Program` for the shading runtime.
 
 pub mod ast;
+pub mod builtins;
+pub mod ir;
+pub mod lower;
