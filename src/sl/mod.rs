@@ -6,3 +6,4 @@ pub mod ast;
 pub mod builtins;
 pub mod ir;
 pub mod lower;
+pub mod preprocess;
