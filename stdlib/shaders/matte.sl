@@ -1,0 +1,7 @@
+/* RISpec 3.2 Appendix A: matte */
+surface matte(float Ka = 1; float Kd = 1;)
+{
+    normal Nf = faceforward(normalize(N), I);
+    Oi = Os;
+    Ci = Os * Cs * (Ka * ambient() + Kd * diffuse(Nf));
+}
