@@ -3,3 +3,4 @@
 //! Input: `.sl` source. Output: a `Program` for the shading runtime.
 
 pub mod ast;
+pub mod parse;
