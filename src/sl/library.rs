@@ -1,0 +1,195 @@
+//! Finding, compiling and caching shaders.
+//!
+//! Input: a shader name (as a scene names it) or a `.sl` path. Output: compiled programs.
+//! Search order for a name: the search paths given (CLI, then the scene's
+//! `Option "searchpath" "shader"`, then the scene's folder), then the standard library embedded
+//! in the binary. `#include` looks in the including file's folder, `-I` folders, the search
+//! paths and the embedded `stdlib/include`. Every program is compiled once per run.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use crate::diag::{Diag, Diagnostics, SourceMap};
+use crate::sl::ast::Item;
+use crate::sl::ir::Program;
+use crate::sl::preprocess::{preprocess, IncludeResolver};
+
+mod embedded {
+    include!(concat!(env!("OUT_DIR"), "/stdlib.rs"));
+}
+
+/// The standard shaders embedded in the binary: (file name, source).
+pub fn stdlib_shaders() -> &'static [(&'static str, &'static str)] {
+    embedded::SHADERS
+}
+
+/// The standard headers embedded in the binary: (file name, source).
+pub fn stdlib_includes() -> &'static [(&'static str, &'static str)] {
+    embedded::INCLUDES
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct CompileOptions {
+    pub include_dirs: Vec<PathBuf>,
+    pub defines: Vec<(String, Option<String>)>,
+    /// Shader search path (also searched for includes).
+    pub search_paths: Vec<PathBuf>,
+}
+
+struct Resolver<'a> {
+    opts: &'a CompileOptions,
+}
+
+impl IncludeResolver for Resolver<'_> {
+    fn resolve(&self, name: &str, system: bool, from: Option<&Path>) -> Option<(String, String)> {
+        let mut dirs: Vec<PathBuf> = Vec::new();
+        if !system {
+            if let Some(dir) = from.and_then(Path::parent) {
+                dirs.push(dir.to_path_buf());
+            }
+        }
+        dirs.extend(self.opts.include_dirs.iter().cloned());
+        dirs.extend(self.opts.search_paths.iter().cloned());
+        for d in dirs {
+            let p = d.join(name);
+            if let Ok(text) = std::fs::read_to_string(&p) {
+                return Some((p.display().to_string(), text));
+            }
+        }
+        let base = Path::new(name).file_name()?.to_str()?;
+        stdlib_includes()
+            .iter()
+            .find(|(n, _)| *n == base)
+            .map(|(n, t)| (format!("<stdlib>/include/{n}"), t.to_string()))
+    }
+}
+
+/// Compiles every shader defined in a source text. Diagnostics go to `diags`; the programs
+/// that compiled cleanly are returned.
+pub fn compile_source(
+    name: &str,
+    text: &str,
+    path: Option<&Path>,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+    opts: &CompileOptions,
+) -> Vec<Program> {
+    let file = sources.add(name, text);
+    let resolver = Resolver { opts };
+    let pre = preprocess(file, path, sources, &opts.defines, &resolver, diags);
+    let span = |a: usize, b: usize| pre.span(a, b);
+    let Some(ast) = crate::sl::parse::parse(&pre.text, &span, diags) else {
+        return Vec::new();
+    };
+    let functions: Vec<_> = ast
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Function(f) => Some(f.clone()),
+            _ => None,
+        })
+        .collect();
+    let mut out = Vec::new();
+    let mut any_shader = false;
+    for item in &ast.items {
+        if let Item::Shader(def) = item {
+            any_shader = true;
+            match crate::sl::lower::lower_shader(def, &functions) {
+                Ok((prog, warnings)) => {
+                    for w in warnings {
+                        diags.report(w);
+                    }
+                    out.push(prog);
+                }
+                Err(errs) => {
+                    for e in errs {
+                        diags.report(e);
+                    }
+                }
+            }
+        }
+    }
+    if !any_shader {
+        diags.report(Diag::warning("sl::empty", format!("`{name}` defines no shader")));
+    }
+    out
+}
+
+/// Compiled shaders by name, shared by every thread of a render.
+pub struct ShaderLibrary {
+    pub opts: CompileOptions,
+    cache: Mutex<HashMap<String, Option<Arc<Program>>>>,
+}
+
+impl ShaderLibrary {
+    pub fn new(opts: CompileOptions) -> ShaderLibrary {
+        ShaderLibrary { opts, cache: Mutex::new(HashMap::new()) }
+    }
+
+    /// The program for a shader name ("plastic", "myshaders/wood", "wood.sl"); None (with an
+    /// error reported once) when it cannot be found or does not compile.
+    pub fn get(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
+        if let Some(p) = self.cache.lock().unwrap_or_else(|e| e.into_inner()).get(name) {
+            return p.clone();
+        }
+        let result = self.load(name, sources, diags);
+        self.cache.lock().unwrap_or_else(|e| e.into_inner()).insert(name.to_string(), result.clone());
+        result
+    }
+
+    fn load(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
+        let stem = name
+            .strip_suffix(".sl")
+            .or_else(|| name.strip_suffix(".slo"))
+            .or_else(|| name.strip_suffix(".slx"))
+            .or_else(|| name.strip_suffix(".sdr"))
+            .unwrap_or(name);
+        let file_name = format!("{stem}.sl");
+        let base = Path::new(stem).file_name().and_then(|s| s.to_str()).unwrap_or(stem).to_string();
+        let mut candidates: Vec<PathBuf> = self.opts.search_paths.iter().map(|d| d.join(&file_name)).collect();
+        candidates.push(PathBuf::from(&file_name));
+        for c in candidates {
+            if let Ok(text) = std::fs::read_to_string(&c) {
+                let progs = compile_source(&c.display().to_string(), &text, Some(&c), sources, diags, &self.opts);
+                return pick(progs, &base, name, diags);
+            }
+        }
+        if let Some((n, text)) = stdlib_shaders().iter().find(|(n, _)| n.strip_suffix(".sl") == Some(&base)) {
+            let progs = compile_source(&format!("<stdlib>/shaders/{n}"), text, None, sources, diags, &self.opts);
+            return pick(progs, &base, name, diags);
+        }
+        diags.report(
+            Diag::error("shade::missing", format!("shader `{name}` not found"))
+                .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
+        );
+        None
+    }
+}
+
+fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Option<Arc<Program>> {
+    if progs.is_empty() {
+        diags.report(Diag::error("shade::compile", format!("shader `{name}` did not compile")));
+        return None;
+    }
+    let idx = progs.iter().position(|p| p.name == base).unwrap_or(0);
+    progs.into_iter().nth(idx).map(Arc::new)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_standard_shader_compiles() {
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let lib = ShaderLibrary::new(CompileOptions::default());
+        for (n, _) in stdlib_shaders() {
+            let name = n.trim_end_matches(".sl");
+            let p = lib.get(name, &sources, &diags);
+            assert!(p.is_some(), "{name}: {}", diags.render_plain(&sources));
+        }
+        assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    }
+}

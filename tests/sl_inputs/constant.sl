@@ -1,0 +1,6 @@
+surface
+constant()
+{
+    Oi = Os;
+    Ci = Os * Cs;
+}

@@ -1,0 +1,4 @@
+surface
+null()
+{
+}
