@@ -323,6 +323,9 @@ pub const SPECIAL: &[&str] = &[
     "shadername",
     "arraylength",
     "spline",
+    "transform",
+    "vtransform",
+    "ntransform",
 ];
 
 /// Whether a name is a built-in function.

@@ -1437,6 +1437,7 @@ impl<'a> Lowerer<'a> {
         }
         match name {
             "texture" | "environment" | "shadow" | "bump" => return self.texture_call(name, args, span, hint),
+            "transform" | "vtransform" | "ntransform" => return self.transform_call(name, args, span),
             "filterstep" => return self.filterstep(args, span),
             "printf" | "format" => return self.printf(name, args, span),
             "atmosphere" | "displacement" | "lightsource" | "surface" | "incident" | "opposite"
@@ -1856,6 +1857,55 @@ impl<'a> Lowerer<'a> {
             Some(r) => Val { reg: r.reg, ty: r.ty, varying: r.varying, array: None },
             None => Val { reg: self.error_reg, ty: BaseType::Void, varying: false, array: None },
         }
+    }
+
+    /// transform/vtransform/ntransform: ([from,] to, x), (m, x), (from, m, x).
+    fn transform_call(&mut self, name: &str, args: &[Expr], span: Span) -> Val {
+        let (kind, ty) = match name {
+            "transform" => (XformKind::Point, BaseType::Point),
+            "vtransform" => (XformKind::Vector, BaseType::Vector),
+            _ => (XformKind::Normal, BaseType::Normal),
+        };
+        if args.len() < 2 || args.len() > 3 {
+            return self.error(
+                Diag::error("sl::call", format!("`{name}` takes ([from,] to, x) or ([from,] matrix, x)"))
+                    .label(span, "call"),
+            );
+        }
+        let ops: Vec<Val> = args[..args.len() - 1].iter().map(|a| self.expr(a, None)).collect();
+        let xe = &args[args.len() - 1];
+        let x = self.expr(xe, Some(ty));
+        let x = self.coerce(x, ty, xe.span);
+        let mut spaces = Vec::new();
+        for (v, a) in ops.iter().zip(args) {
+            match v.ty {
+                BaseType::String => spaces.push(Space::Named(v.reg)),
+                BaseType::Matrix => spaces.push(Space::Matrix(v.reg)),
+                _ => {
+                    return self.error(
+                        Diag::error("sl::call", format!("`{name}` takes space names or a matrix before the value"))
+                            .label(a.span, format!("this is {}", v.ty.name())),
+                    )
+                }
+            }
+        }
+        let (from, to) = match spaces.as_slice() {
+            [to] => (Space::Current, *to),
+            [from, to] => {
+                if matches!(from, Space::Matrix(_)) {
+                    return self.error(
+                        Diag::error("sl::call", format!("`{name}`: the source space must be a name"))
+                            .label(args[0].span, "matrix"),
+                    );
+                }
+                (*from, *to)
+            }
+            _ => (Space::Current, Space::Current),
+        };
+        let varying = x.varying || ops.iter().any(|v| v.varying);
+        let t = self.temp(x.ty, varying);
+        self.emit(Instr::Transform { kind, dst: t.reg, from, to, a: x.reg });
+        t
     }
 
     /// spline with an array of knots: spline([basis,] x, array).

@@ -1,0 +1,539 @@
+//! Running a primitive's shaders over a grid: binding globals, parameters and primitive
+//! variables, evaluating lights, then surface, atmosphere and displacement programs.
+//!
+//! Input: a diced [`Grid`] (camera space), the scene, the camera and the primitive.
+//! Output: `grid.ci`/`grid.oi` (premultiplied, as RenderMan shaders leave them), or the
+//! displaced `grid.p`/`grid.n`, plus shader output variables in `grid.outputs`.
+//! Invariants: a missing or broken shader never stops the render: a warning, then the default
+//! surface (or no displacement / no light); parameter values of type point/vector/normal are
+//! moved from shader space to camera ("current") space when bound.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::{Diag, Diagnostics, SourceMap};
+use crate::render::Camera;
+use crate::scene::{Attributes, ParamData, ParamType, Scene, ShaderRef};
+use crate::shade::exec::{Env, Exec, InfoValue, LightResult, LightState, TextureLookup};
+use crate::shade::value::Slot;
+use crate::shade::{Grid, GridVar};
+use crate::sl::ast::{BaseType, ShaderKind};
+use crate::sl::ir::{Instr, Program};
+use crate::sl::ShaderLibrary;
+
+/// The shading half of the renderer: compiled shaders plus where to report.
+pub struct ShadeSystem<'a> {
+    pub library: &'a ShaderLibrary,
+    pub sources: &'a SourceMap,
+    pub diags: &'a Diagnostics,
+    pub textures: Option<&'a dyn TextureLookup>,
+}
+
+fn uses_lights(instrs: &[Instr]) -> bool {
+    use crate::sl::builtins::Builtin::*;
+    instrs.iter().any(|i| match i {
+        Instr::Illuminance { .. } => true,
+        Instr::Call { f, .. } => matches!(f, Ambient | Diffuse | Specular | Phong),
+        Instr::If { then, otherwise, .. } => uses_lights(then) || uses_lights(otherwise),
+        Instr::Loop { cond_code, body, step, .. } => uses_lights(cond_code) || uses_lights(body) || uses_lights(step),
+        Instr::Function { body } | Instr::Illuminate { body, .. } | Instr::Solar { body, .. } => uses_lights(body),
+        Instr::Gather { otherwise } => uses_lights(otherwise),
+        _ => false,
+    })
+}
+
+/// Per-run facts shared by the programs of one grid.
+struct RunCtx<'s> {
+    scene: &'s Scene,
+    camera: &'s Camera,
+    attrs: &'s Attributes,
+    camera_from_object: Mat4,
+    seed: u32,
+}
+
+impl<'a> ShadeSystem<'a> {
+    fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
+        let p = self.library.get(&sref.name, self.sources, self.diags)?;
+        let ok = match kind {
+            ShaderKind::Volume => p.kind == ShaderKind::Volume,
+            k => p.kind == k || (sref.name == "null"),
+        };
+        if !ok {
+            self.diags.report(
+                Diag::error(
+                    "shade::kind",
+                    format!("`{}` is a {} shader, used as a {} shader", sref.name, p.kind.name(), kind.name()),
+                )
+                .label(sref.span, "named here"),
+            );
+            return None;
+        }
+        Some(p)
+    }
+
+    fn default_surface(&self) -> Option<Arc<Program>> {
+        self.library.get("defaultsurface", self.sources, self.diags)
+    }
+
+    /// Runs the displacement shader, if any: moves P, updates N and Ng.
+    pub fn displace(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
+        let Some(p) = scene.primitives.get(prim) else { return };
+        let Some(sref) = p.attributes.displacement.clone() else { return };
+        let Some(prog) = self.program(&sref, ShaderKind::Displacement) else { return };
+        let ctx = self.ctx(scene, camera, prim);
+        let n0 = grid.n.clone();
+        let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None);
+        if let Some(regs) = regs {
+            if let Some(g) = prog.global("P") {
+                grid.p = slot_vt(&regs[g.reg as usize], grid.len());
+            }
+            if let Some(g) = prog.global("N") {
+                let nn = slot_vt(&regs[g.reg as usize], grid.len());
+                grid.n = nn;
+            }
+            for (name, slot) in ["s", "t"].iter().filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize]))) {
+                let v = slot_vf(slot, grid.len());
+                if name == "s" {
+                    grid.s = v;
+                } else {
+                    grid.t = v;
+                }
+            }
+            // Ng follows the displaced surface, oriented like the undisplaced normal.
+            let ng = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 0, 1.0);
+            let ng2 = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 1, 1.0);
+            for i in 0..grid.len() {
+                let mut c = ng[i].cross(ng2[i]);
+                if c.dot(n0[i]) < 0.0 {
+                    c = -c;
+                }
+                if c.length_squared() > 0.0 {
+                    grid.ng[i] = c;
+                }
+            }
+        }
+    }
+
+    fn ctx<'s>(&self, scene: &'s Scene, camera: &'s Camera, prim: usize) -> RunCtx<'s> {
+        let p = &scene.primitives[prim];
+        RunCtx {
+            scene,
+            camera,
+            attrs: &p.attributes,
+            camera_from_object: camera.camera_from_world * p.world_from_object,
+            seed: crate::pattern::hash::hash_u32(prim as u32 ^ 0x9e37_79b9),
+        }
+    }
+
+    /// Runs surface (with lights) and atmosphere shaders; fills ci/oi.
+    pub fn shade(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
+        let Some(p) = scene.primitives.get(prim) else { return };
+        let ctx = self.ctx(scene, camera, prim);
+        let surface = match &p.attributes.surface {
+            Some(s) => self.program(s, ShaderKind::Surface).map(|prog| (prog, s.clone())),
+            None => None,
+        };
+        let (prog, sref) = match surface {
+            Some(x) => x,
+            None => match self.default_surface() {
+                Some(prog) => (
+                    prog,
+                    Arc::new(ShaderRef {
+                        name: "defaultsurface".into(),
+                        params: Default::default(),
+                        span: p.span,
+                        world_from_shader: p.world_from_object,
+                    }),
+                ),
+                None => return,
+            },
+        };
+        let lights = if uses_lights(&prog.body) { self.eval_lights(grid, &ctx) } else { Vec::new() };
+        if let Some(regs) = self.run(&prog, &sref, grid, &ctx, &lights, None, None) {
+            let n = grid.len();
+            if let Some(g) = prog.global("Ci") {
+                grid.ci = slot_vt(&regs[g.reg as usize], n);
+            }
+            if let Some(g) = prog.global("Oi") {
+                grid.oi = slot_vt(&regs[g.reg as usize], n);
+            }
+            // Output parameters become arbitrary output variables.
+            grid.outputs.clear();
+            for par in prog.params.iter().filter(|p| p.output) {
+                grid.outputs.push(slot_to_gridvar(&par.name, par.ty, &regs[par.reg as usize], n));
+            }
+            for gname in ["N", "P", "s", "t", "Cs", "Os"] {
+                if let Some(g) = prog.global(gname) {
+                    let ty = match gname {
+                        "N" => BaseType::Normal,
+                        "P" => BaseType::Point,
+                        "Cs" | "Os" => BaseType::Color,
+                        _ => BaseType::Float,
+                    };
+                    grid.outputs.push(slot_to_gridvar(gname, ty, &regs[g.reg as usize], n));
+                }
+            }
+        } else {
+            return;
+        }
+        // Atmosphere.
+        if let Some(aref) = p.attributes.atmosphere.clone() {
+            if let Some(aprog) = self.program(&aref, ShaderKind::Volume) {
+                let ci = grid.ci.clone();
+                let oi = grid.oi.clone();
+                if let Some(regs) = self.run(&aprog, &aref, grid, &ctx, &lights, Some((&ci, &oi)), None) {
+                    let n = grid.len();
+                    if let Some(g) = aprog.global("Ci") {
+                        grid.ci = slot_vt(&regs[g.reg as usize], n);
+                    }
+                    if let Some(g) = aprog.global("Oi") {
+                        grid.oi = slot_vt(&regs[g.reg as usize], n);
+                    }
+                }
+            }
+        }
+        // Guard the hider against NaN and infinities from shaders.
+        let mut bad = false;
+        for c in grid.ci.iter_mut().chain(grid.oi.iter_mut()) {
+            if !c.is_finite() {
+                *c = Vec3::ZERO;
+                bad = true;
+            }
+        }
+        if bad {
+            self.diags.report(Diag::warning(
+                "shade::nan",
+                format!("shader `{}` produced NaN or infinite colours (rendered black)", sref.name),
+            ));
+        }
+    }
+
+    fn eval_lights(&self, grid: &Grid, ctx: &RunCtx) -> Vec<LightResult> {
+        let n = grid.len();
+        let mut out = Vec::new();
+        for &li in &ctx.attrs.lights_on {
+            let Some(light) = ctx.scene.lights.get(li) else { continue };
+            let Some(prog) = self.program(&light.shader, ShaderKind::Light) else { continue };
+            let ns: Vec<Vec3> = grid.n.iter().map(|v| v.normalize_or_zero()).collect();
+            let state = LightState { ran: false, lit: vec![false; n], ps: grid.p.clone(), ns };
+            let mut st = Some(state);
+            let Some(regs) = self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st)) else { continue };
+            let state = st.unwrap_or_default();
+            let ambient = !state.ran;
+            let get = |name: &str, def: Vec3| -> Vec<Vec3> {
+                prog.global(name).map(|g| slot_vt(&regs[g.reg as usize], n)).unwrap_or_else(|| vec![def; n])
+            };
+            let l: Vec<Vec3> = get("L", Vec3::ZERO).into_iter().map(|v| -v).collect();
+            let mut cl = get("Cl", Vec3::ZERO);
+            let ol = get("Ol", Vec3::ONE);
+            let lit = if ambient { vec![true; n] } else { state.lit };
+            for (c, &on) in cl.iter_mut().zip(&lit) {
+                if !on {
+                    *c = Vec3::ZERO;
+                }
+            }
+            let mut category = String::new();
+            let mut nondiffuse = false;
+            let mut nonspecular = false;
+            let mut outputs = Vec::new();
+            for par in &prog.params {
+                let slot = regs[par.reg as usize].clone();
+                match par.name.as_str() {
+                    "__category" => category = slot.s().to_string(),
+                    "__nondiffuse" => nondiffuse = slot.f().first() != 0.0,
+                    "__nonspecular" => nonspecular = slot.f().first() != 0.0,
+                    _ => {}
+                }
+                outputs.push((par.name.clone(), slot));
+            }
+            out.push(LightResult { ambient, lit, l, cl, ol, category, nondiffuse, nonspecular, outputs });
+        }
+        out
+    }
+
+    /// Binds and runs one program over the grid; returns its registers.
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &self,
+        prog: &Program,
+        sref: &ShaderRef,
+        grid: &Grid,
+        ctx: &RunCtx,
+        lights: &[LightResult],
+        ci_oi: Option<(&[Vec3], &[Vec3])>,
+        light_state: Option<&mut Option<LightState>>,
+    ) -> Option<Vec<Slot>> {
+        let n = grid.len();
+        let camera_from_shader = ctx.camera.camera_from_world * sref.world_from_shader;
+        let camera_from_object = ctx.camera_from_object;
+        let camera = ctx.camera;
+        let spaces = move |name: &str| -> Option<Mat4> {
+            match name {
+                "object" => Some(camera_from_object),
+                "shader" => Some(camera_from_shader),
+                _ => camera.camera_from_space(name),
+            }
+        };
+        let attrs = ctx.attrs;
+        let scene = ctx.scene;
+        let info = move |which: &str, name: &str| -> Option<InfoValue> { info_query(scene, attrs, camera, which, name) };
+        let flip = match (grid.ng.first(), grid.dpdu.first(), grid.dpdv.first()) {
+            (Some(ng), Some(a), Some(b)) => ng.dot(a.cross(*b)) < 0.0,
+            _ => false,
+        };
+        let env = Env {
+            nu: grid.nu,
+            nv: grid.nv,
+            spaces: &spaces,
+            lights,
+            flip_normals: flip,
+            near: camera.near,
+            far: camera.far,
+            shader_name: &sref.name,
+            diags: self.diags,
+            info: &info,
+            textures: self.textures,
+            seed: ctx.seed,
+        };
+        let mut ex = Exec::new(prog, n, &env);
+        // Globals.
+        for g in &prog.globals {
+            let v = match g.name {
+                "P" => {
+                    if prog.kind == ShaderKind::Light {
+                        Slot::T(camera_from_shader.transform_point3(Vec3::ZERO))
+                    } else {
+                        Slot::VT(grid.p.clone())
+                    }
+                }
+                "Ps" => Slot::VT(grid.p.clone()),
+                "N" => Slot::VT(grid.n.clone()),
+                "Ng" => Slot::VT(grid.ng.clone()),
+                "dPdu" => Slot::VT(grid.dpdu.clone()),
+                "dPdv" => Slot::VT(grid.dpdv.clone()),
+                "u" => Slot::VF(grid.u.clone()),
+                "v" => Slot::VF(grid.v.clone()),
+                "s" => Slot::VF(grid.s.clone()),
+                "t" => Slot::VF(grid.t.clone()),
+                "du" => Slot::F(grid.du),
+                "dv" => Slot::F(grid.dv),
+                "Cs" => Slot::VT(grid.cs.clone()),
+                "Os" => Slot::VT(grid.os.clone()),
+                "I" => Slot::VT(grid.i.clone()),
+                "E" => Slot::T(Vec3::ZERO),
+                "Ci" => match ci_oi {
+                    Some((ci, _)) => Slot::VT(ci.to_vec()),
+                    None => Slot::VT(vec![Vec3::ZERO; n]),
+                },
+                "Oi" => match ci_oi {
+                    Some((_, oi)) => Slot::VT(oi.to_vec()),
+                    None => Slot::VT(grid.os.clone()),
+                },
+                "Cl" => Slot::VT(vec![Vec3::ZERO; n]),
+                "Ol" => Slot::VT(vec![Vec3::ONE; n]),
+                "L" => Slot::VT(vec![Vec3::ZERO; n]),
+                "ncomps" => Slot::F(3.0),
+                "time" | "dtime" => Slot::F(0.0),
+                "dPdtime" => Slot::VT(vec![Vec3::ZERO; n]),
+                "alpha" => Slot::F(1.0),
+                _ => continue,
+            };
+            ex.set(g.reg, fit(v, prog.regs[g.reg as usize].varying, n));
+        }
+        if let Some(st) = light_state {
+            ex.light = st.take();
+            ex.run_init();
+            bind_params(&mut ex, prog, sref, grid, camera_from_shader, self.diags);
+            ex.run_body();
+            *st = ex.light.take();
+        } else {
+            ex.run_init();
+            bind_params(&mut ex, prog, sref, grid, camera_from_shader, self.diags);
+            ex.run_body();
+        }
+        Some(ex.regs)
+    }
+}
+
+/// Makes a slot match a register's detail.
+fn fit(v: Slot, varying: bool, n: usize) -> Slot {
+    if varying && !v.is_varying() {
+        crate::shade::exec::broadcast(&v, n)
+    } else if !varying && v.is_varying() {
+        match v {
+            Slot::VF(x) => Slot::F(x.first().copied().unwrap_or(0.0)),
+            Slot::VT(x) => Slot::T(x.first().copied().unwrap_or(Vec3::ZERO)),
+            Slot::VM(x) => Slot::M(x.first().copied().unwrap_or(Mat4::IDENTITY)),
+            s => s,
+        }
+    } else {
+        v
+    }
+}
+
+/// Instance values (from the Surface/LightSource request), then primitive variables of the same
+/// name, override the defaults.
+fn bind_params(ex: &mut Exec, prog: &Program, sref: &ShaderRef, grid: &Grid, camera_from_shader: Mat4, diags: &Diagnostics) {
+    let n = grid.len();
+    for par in &prog.params {
+        let count = par.array.unwrap_or(1);
+        if let Some(p) = sref.params.get(&par.name) {
+            let comps = match par.ty {
+                BaseType::Float => 1,
+                BaseType::Matrix => 16,
+                BaseType::String => 1,
+                _ => 3,
+            };
+            match &p.data {
+                ParamData::Strings(s) if par.ty == BaseType::String => {
+                    for k in 0..count.min(s.len()) {
+                        ex.set(par.reg + k as u32, Slot::S(Arc::from(s[k].as_str())));
+                    }
+                }
+                ParamData::Floats(f) if par.ty != BaseType::String && f.len() >= comps => {
+                    for k in 0..count.min(f.len() / comps) {
+                        let x = &f[k * comps..(k + 1) * comps];
+                        let slot = match par.ty {
+                            BaseType::Float => Slot::F(x[0]),
+                            BaseType::Matrix => {
+                                let mut a = [0f32; 16];
+                                a.copy_from_slice(x);
+                                Slot::M(Mat4::from_cols_array(&a))
+                            }
+                            BaseType::Point => Slot::T(camera_from_shader.transform_point3(Vec3::new(x[0], x[1], x[2]))),
+                            BaseType::Vector => Slot::T(camera_from_shader.transform_vector3(Vec3::new(x[0], x[1], x[2]))),
+                            BaseType::Normal => {
+                                let m = glam::Mat3::from_mat4(camera_from_shader);
+                                let m = if m.determinant() != 0.0 { m.inverse().transpose() } else { m };
+                                Slot::T(m * Vec3::new(x[0], x[1], x[2]))
+                            }
+                            _ => Slot::T(Vec3::new(x[0], x[1], x[2])),
+                        };
+                        ex.set(par.reg + k as u32, fit(slot, par.varying, n));
+                    }
+                }
+                _ => diags.report(
+                    Diag::warning(
+                        "shade::param",
+                        format!("value of `{}` does not fit the {} parameter of `{}` (ignored)", par.name, par.ty.name(), sref.name),
+                    )
+                    .label(p.span, "value"),
+                ),
+            }
+        }
+        if let Some(gv) = grid.primvar(&par.name) {
+            bind_gridvar(ex, par.reg, par.ty, count, par.varying, gv, n);
+        }
+    }
+}
+
+fn bind_gridvar(ex: &mut Exec, reg: u32, ty: BaseType, count: usize, varying: bool, gv: &GridVar, n: usize) {
+    let w = gv.width();
+    let comps = match ty {
+        BaseType::Float => 1,
+        BaseType::Matrix => 16,
+        BaseType::String => {
+            if let Some(s) = gv.strings.first() {
+                ex.set(reg, Slot::S(Arc::from(s.as_str())));
+            }
+            return;
+        }
+        _ => 3,
+    };
+    if gv.ty.components() * gv.array_len != comps * count && w != comps * count {
+        return;
+    }
+    for k in 0..count {
+        let off = k * comps;
+        let slot = if gv.uniform {
+            let f = &gv.floats;
+            match comps {
+                1 => Slot::F(f.get(off).copied().unwrap_or(0.0)),
+                3 => Slot::T(Vec3::new(f[off], f[off + 1], f[off + 2])),
+                _ => {
+                    let mut a = [0f32; 16];
+                    a.copy_from_slice(&f[off..off + 16]);
+                    Slot::M(Mat4::from_cols_array(&a))
+                }
+            }
+        } else {
+            match comps {
+                1 => Slot::VF((0..n).map(|i| gv.floats[i * w + off]).collect()),
+                3 => Slot::VT(
+                    (0..n).map(|i| Vec3::new(gv.floats[i * w + off], gv.floats[i * w + off + 1], gv.floats[i * w + off + 2])).collect(),
+                ),
+                _ => continue,
+            }
+        };
+        ex.set(reg + k as u32, fit(slot, varying, n));
+    }
+}
+
+fn slot_vt(s: &Slot, n: usize) -> Vec<Vec3> {
+    let t = s.t();
+    (0..n).map(|i| t.at(i)).collect()
+}
+
+fn slot_vf(s: &Slot, n: usize) -> Vec<f32> {
+    let f = s.f();
+    (0..n).map(|i| f.at(i)).collect()
+}
+
+fn slot_to_gridvar(name: &str, ty: BaseType, s: &Slot, n: usize) -> GridVar {
+    let (pty, floats) = match ty {
+        BaseType::Float => (ParamType::Float, slot_vf(s, n)),
+        BaseType::Color => (ParamType::Color, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
+        BaseType::Normal => (ParamType::Normal, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
+        BaseType::Vector => (ParamType::Vector, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
+        BaseType::Point => (ParamType::Point, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
+        _ => (ParamType::Float, vec![0.0; n]),
+    };
+    GridVar { name: name.to_string(), ty: pty, array_len: 1, uniform: false, floats, strings: Vec::new() }
+}
+
+/// attribute(), option(), rendererinfo() and textureinfo() answers (RISpec Tables 15.4–15.6).
+fn info_query(scene: &Scene, attrs: &Attributes, camera: &Camera, which: &str, name: &str) -> Option<InfoValue> {
+    let o = &scene.options;
+    let f = |v: &[f32]| Some(InfoValue::Floats(v.to_vec()));
+    match which {
+        "attribute" => match name {
+            "ShadingRate" => f(&[attrs.shading_rate]),
+            "Sides" => f(&[attrs.sides as f32]),
+            "Matte" => f(&[if attrs.matte { 1.0 } else { 0.0 }]),
+            "displacementbound:sphere" => f(&[attrs.displacement_bound]),
+            "displacementbound:coordinatesystem" => Some(InfoValue::Str(attrs.displacement_bound_space.clone())),
+            "identifier:name" => attrs.identifier.clone().map(InfoValue::Str),
+            other => {
+                let key = other.strip_prefix("user:").map(|k| format!("user:{k}")).unwrap_or_else(|| other.to_string());
+                attrs.user.get(&key).map(|p| match &p.data {
+                    ParamData::Floats(v) => InfoValue::Floats(v.clone()),
+                    ParamData::Strings(s) => InfoValue::Str(s.first().cloned().unwrap_or_default()),
+                })
+            }
+        },
+        "option" => match name {
+            "Format" => f(&[o.xres as f32, o.yres as f32, o.pixel_aspect]),
+            "DeviceResolution" => f(&[o.xres as f32, o.yres as f32, o.pixel_aspect]),
+            "FrameAspectRatio" => f(&[o.effective_frame_aspect()]),
+            "CropWindow" => f(&o.crop_window),
+            "DepthOfField" => match o.depth_of_field {
+                Some(d) => f(&d),
+                None => f(&[f32::INFINITY, 0.0, 0.0]),
+            },
+            "Shutter" => f(&o.shutter),
+            "Clipping" => f(&[camera.near, camera.far]),
+            other => o.user.get(other).map(|p| match &p.data {
+                ParamData::Floats(v) => InfoValue::Floats(v.clone()),
+                ParamData::Strings(s) => InfoValue::Str(s.first().cloned().unwrap_or_default()),
+            }),
+        },
+        "rendererinfo" => match name {
+            "renderer" => Some(InfoValue::Str("arbor".into())),
+            "version" => f(&[0.0, 1.0, 0.0, 0.0]),
+            "versionstring" => Some(InfoValue::Str(env!("CARGO_PKG_VERSION").into())),
+            _ => None,
+        },
+        _ => None,
+    }
+}
