@@ -127,18 +127,26 @@ impl Request {
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
 
+mod ascii;
+mod lex;
+
 /// Reads RIB bytes (ASCII, binary or gzip, detected from the content), registering the text
 /// under `name` in `sources`. Syntax errors are reported to `diags`; the requests that could be
 /// read are returned.
+///
+/// Gzip input (magic bytes 1f 8b) is decompressed first. Pure ASCII is registered as is.
 pub fn parse_bytes(
     name: &str,
     bytes: &[u8],
     sources: &SourceMap,
     diags: &Diagnostics,
 ) -> Vec<Request> {
-    // Replaced by the real reader (ascii.rs / binary.rs).
-    let _ = (name, bytes, sources, diags);
-    Vec::new()
+    let text: std::sync::Arc<str> = match std::str::from_utf8(bytes) {
+        Ok(s) if bytes.is_ascii() => s.into(),
+        _ => String::from_utf8_lossy(bytes).into_owned().into(),
+    };
+    let file = sources.add(name, text.clone());
+    ascii::parse_text(&text, file, diags, &[])
 }
 
 /// Reads a RIB file from disk ("-" reads stdin).
