@@ -31,8 +31,8 @@ enum BuildError {
 }
 
 /// Reads every request of `text` (file id `file`). Errors whose position is in `quiet`
-/// (sorted; places where the binary decoder already reported a problem) are not reported
-/// again, but still resynchronise.
+/// (sorted; placeholders where the binary decoder already reported a problem) are not
+/// reported again, but still resynchronise; a request whose name is there is dropped.
 pub(crate) fn parse_text(
     text: &str,
     file: u32,
@@ -66,6 +66,7 @@ pub(crate) fn parse_text(
                     count += 1;
                     end = p.as_span().end();
                     match build(p, pos, file) {
+                        Ok(r) if quiet.binary_search(&(r.span.start as usize)).is_ok() => {}
                         Ok(r) => out.push(r),
                         Err(BuildError::Bad(d)) => diags.report(d),
                         Err(BuildError::BadToken { start, end, open }) => {
@@ -103,7 +104,9 @@ pub(crate) fn parse_text(
                 {
                     let e = r.as_span().end();
                     if let Ok(req) = build(r, pos, file) {
-                        out.push(req);
+                        if quiet.binary_search(&(req.span.start as usize)).is_err() {
+                            out.push(req);
+                        }
                     }
                     pos += e.max(1);
                     pos = boundary(text, pos);

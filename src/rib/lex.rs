@@ -235,8 +235,21 @@ pub(crate) fn unescape(s: &str) -> String {
     }
 }
 
+/// Writes a real so that `scan_number` reads back the same f32 and sees a real (Rust's
+/// shortest round-trip form always has a `.` or an exponent). Infinities become `±1e39`
+/// (which reads back as infinity); NaN, which RIB cannot spell, becomes `0.0`.
+pub(crate) fn write_f32(out: &mut String, f: f32) {
+    use std::fmt::Write;
+    if f.is_nan() {
+        out.push_str("0.0");
+    } else if f.is_infinite() {
+        out.push_str(if f > 0.0 { "1e39" } else { "-1e39" });
+    } else {
+        let _ = write!(out, "{f:?}");
+    }
+}
+
 /// Writes `s` as a quoted RIB string that `unescape` reads back exactly.
-#[allow(dead_code)]
 pub(crate) fn escape_into(out: &mut String, s: &str) {
     out.push('"');
     for ch in s.chars() {
