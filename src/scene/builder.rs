@@ -327,6 +327,10 @@ impl<'a> Builder<'a> {
     /// Ends the stream: reports unclosed blocks (each at its opener) and closes an open world
     /// so its scene is still produced.
     pub fn finish(mut self) -> Vec<Scene> {
+        // After an abort nothing more is reported; an open world still yields its scene.
+        if self.aborted {
+            self.error_mode = ErrorMode::Ignore;
+        }
         self.aborted = false;
         for c in std::mem::take(&mut self.conds).into_iter().rev() {
             self.report(

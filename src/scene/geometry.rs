@@ -915,21 +915,22 @@ impl Builder<'_> {
         let mut varying = 0;
         for &n in &nverts {
             let n = n as usize;
-            let segs =
-                match (cubic, periodic) {
-                    (false, false) => n - 1,
-                    (false, true) => n,
-                    (true, false) if (n - 4) % step == 0 => (n - 4) / step + 1,
-                    (true, true) if n % step == 0 => n / step,
-                    _ => return self.geom_error(
+            let segs = match (cubic, periodic) {
+                (false, false) => n - 1,
+                (false, true) => n,
+                (true, false) if (n - 4) % step == 0 => (n - 4) / step + 1,
+                (true, true) if n % step == 0 => n / step,
+                _ => {
+                    return self.geom_error(
                         call,
                         call.pos_spans[1],
                         format!("a cubic curve of {n} vertices does not fit the basis step {step}"),
                         format!(
                             "nonperiodic: 4 + k·{step} vertices; periodic: a multiple of {step}"
                         ),
-                    ),
-                };
+                    )
+                }
+            };
             varying += if periodic { segs } else { segs + 1 };
         }
         let pv = self.params(call, ParamUse::Primitive);

@@ -131,6 +131,15 @@ pub fn split_token(token: &str) -> Result<(Option<Decl>, &str), String> {
     }
 }
 
+fn has_class_word(token: &str) -> bool {
+    token.split_whitespace().next().is_some_and(|w| {
+        matches!(
+            w,
+            "constant" | "uniform" | "varying" | "vertex" | "facevarying" | "facevertex"
+        )
+    })
+}
+
 /// The standard declarations every renderer knows (RISpec 3.2 Table 5.1, the standard
 /// shaders' parameters, Display/Hider/Option/Attribute parameters).
 const STANDARD: &[(&str, &str)] = &[
@@ -328,10 +337,20 @@ pub fn parse_params(
                 continue;
             }
         };
-        let decl = inline.or_else(|| match usage {
+        let known = match usage {
             ParamUse::Category(c) => dict.get_in(c, name),
             _ => dict.get(name),
-        });
+        };
+        // An inline declaration without a class ("float[2] st") keeps the class of the
+        // standing declaration of that name, if any (else uniform, the spec's default).
+        let decl = match (inline, known) {
+            (Some(mut d), Some(k)) if !has_class_word(token) => {
+                d.class = k.class;
+                Some(d)
+            }
+            (Some(d), _) => Some(d),
+            (None, k) => k,
+        };
         let decl = match decl {
             Some(d) => d,
             None => {
