@@ -127,18 +127,77 @@ impl Request {
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
 
+mod ascii;
+mod binary;
+pub mod format;
+mod lex;
+
+pub use format::format_requests;
+
 /// Reads RIB bytes (ASCII, binary or gzip, detected from the content), registering the text
 /// under `name` in `sources`. Syntax errors are reported to `diags`; the requests that could be
 /// read are returned.
+///
+/// Gzip input (magic bytes 1f 8b) is decompressed first. Pure ASCII is registered as is; a
+/// stream holding binary tokens (RISpec C.1, possibly mixed with ASCII) is registered as its
+/// decoded ASCII text, and spans are byte offsets into that registered text.
 pub fn parse_bytes(
     name: &str,
     bytes: &[u8],
     sources: &SourceMap,
     diags: &Diagnostics,
 ) -> Vec<Request> {
-    // Replaced by the real reader (ascii.rs / binary.rs).
-    let _ = (name, bytes, sources, diags);
-    Vec::new()
+    let unzipped;
+    let mut data = bytes;
+    if data.starts_with(&[0x1f, 0x8b]) {
+        match gunzip(data) {
+            Ok(v) => {
+                unzipped = v;
+                data = &unzipped;
+            }
+            Err(e) => {
+                let file = sources.add(name, "");
+                diags.report(
+                    Diag::error("rib::gzip", format!("cannot decompress `{name}`: {e}"))
+                        .label(Span::new(file, 0, 0), "gzip stream starts here")
+                        .help(
+                            "the file starts with the gzip magic bytes 1f 8b but is not valid gzip",
+                        ),
+                );
+                return Vec::new();
+            }
+        }
+    }
+    if data.is_ascii() {
+        // Pure ASCII: always valid UTF-8.
+        let text: std::sync::Arc<str> = String::from_utf8_lossy(data).into();
+        let file = sources.add(name, text.clone());
+        return ascii::parse_text(&text, file, diags, &[]);
+    }
+    let (decoded, issues) = binary::transcode(data);
+    let text: std::sync::Arc<str> = decoded.into();
+    let file = sources.add(name, text.clone());
+    let mut quiet = Vec::new();
+    for is in issues {
+        let end = (is.at + 1).min(text.len()).max(is.at);
+        let d = if is.error {
+            Diag::error("rib::binary", is.message)
+        } else {
+            Diag::warning("rib::binary", is.message)
+        };
+        diags.report(d.label(Span::new(file, is.at, end), "here").help(is.help));
+        if is.placeholder {
+            quiet.push(is.at);
+        }
+    }
+    quiet.sort_unstable();
+    ascii::parse_text(&text, file, diags, &quiet)
+}
+
+fn gunzip(data: &[u8]) -> std::io::Result<Vec<u8>> {
+    let mut out = Vec::with_capacity(data.len() * 4);
+    std::io::Read::read_to_end(&mut flate2::read::MultiGzDecoder::new(data), &mut out)?;
+    Ok(out)
 }
 
 /// Reads a RIB file from disk ("-" reads stdin).

@@ -3,7 +3,21 @@
 //! Input: [`crate::rib::Request`]s. Output: one [`Scene`] per frame (plain data, see `types`).
 //! Invariants: every request is validated against the table; errors are collected, not stopped
 //! at; requests that are recognised but not implemented warn once, by name.
+//!
+//! Layout: `table` (one row per request), `params` (declarations and value counts),
+//! `builder` (driver, blocks, frames), and one file per request family: `options`,
+//! `attributes`, `transforms`, `geometry`, `archive`, `cond` (conditional RIB).
 
+mod archive;
+mod attributes;
+pub mod builder;
+pub mod cond;
+mod geometry;
+mod options;
+pub mod params;
+pub mod table;
+mod transforms;
 pub mod types;
 
+pub use builder::{build_scenes, BuildContext, Builder};
 pub use types::*;

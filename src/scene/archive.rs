@@ -1,0 +1,167 @@
+//! Archives: `ReadArchive` (files on the archive path or inline archives) and
+//! `ArchiveBegin`/`ArchiveEnd` definitions.
+//!
+//! Input: an archive name and the span of the request naming it. Output: the archive's
+//! requests run in place, with the current graphics state.
+//! Invariants: the search order is the CLI's archive paths, `Option "searchpath" "archive"`,
+//! the including file's folder, then the main scene's folder; an archive that (indirectly)
+//! reads itself is an error naming the chain, and is not read again.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::diag::{Diag, Span};
+use crate::rib::{Request, Value};
+
+use super::builder::Builder;
+use super::table::Call;
+
+impl Builder<'_> {
+    /// `reqs[start]` is `ArchiveBegin`: stores the requests up to the matching `ArchiveEnd`
+    /// under the archive's name and returns the index after it.
+    pub(super) fn record_archive(&mut self, reqs: &[Request], start: usize) -> usize {
+        let open = &reqs[start];
+        let name = match open.args.first().map(|a| &a.value) {
+            Some(Value::Str(s)) => s.clone(),
+            _ => {
+                let d = Diag::error("scene::arguments", "`ArchiveBegin` needs an archive name")
+                    .label(open.span, "no name")
+                    .help("`ArchiveBegin \"name\"` … `ArchiveEnd`, then `ReadArchive \"name\"`");
+                self.report(d);
+                String::new()
+            }
+        };
+        let mut depth = 0usize;
+        let mut end = None;
+        for (j, r) in reqs.iter().enumerate().skip(start + 1) {
+            match r.name.as_str() {
+                "ArchiveBegin" => depth += 1,
+                "ArchiveEnd" if depth == 0 => {
+                    end = Some(j);
+                    break;
+                }
+                "ArchiveEnd" => depth -= 1,
+                _ => {}
+            }
+        }
+        let stop = end.unwrap_or(reqs.len());
+        if end.is_none() {
+            let d = Diag::error(
+                "scene::nesting",
+                "`ArchiveBegin` is never closed by `ArchiveEnd`",
+            )
+            .label(open.span, "opened here")
+            .help("add `ArchiveEnd` after the archive's requests");
+            self.report(d);
+        }
+        if !name.is_empty() {
+            self.archives
+                .insert(name, Arc::new(reqs[start + 1..stop].to_vec()));
+        }
+        (stop + 1).min(reqs.len())
+    }
+
+    pub(super) fn archive_end_alone(&mut self, call: &Call<'_>) {
+        let d = Diag::error("scene::nesting", "`ArchiveEnd` without `ArchiveBegin`")
+            .label(call.span(), "nothing to close")
+            .help("remove it, or add `ArchiveBegin \"name\"` before the archive's requests");
+        self.report(d);
+    }
+
+    pub(super) fn read_archive(&mut self, call: &Call<'_>) {
+        let name = call.pos[0].str().to_string();
+        self.read_archive_named(&name, call.pos_spans[0], call.span());
+    }
+
+    /// Where a file archive is found, with the folders that were searched.
+    fn find_archive(&self, name: &str, from: Span) -> (Option<PathBuf>, Vec<String>) {
+        let p = Path::new(name);
+        if p.is_absolute() {
+            return (p.is_file().then(|| p.to_path_buf()), vec![]);
+        }
+        let mut dirs: Vec<PathBuf> = Vec::new();
+        dirs.extend(self.ctx.archive_paths.iter().map(PathBuf::from));
+        dirs.extend(self.option_paths.archive.iter().map(PathBuf::from));
+        if let Some(f) = self.ctx.sources.get(from.file) {
+            let parent = Path::new(&f.name).parent().map(Path::to_path_buf);
+            dirs.push(match parent {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => PathBuf::from("."),
+            });
+        }
+        if let Some(b) = &self.ctx.base_dir {
+            dirs.push(b.clone());
+        }
+        let searched = dirs.iter().map(|d| d.display().to_string()).collect();
+        let found = dirs.iter().map(|d| d.join(name)).find(|c| c.is_file());
+        (found, searched)
+    }
+
+    pub(super) fn read_archive_named(&mut self, name: &str, arg_span: Span, req_span: Span) {
+        if let Some(reqs) = self.archives.get(name).cloned() {
+            let key = format!("inline archive \"{name}\"");
+            if self.enter_archive(&key, req_span) {
+                self.run(&reqs);
+                self.include.pop();
+            }
+            return;
+        }
+        let (found, searched) = self.find_archive(name, req_span);
+        let Some(path) = found else {
+            let mut d = Diag::error("scene::archive", format!("cannot find archive \"{name}\""))
+                .label(arg_span, "not found");
+            d = if searched.is_empty() {
+                d.help("check the path")
+            } else {
+                d.help(format!(
+                    "searched: {} (add a folder with `Option \"searchpath\" \"archive\"` or --archives)",
+                    searched.join(", ")
+                ))
+            };
+            return self.report(d);
+        };
+        let key = std::fs::canonicalize(&path)
+            .unwrap_or_else(|_| path.clone())
+            .display()
+            .to_string();
+        if !self.enter_archive(&key, req_span) {
+            return;
+        }
+        match crate::rib::read_path(&path, self.ctx.sources, self.ctx.diags) {
+            Ok(reqs) => self.run(&reqs),
+            Err(d) => {
+                let d = d.label(arg_span, "while reading this archive");
+                self.report(d);
+            }
+        }
+        self.include.pop();
+    }
+
+    /// Pushes `key` on the include chain, or reports the cycle it would close.
+    fn enter_archive(&mut self, key: &str, span: Span) -> bool {
+        if let Some(i) = self.include.iter().position(|k| k == key) {
+            let chain = self.include[i..]
+                .iter()
+                .map(String::as_str)
+                .chain(std::iter::once(key))
+                .collect::<Vec<_>>()
+                .join(" → ");
+            let d = Diag::error(
+                "scene::archive-cycle",
+                format!("`ReadArchive` cycle: {chain}"),
+            )
+            .label(span, "reads an archive that is already being read")
+            .help("an archive must not (indirectly) read itself");
+            self.report(d);
+            return false;
+        }
+        if self.include.len() >= 64 {
+            let d = Diag::error("scene::archive", "archives nested more than 64 deep")
+                .label(span, "here");
+            self.report(d);
+            return false;
+        }
+        self.include.push(key.to_string());
+        true
+    }
+}

@@ -1,0 +1,755 @@
+//! The scene builder: runs requests through the table and keeps the graphics state.
+//!
+//! Input: `Vec<Request>` (one RIB stream; `ReadArchive` pulls in more) and a
+//! [`BuildContext`]. Output: one [`Scene`] per frame (per `WorldBegin`…`WorldEnd` without
+//! `FrameBegin`), filtered by the CLI's frame range.
+//! Invariants: errors are collected and the build goes on (unless `ErrorHandler "abort"`);
+//! every block records the span that opened it; inside the world `ctm` is world_from_object,
+//! before it camera_from_current.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::{Diag, Diagnostics, Severity, SourceMap, Span};
+use crate::rib::Request;
+
+use super::params::{parse_params, validate_single, ColorMap, Dictionary, ParamUse};
+use super::table::{self, Call};
+use super::types::*;
+
+/// What the builder needs from the outside world.
+pub struct BuildContext<'a> {
+    pub sources: &'a SourceMap,
+    pub diags: &'a Diagnostics,
+    /// Search paths from the command line, searched before the scene's own.
+    pub shader_paths: Vec<String>,
+    pub texture_paths: Vec<String>,
+    pub archive_paths: Vec<String>,
+    /// The folder of the main scene file.
+    pub base_dir: Option<PathBuf>,
+    /// Only frames in this inclusive range are built (frame numbers from `FrameBegin`, else
+    /// the 1-based count of world blocks).
+    pub frames: Option<(i32, i32)>,
+}
+
+impl<'a> BuildContext<'a> {
+    pub fn new(sources: &'a SourceMap, diags: &'a Diagnostics) -> BuildContext<'a> {
+        BuildContext {
+            sources,
+            diags,
+            shader_paths: Vec::new(),
+            texture_paths: Vec::new(),
+            archive_paths: Vec::new(),
+            base_dir: None,
+            frames: None,
+        }
+    }
+}
+
+/// Builds every scene of a request stream.
+pub fn build_scenes(requests: Vec<Request>, ctx: &BuildContext) -> Vec<Scene> {
+    let mut b = Builder::new(ctx);
+    b.run(&requests);
+    b.finish()
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum BlockKind {
+    Frame,
+    World,
+    Attribute,
+    Transform,
+    Solid,
+    Object,
+    Motion,
+}
+
+impl BlockKind {
+    pub(super) fn begin(self) -> &'static str {
+        match self {
+            BlockKind::Frame => "FrameBegin",
+            BlockKind::World => "WorldBegin",
+            BlockKind::Attribute => "AttributeBegin",
+            BlockKind::Transform => "TransformBegin",
+            BlockKind::Solid => "SolidBegin",
+            BlockKind::Object => "ObjectBegin",
+            BlockKind::Motion => "MotionBegin",
+        }
+    }
+    pub(super) fn end(self) -> &'static str {
+        match self {
+            BlockKind::Frame => "FrameEnd",
+            BlockKind::World => "WorldEnd",
+            BlockKind::Attribute => "AttributeEnd",
+            BlockKind::Transform => "TransformEnd",
+            BlockKind::Solid => "SolidEnd",
+            BlockKind::Object => "ObjectEnd",
+            BlockKind::Motion => "MotionEnd",
+        }
+    }
+}
+
+/// The part of the graphics state saved by attribute blocks.
+#[derive(Clone, Debug)]
+pub(super) struct GState {
+    pub attrs: Arc<Attributes>,
+    /// TrimCurve in force (an attribute).
+    pub trim: Option<Arc<TrimCurves>>,
+    /// World_from_object inside the world; camera_from_current before it.
+    pub ctm: Mat4,
+    /// ScopedCoordinateSystem entries made so far: (name, value it replaced).
+    pub scoped: Vec<(String, Option<Mat4>)>,
+}
+
+/// Options saved by FrameBegin.
+#[derive(Clone, Debug)]
+pub(super) struct SavedOptions {
+    pub options: Options,
+    pub option_paths: SearchPaths,
+    pub colors: Option<ColorMap>,
+    pub clip_camera: Vec<(Vec3, Vec3)>,
+}
+
+#[derive(Clone, Debug)]
+pub(super) struct Block {
+    pub kind: BlockKind,
+    pub span: Span,
+    pub saved: GState,
+    pub saved_options: Option<Box<SavedOptions>>,
+}
+
+/// A primitive kept by ObjectBegin, relative to the object's own space.
+#[derive(Clone, Debug)]
+pub(super) struct ObjPrim {
+    pub geometry: Arc<Geometry>,
+    pub primvars: Arc<ParamList>,
+    pub object_from_prim: Mat4,
+    pub span: Span,
+}
+
+#[derive(Debug)]
+pub(super) struct ObjectDef {
+    pub handle: String,
+    pub prims: Vec<ObjPrim>,
+    /// inverse of the ctm at ObjectBegin.
+    pub object_from_ctm: Mat4,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum ErrorMode {
+    Print,
+    Ignore,
+    Abort,
+}
+
+/// One IfBegin…IfEnd level.
+#[derive(Clone, Debug)]
+pub(super) struct Cond {
+    pub span: Span,
+    /// The enclosing level was active.
+    pub parent_active: bool,
+    /// Some branch of this level was taken already.
+    pub taken: bool,
+    /// The current branch is being processed.
+    pub active: bool,
+    pub seen_else: bool,
+}
+
+/// The builder state (handlers live in the sibling modules as `impl Builder` blocks).
+pub struct Builder<'a> {
+    pub(super) ctx: &'a BuildContext<'a>,
+    pub(super) dict: Dictionary,
+    pub(super) options: Options,
+    /// Option "searchpath" values (after `&`/`@` expansion), without the CLI paths.
+    pub(super) option_paths: SearchPaths,
+    pub(super) colors: Option<ColorMap>,
+    pub(super) gs: GState,
+    pub(super) blocks: Vec<Block>,
+    /// The scene being built between WorldBegin and WorldEnd.
+    pub(super) world: Option<Scene>,
+    /// camera_from_named for CoordinateSystem names.
+    pub(super) named: HashMap<String, Mat4>,
+    /// ClippingPlane given before WorldBegin, in camera space.
+    pub(super) clip_camera: Vec<(Vec3, Vec3)>,
+    pub(super) scenes: Vec<Scene>,
+    pub(super) frame: Option<i32>,
+    pub(super) world_count: i32,
+    pub(super) frame_active: bool,
+    pub(super) light_handles: HashMap<String, usize>,
+    pub(super) objects: HashMap<String, Arc<Vec<ObjPrim>>>,
+    pub(super) defining: Option<ObjectDef>,
+    /// Inside MotionBegin: whether the block's first request was taken.
+    pub(super) motion_taken: Option<bool>,
+    pub(super) archives: HashMap<String, Arc<Vec<Request>>>,
+    /// Archives being read, outermost first, for cycle detection.
+    pub(super) include: Vec<String>,
+    pub(super) conds: Vec<Cond>,
+    pub(super) error_mode: ErrorMode,
+    pub(super) aborted: bool,
+}
+
+impl<'a> Builder<'a> {
+    pub fn new(ctx: &'a BuildContext<'a>) -> Builder<'a> {
+        Builder {
+            ctx,
+            dict: Dictionary::default(),
+            options: Options::default(),
+            option_paths: SearchPaths::default(),
+            colors: None,
+            gs: GState {
+                attrs: Arc::new(Attributes::default()),
+                trim: None,
+                ctm: Mat4::IDENTITY,
+                scoped: Vec::new(),
+            },
+            blocks: Vec::new(),
+            world: None,
+            named: HashMap::new(),
+            clip_camera: Vec::new(),
+            scenes: Vec::new(),
+            frame: None,
+            world_count: 0,
+            frame_active: true,
+            light_handles: HashMap::new(),
+            objects: HashMap::new(),
+            defining: None,
+            motion_taken: None,
+            archives: HashMap::new(),
+            include: Vec::new(),
+            conds: Vec::new(),
+            error_mode: ErrorMode::Print,
+            aborted: false,
+        }
+    }
+
+    /// Reports a diagnostic under the current ErrorHandler.
+    pub(super) fn report(&mut self, d: Diag) {
+        match self.error_mode {
+            ErrorMode::Ignore => {}
+            ErrorMode::Print => self.ctx.diags.report(d),
+            ErrorMode::Abort => {
+                let err = d.severity == Severity::Error;
+                self.ctx.diags.report(d);
+                if err {
+                    self.aborted = true;
+                }
+            }
+        }
+    }
+
+    pub(super) fn error(
+        &mut self,
+        code: &'static str,
+        msg: impl Into<String>,
+        span: Span,
+        label: &str,
+    ) {
+        self.report(Diag::error(code, msg).label(span, label));
+    }
+
+    /// The warning for a request the renderer does not implement (same text every time, so
+    /// the sink shows it once with a count).
+    pub(super) fn unimplemented(&mut self, call: &Call<'_>) {
+        let d = Diag::warning(
+            "scene::unimplemented",
+            format!("`{}` is not implemented yet; ignored", call.name()),
+        )
+        .label(call.span(), "ignored")
+        .help(format!("RISpec 3.2 §{}", call.spec.section));
+        self.report(d);
+    }
+
+    /// For requests handled by the driver itself (conditionals, ArchiveBegin) or that need
+    /// nothing (version).
+    pub(super) fn nothing(&mut self, _call: &Call<'_>) {}
+
+    pub(super) fn c_only(&mut self, call: &Call<'_>) {
+        let d = Diag::warning(
+            "scene::c-only",
+            format!(
+                "`{}` belongs to the C binding and has no effect in RIB",
+                call.name()
+            ),
+        )
+        .label(call.span(), "ignored");
+        self.report(d);
+    }
+
+    /// Runs a request stream (the main file, an archive, or an inline archive).
+    pub fn run(&mut self, reqs: &[Request]) {
+        let mut i = 0;
+        while i < reqs.len() && !self.aborted {
+            let r = &reqs[i];
+            i += 1;
+            match r.name.as_str() {
+                "IfBegin" | "ElseIf" | "Else" | "IfEnd" => {
+                    self.conditional(r);
+                    continue;
+                }
+                _ => {}
+            }
+            if !self.conds.last().map_or(true, |c| c.active) {
+                continue;
+            }
+            if r.name == "ArchiveBegin" {
+                i = self.record_archive(reqs, i - 1);
+                continue;
+            }
+            if let Some(taken) = self.motion_taken {
+                if r.name != "MotionEnd" {
+                    if taken {
+                        continue;
+                    }
+                    self.motion_taken = Some(true);
+                }
+            }
+            self.dispatch(r);
+        }
+    }
+
+    /// Checks one request against the table and calls its handler.
+    pub(super) fn dispatch(&mut self, r: &Request) {
+        let Some(spec) = table::lookup(&r.name) else {
+            let d = table::unknown_request(r);
+            self.report(d);
+            return;
+        };
+        let ncomps = self.colors.as_ref().map_or(3, |c| c.n);
+        match table::check_args(r, spec, ncomps) {
+            Ok(call) => (spec.handler)(self, &call),
+            Err(d) => self.report(d),
+        }
+    }
+
+    /// Ends the stream: reports unclosed blocks (each at its opener) and closes an open world
+    /// so its scene is still produced.
+    pub fn finish(mut self) -> Vec<Scene> {
+        // After an abort nothing more is reported; an open world still yields its scene.
+        if self.aborted {
+            self.error_mode = ErrorMode::Ignore;
+        }
+        self.aborted = false;
+        for c in std::mem::take(&mut self.conds).into_iter().rev() {
+            self.report(
+                Diag::error("scene::nesting", "`IfBegin` is never closed by `IfEnd`")
+                    .label(c.span, "opened here"),
+            );
+        }
+        if let Some(def) = self.defining.take() {
+            let _ = def;
+        }
+        while let Some(b) = self.blocks.pop() {
+            self.report(
+                Diag::error(
+                    "scene::nesting",
+                    format!("`{}` is never closed by `{}`", b.kind.begin(), b.kind.end()),
+                )
+                .label(b.span, "opened here")
+                .help(format!("add `{}` at the end of the block", b.kind.end())),
+            );
+            if b.kind == BlockKind::World {
+                self.close_world(b);
+            } else {
+                self.gs = b.saved;
+            }
+        }
+        self.scenes
+    }
+
+    // ---- helpers shared by the handlers ----
+
+    /// The current attributes, for modification (copied on write when shared).
+    pub(super) fn attrs(&mut self) -> &mut Attributes {
+        Arc::make_mut(&mut self.gs.attrs)
+    }
+
+    /// world_from_current: the ctm inside the world; identity before it (shader space of
+    /// shaders declared before WorldBegin is taken as world space).
+    pub(super) fn world_from_current(&self) -> Mat4 {
+        if self.world.is_some() {
+            self.gs.ctm
+        } else {
+            Mat4::IDENTITY
+        }
+    }
+
+    /// camera_from_current, inside or outside the world.
+    pub(super) fn camera_from_current(&self) -> Mat4 {
+        match &self.world {
+            Some(s) => s.camera_from_world * self.gs.ctm,
+            None => self.gs.ctm,
+        }
+    }
+
+    /// Parses a call's parameter list.
+    pub(super) fn params(&mut self, call: &Call<'_>, usage: ParamUse<'_>) -> ParamList {
+        let mut ds = Vec::new();
+        let l = parse_params(
+            call.rest,
+            &self.dict,
+            usage,
+            self.colors.as_ref(),
+            call.name(),
+            &mut |d| ds.push(d),
+        );
+        for d in ds {
+            self.report(d);
+        }
+        l
+    }
+
+    /// A shader named by the call's first argument, with its parameters.
+    pub(super) fn shader_ref(&mut self, call: &Call<'_>) -> ShaderRef {
+        let mut params = self.params(call, ParamUse::Shader);
+        let mut ds = Vec::new();
+        validate_single(&mut params, call.name(), &mut |d| ds.push(d));
+        for d in ds {
+            self.report(d);
+        }
+        ShaderRef {
+            name: call.pos[0].str().to_string(),
+            params,
+            span: call.full_span(),
+            world_from_shader: self.world_from_current(),
+        }
+    }
+
+    // ---- blocks ----
+
+    pub(super) fn push_block(&mut self, kind: BlockKind, span: Span) {
+        self.blocks.push(Block {
+            kind,
+            span,
+            saved: self.gs.clone(),
+            saved_options: None,
+        });
+    }
+
+    /// Pops the block `kind` closed by `call`; reports a missing or mismatched opener.
+    pub(super) fn pop_block(&mut self, kind: BlockKind, call: &Call<'_>) -> Option<Block> {
+        let Some(pos) = self.blocks.iter().rposition(|b| b.kind == kind) else {
+            let mut d = Diag::error(
+                "scene::nesting",
+                format!("`{}` without `{}`", kind.end(), kind.begin()),
+            )
+            .label(call.span(), "nothing to close");
+            if let Some(top) = self.blocks.last() {
+                d = d
+                    .label(
+                        top.span,
+                        format!("the open block is this `{}`", top.kind.begin()),
+                    )
+                    .help(format!("did you mean `{}`?", top.kind.end()));
+            } else {
+                d = d.help(format!("remove it, or add `{}` before it", kind.begin()));
+            }
+            self.report(d);
+            return None;
+        };
+        // Blocks opened after the one being closed are closed with it (and reported).
+        while self.blocks.len() > pos + 1 {
+            let inner = self.blocks.pop()?;
+            self.report(
+                Diag::error(
+                    "scene::nesting",
+                    format!(
+                        "`{}` closes `{}` while `{}` is still open",
+                        kind.end(),
+                        kind.begin(),
+                        inner.kind.begin()
+                    ),
+                )
+                .label(call.span(), format!("closes the `{}`", kind.begin()))
+                .label(inner.span, format!("`{}` opened here", inner.kind.begin()))
+                .help(format!("add `{}` before it", inner.kind.end())),
+            );
+            self.unwind_block(inner);
+        }
+        self.blocks.pop()
+    }
+
+    /// Undoes a block closed implicitly.
+    fn unwind_block(&mut self, b: Block) {
+        match b.kind {
+            BlockKind::World => self.close_world(b),
+            BlockKind::Object => {
+                self.finish_object();
+                self.restore_attrs(b.saved);
+            }
+            BlockKind::Motion => {
+                self.motion_taken = None;
+            }
+            BlockKind::Transform => self.gs.ctm = b.saved.ctm,
+            BlockKind::Frame => self.restore_frame(b),
+            _ => self.restore_attrs(b.saved),
+        }
+    }
+
+    /// Restores the attribute state, undoing ScopedCoordinateSystem entries.
+    pub(super) fn restore_attrs(&mut self, saved: GState) {
+        while self.gs.scoped.len() > saved.scoped.len() {
+            if let Some((name, old)) = self.gs.scoped.pop() {
+                match old {
+                    Some(m) => self.named.insert(name, m),
+                    None => self.named.remove(&name),
+                };
+            }
+        }
+        self.gs = saved;
+    }
+
+    pub(super) fn restore_frame(&mut self, b: Block) {
+        if let Some(o) = b.saved_options {
+            self.options = o.options;
+            self.option_paths = o.option_paths;
+            self.colors = o.colors;
+            self.clip_camera = o.clip_camera;
+        }
+        self.restore_attrs(b.saved);
+        self.frame = None;
+    }
+
+    pub(super) fn frame_begin(&mut self, call: &Call<'_>) {
+        if self.world.is_some() {
+            self.error(
+                "scene::nesting",
+                "`FrameBegin` inside `WorldBegin`…`WorldEnd`",
+                call.span(),
+                "frames cannot start inside a world block",
+            );
+            return;
+        }
+        if let Some(b) = self.blocks.iter().find(|b| b.kind == BlockKind::Frame) {
+            let sp = b.span;
+            self.report(
+                Diag::error("scene::nesting", "`FrameBegin` inside another frame")
+                    .label(call.span(), "nested frame")
+                    .label(sp, "the open frame")
+                    .help("close it with `FrameEnd` first"),
+            );
+            return;
+        }
+        self.push_block(BlockKind::Frame, call.span());
+        if let Some(b) = self.blocks.last_mut() {
+            b.saved_options = Some(Box::new(SavedOptions {
+                options: self.options.clone(),
+                option_paths: self.option_paths.clone(),
+                colors: self.colors.clone(),
+                clip_camera: self.clip_camera.clone(),
+            }));
+        }
+        self.frame = Some(if call.pos[0].is_absent() {
+            self.world_count + 1
+        } else {
+            call.pos[0].int() as i32
+        });
+    }
+
+    pub(super) fn frame_end(&mut self, call: &Call<'_>) {
+        if let Some(b) = self.pop_block(BlockKind::Frame, call) {
+            self.restore_frame(b);
+        }
+    }
+
+    pub(super) fn world_begin(&mut self, call: &Call<'_>) {
+        if self.world.is_some() {
+            let sp = self
+                .blocks
+                .iter()
+                .find(|b| b.kind == BlockKind::World)
+                .map(|b| b.span)
+                .unwrap_or(call.span());
+            self.report(
+                Diag::error("scene::nesting", "`WorldBegin` inside another world block")
+                    .label(call.span(), "nested world")
+                    .label(sp, "the open world")
+                    .help("close it with `WorldEnd` first"),
+            );
+            return;
+        }
+        self.world_count += 1;
+        let number = self.frame.unwrap_or(self.world_count);
+        self.frame_active = self
+            .ctx
+            .frames
+            .map_or(true, |(a, b)| a <= number && number <= b);
+        self.push_block(BlockKind::World, call.span());
+        let cfw = self.gs.ctm;
+        let wfc = cfw.inverse();
+        let mut options = self.options.clone();
+        let cli = |c: &Vec<String>, o: &Vec<String>| c.iter().chain(o).cloned().collect();
+        options.search_paths = SearchPaths {
+            shader: cli(&self.ctx.shader_paths, &self.option_paths.shader),
+            texture: cli(&self.ctx.texture_paths, &self.option_paths.texture),
+            archive: cli(&self.ctx.archive_paths, &self.option_paths.archive),
+            procedural: self.option_paths.procedural.clone(),
+        };
+        options.clipping_planes = self
+            .clip_camera
+            .iter()
+            .map(|&(p, n)| {
+                (
+                    wfc.transform_point3(p),
+                    cfw.transpose().transform_vector3(n).normalize_or_zero(),
+                )
+            })
+            .collect();
+        if let Some(im) = options.imager.as_mut() {
+            // Imager shader space was recorded as camera_from_shader.
+            im.world_from_shader = wfc * im.world_from_shader;
+        }
+        self.world = Some(Scene {
+            frame: self.frame,
+            options,
+            camera_from_world: cfw,
+            lights: Vec::new(),
+            primitives: Vec::new(),
+            coordinate_systems: HashMap::new(),
+            source_dir: self.ctx.base_dir.clone(),
+        });
+        self.light_handles.clear();
+        self.gs.ctm = Mat4::IDENTITY;
+    }
+
+    pub(super) fn world_end(&mut self, call: &Call<'_>) {
+        if let Some(b) = self.pop_block(BlockKind::World, call) {
+            self.close_world(b);
+        }
+    }
+
+    fn close_world(&mut self, b: Block) {
+        self.restore_attrs(b.saved);
+        if let Some(mut scene) = self.world.take() {
+            let wfc = scene.camera_from_world.inverse();
+            scene.coordinate_systems = self
+                .named
+                .iter()
+                .map(|(k, m)| (k.clone(), wfc * *m))
+                .collect();
+            if self.frame_active {
+                self.scenes.push(scene);
+            }
+        }
+        self.frame_active = true;
+        self.light_handles.clear();
+    }
+
+    pub(super) fn attribute_begin(&mut self, call: &Call<'_>) {
+        self.push_block(BlockKind::Attribute, call.span());
+    }
+
+    pub(super) fn attribute_end(&mut self, call: &Call<'_>) {
+        if let Some(b) = self.pop_block(BlockKind::Attribute, call) {
+            self.restore_attrs(b.saved);
+        }
+    }
+
+    pub(super) fn transform_begin(&mut self, call: &Call<'_>) {
+        self.push_block(BlockKind::Transform, call.span());
+    }
+
+    pub(super) fn transform_end(&mut self, call: &Call<'_>) {
+        if let Some(b) = self.pop_block(BlockKind::Transform, call) {
+            self.gs.ctm = b.saved.ctm;
+        }
+    }
+
+    pub(super) fn solid_begin(&mut self, call: &Call<'_>) {
+        let op = call.pos[0].str();
+        if !matches!(op, "primitive" | "union" | "intersection" | "difference") {
+            self.report(
+                Diag::error(
+                    "scene::arguments",
+                    format!("unknown solid operation \"{op}\""),
+                )
+                .label(call.pos_spans[0], "not a CSG operation")
+                .help("use \"primitive\", \"union\", \"intersection\" or \"difference\""),
+            );
+        }
+        self.report(
+            Diag::warning(
+                "scene::unimplemented",
+                "`SolidBegin` (constructive solid geometry) is not implemented yet; its primitives are rendered as a union",
+            )
+            .label(call.span(), "CSG ignored"),
+        );
+        self.push_block(BlockKind::Solid, call.span());
+    }
+
+    pub(super) fn solid_end(&mut self, call: &Call<'_>) {
+        if let Some(b) = self.pop_block(BlockKind::Solid, call) {
+            self.restore_attrs(b.saved);
+        }
+    }
+
+    pub(super) fn motion_begin(&mut self, call: &Call<'_>) {
+        if self.motion_taken.is_some() {
+            self.error(
+                "scene::nesting",
+                "`MotionBegin` inside another motion block",
+                call.span(),
+                "motion blocks do not nest",
+            );
+            return;
+        }
+        self.report(
+            Diag::warning(
+                "scene::unimplemented",
+                "`MotionBegin` (motion blur) is not implemented yet; each motion block uses its first sample",
+            )
+            .label(call.span(), "motion ignored"),
+        );
+        self.push_block(BlockKind::Motion, call.span());
+        self.motion_taken = Some(false);
+    }
+
+    pub(super) fn motion_end(&mut self, call: &Call<'_>) {
+        if self.pop_block(BlockKind::Motion, call).is_some() {
+            self.motion_taken = None;
+        }
+    }
+
+    pub(super) fn declare(&mut self, call: &Call<'_>) {
+        let name = call.pos[0].str();
+        match super::params::parse_decl(call.pos[1].str()) {
+            Ok(d) => {
+                if name.is_empty() || name.contains(char::is_whitespace) {
+                    self.error(
+                        "scene::declaration",
+                        format!("`Declare`: \"{name}\" is not a parameter name"),
+                        call.pos_spans[0],
+                        "names have no spaces",
+                    );
+                    return;
+                }
+                self.dict.declare(name, d);
+            }
+            Err(e) => self.report(
+                Diag::error("scene::declaration", format!("`Declare \"{name}\"`: {e}"))
+                    .label(call.pos_spans[1], "bad declaration")
+                    .help("write it as \"[class] type[n]\", e.g. \"varying float[2]\""),
+            ),
+        }
+    }
+
+    pub(super) fn error_handler(&mut self, call: &Call<'_>) {
+        self.error_mode = match call.pos[0].str() {
+            "print" => ErrorMode::Print,
+            "ignore" => ErrorMode::Ignore,
+            "abort" => ErrorMode::Abort,
+            other => {
+                let d = Diag::error(
+                    "scene::arguments",
+                    format!("unknown error handler \"{other}\""),
+                )
+                .label(call.pos_spans[0], "not a handler")
+                .help("use \"print\", \"ignore\" or \"abort\"");
+                self.report(d);
+                return;
+            }
+        };
+    }
+}

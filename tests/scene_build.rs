@@ -1,0 +1,676 @@
+//! Scene builder: RIB text through `parse_bytes` and `build_scenes`, checking the built scenes
+//! (options, transforms, attributes, lights, primitives, objects, archives, frames,
+//! conditionals) and that each malformed input gives one clear diagnostic.
+
+use arbor::diag::{Diagnostics, Severity, SourceMap};
+use arbor::rib::parse_bytes;
+use arbor::scene::{build_scenes, BuildContext, Class, Geometry, ParamType, Projection, Scene};
+use glam::{Mat4, Vec3};
+
+struct Built {
+    scenes: Vec<Scene>,
+    diags: Diagnostics,
+    sources: SourceMap,
+}
+
+impl Built {
+    fn errors(&self) -> Vec<String> {
+        self.diags
+            .snapshot()
+            .into_iter()
+            .filter(|(d, _)| d.severity == Severity::Error)
+            .map(|(d, _)| d.to_line(&self.sources))
+            .collect()
+    }
+    fn warnings(&self) -> Vec<(String, usize)> {
+        self.diags
+            .snapshot()
+            .into_iter()
+            .filter(|(d, _)| d.severity == Severity::Warning)
+            .map(|(d, n)| (d.message.clone(), n))
+            .collect()
+    }
+    fn clean(&self) {
+        let all: Vec<String> = self
+            .diags
+            .snapshot()
+            .into_iter()
+            .map(|(d, _)| d.to_line(&self.sources))
+            .collect();
+        assert!(all.is_empty(), "unexpected diagnostics: {all:#?}");
+    }
+    fn one(&self) -> &Scene {
+        assert_eq!(self.scenes.len(), 1, "{:#?}", self.errors());
+        &self.scenes[0]
+    }
+}
+
+fn build_with(text: &str, f: impl FnOnce(&mut BuildContext)) -> Built {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = parse_bytes("scene.rib", text.as_bytes(), &sources, &diags);
+    let scenes = {
+        let mut ctx = BuildContext::new(&sources, &diags);
+        f(&mut ctx);
+        build_scenes(reqs, &ctx)
+    };
+    Built {
+        scenes,
+        diags,
+        sources,
+    }
+}
+
+fn build(text: &str) -> Built {
+    build_with(text, |_| {})
+}
+
+fn close(a: Vec3, b: Vec3) -> bool {
+    (a - b).length() < 1e-4
+}
+
+const COMPANION: &str = r#"##RenderMan RIB-Structure 1.1
+version 3.03
+Declare "Kd" "uniform float"
+Declare "roughness" "uniform float"
+Display "ball.tif" "file" "rgba"
+Format 320 240 1
+Projection "perspective" "fov" [40]
+Translate 0 0 5
+WorldBegin
+  LightSource "ambientlight" 1 "intensity" [0.2]
+  LightSource "distantlight" 2 "intensity" 1.0 "from" [0 0 -1] "to" [0 0 0]
+  AttributeBegin
+    Color [1 0.2 0.2]
+    Surface "plastic" "Kd" .6 "roughness" [0.05]
+    Translate 1 0 0
+    Sphere 1 -1 1 360
+  AttributeEnd
+  AttributeBegin
+    Illuminate 2 0
+    Surface "matte"
+    Polygon "P" [-1 -1 0  1 -1 0  1 1 0  -1 1 0] "Cs" [1 0 0  0 1 0  0 0 1  1 1 1]
+  AttributeEnd
+WorldEnd
+"#;
+
+#[test]
+fn companion_scene_builds() {
+    let b = build(COMPANION);
+    b.clean();
+    let s = b.one();
+    assert_eq!((s.options.xres, s.options.yres), (320, 240));
+    assert_eq!(s.options.projection, Projection::Perspective { fov: 40.0 });
+    assert_eq!(s.options.displays.len(), 1);
+    assert_eq!(s.options.displays[0].name, "ball.tif");
+    // Camera: the world origin is 5 units in front of the camera.
+    assert!(close(
+        s.camera_from_world.transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 0.0, 5.0)
+    ));
+    assert_eq!(s.lights.len(), 2);
+    assert_eq!(s.lights[1].shader.name, "distantlight");
+    assert_eq!(
+        s.lights[1].shader.params.floats("from"),
+        Some(&[0.0, 0.0, -1.0][..])
+    );
+    assert_eq!(s.primitives.len(), 2);
+    let sphere = &s.primitives[0];
+    assert!(matches!(*sphere.geometry, Geometry::Sphere { radius, .. } if radius == 1.0));
+    assert!(close(
+        sphere.world_from_object.transform_point3(Vec3::ZERO),
+        Vec3::X
+    ));
+    assert_eq!(sphere.attributes.color, Vec3::new(1.0, 0.2, 0.2));
+    let surf = sphere.attributes.surface.as_ref().unwrap();
+    assert_eq!(surf.name, "plastic");
+    assert_eq!(surf.params.float("Kd"), Some(0.6));
+    assert_eq!(sphere.attributes.lights_on, vec![0, 1]);
+    let poly = &s.primitives[1];
+    assert_eq!(poly.attributes.lights_on, vec![0]);
+    assert_eq!(poly.attributes.color, Vec3::ONE);
+    assert!(matches!(
+        &*poly.geometry,
+        Geometry::Polygons { nvertices: 4, .. }
+    ));
+    assert_eq!(poly.primvars.floats("Cs").unwrap().len(), 12);
+    assert_eq!(poly.world_from_object, Mat4::IDENTITY);
+}
+
+#[test]
+fn inline_declarations_and_declare() {
+    let b = build(
+        r#"Declare "temperature" "varying float"
+WorldBegin
+Patch "bilinear" "P" [0 0 0 1 0 0 0 1 0 1 1 0] "temperature" [1 2 3 4]
+  "uniform color Kd2" [1 0 0] "float[2] st" [0 0 1 0 0 1 1 1]
+  "constant string label" "hello"
+WorldEnd
+"#,
+    );
+    b.clean();
+    let p = &b.one().primitives[0];
+    let t = p.primvars.get("temperature").unwrap();
+    assert_eq!(t.decl.class, Class::Varying);
+    let kd = p.primvars.get("Kd2").unwrap();
+    assert_eq!(
+        (kd.decl.class, kd.decl.ty),
+        (Class::Uniform, ParamType::Color)
+    );
+    let st = p.primvars.get("st").unwrap();
+    assert_eq!(st.decl.array_len, 2);
+    assert_eq!(p.primvars.string("label"), Some("hello"));
+}
+
+#[test]
+fn value_counts_follow_the_primitive() {
+    let b = build(
+        r#"WorldBegin
+PointsPolygons [3 3] [0 1 2 2 1 3] "P" [0 0 0 1 0 0 0 1 0 1 1 0]
+  "uniform float id" [7 8] "facevarying float[2] uv" [0 0 1 0 0 1 0 1 1 0 1 1]
+  "Cs" [1 1 1 1 1 1 1 1 1 1 1 1]
+Sphere 1 -1 1 360 "s" [0 1 0]
+Polygon "P" [0 0 0 1 0 0 1 1 0 0 1 0] "Cs" [1 0 0 0 1 0 0 0 1]
+WorldEnd
+"#,
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 2, "{e:#?}");
+    assert!(
+        e[0].contains("`Sphere`: \"s\" (varying float) needs 4 numbers, found 3"),
+        "{}",
+        e[0]
+    );
+    assert!(e[1].contains("scene.rib:6:"), "{}", e[1]);
+    assert!(e[1].contains("needs 12 numbers, found 9"), "{}", e[1]);
+    let s = b.one();
+    // The bad variables are dropped, the primitives kept.
+    assert_eq!(s.primitives.len(), 3);
+    assert_eq!(s.primitives[0].primvars.0.len(), 4);
+    assert!(s.primitives[1].primvars.get("s").is_none());
+}
+
+#[test]
+fn unknown_request_suggests_a_name() {
+    let b = build("WorldBegin\nSphre 1 -1 1 360\nWorldEnd\n");
+    let snap = b.diags.snapshot();
+    assert_eq!(snap.len(), 1);
+    assert_eq!(snap[0].0.help.as_deref(), Some("did you mean `Sphere`?"));
+    assert!(b.errors()[0].starts_with("scene.rib:2:1:"));
+}
+
+#[test]
+fn wrong_arguments_say_what_the_request_takes() {
+    let b = build("WorldBegin\nSphere 1 -1 \"big\"\nWorldEnd\n");
+    let snap = b.diags.snapshot();
+    assert_eq!(snap.len(), 1, "{:#?}", b.errors());
+    assert!(snap[0]
+        .0
+        .help
+        .as_deref()
+        .unwrap()
+        .starts_with("`Sphere` takes 4 numbers: radius zmin zmax thetamax"));
+    assert!(b.one().primitives.is_empty());
+}
+
+#[test]
+fn bracketed_quadric_arguments() {
+    let b = build("WorldBegin\nSphere [2 -2 2 180]\nTorus [1 .25 0 360 360]\nWorldEnd\n");
+    b.clean();
+    let s = b.one();
+    assert_eq!(
+        *s.primitives[0].geometry,
+        Geometry::Sphere {
+            radius: 2.0,
+            zmin: -2.0,
+            zmax: 2.0,
+            thetamax: 180.0
+        }
+    );
+    assert!(matches!(*s.primitives[1].geometry, Geometry::Torus { rminor, .. } if rminor == 0.25));
+}
+
+#[test]
+fn block_nesting_errors_point_at_both_ends() {
+    let b = build("WorldBegin\nAttributeEnd\nWorldEnd\n");
+    let e = b.errors();
+    assert_eq!(e.len(), 1);
+    assert!(
+        e[0].contains("scene.rib:2:1") && e[0].contains("`AttributeEnd` without `AttributeBegin`")
+    );
+
+    let b = build("WorldBegin\nAttributeBegin\nSphere 1 -1 1 360\nWorldEnd\n");
+    let snap = b.diags.snapshot();
+    assert_eq!(snap.len(), 1);
+    let d = &snap[0].0;
+    assert!(d
+        .message
+        .contains("`WorldEnd` closes `WorldBegin` while `AttributeBegin` is still open"));
+    // The second label is the opener.
+    assert_eq!(b.sources.line_col(d.labels[1].0), (2, 1));
+    assert_eq!(b.one().primitives.len(), 1);
+
+    let b = build("WorldBegin\nTransformBegin\nSphere 1 -1 1 360\n");
+    let e = b.errors();
+    assert_eq!(e.len(), 2, "{e:#?}");
+    assert!(e[0].contains("scene.rib:2:1") && e[0].contains("never closed"));
+    assert!(e[1].contains("scene.rib:1:1"));
+    // The unclosed world still yields its scene.
+    assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn transforms_compose_in_order() {
+    let b = build(
+        r#"WorldBegin
+TransformBegin
+  Translate 1 0 0
+  Rotate 90 0 0 1
+  Scale 2 2 2
+  Sphere 1 -1 1 360
+TransformEnd
+ConcatTransform [1 0 0 0  0 1 0 0  0 0 1 0  0 0 3 1]
+Sphere 1 -1 1 360
+Identity
+Transform [2 0 0 0  0 2 0 0  0 0 2 0  1 2 3 1]
+Sphere 1 -1 1 360
+WorldEnd
+"#,
+    );
+    b.clean();
+    let s = b.one();
+    let m = s.primitives[0].world_from_object;
+    // Scale first, then rotate (x → y), then translate.
+    assert!(close(m.transform_point3(Vec3::X), Vec3::new(1.0, 2.0, 0.0)));
+    assert!(close(
+        s.primitives[1]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 0.0, 3.0)
+    ));
+    assert!(close(
+        s.primitives[2]
+            .world_from_object
+            .transform_point3(Vec3::ONE),
+        Vec3::new(3.0, 4.0, 5.0)
+    ));
+}
+
+#[test]
+fn coordinate_systems_are_recorded_in_world_space() {
+    let b = build(
+        r#"Translate 0 0 10
+WorldBegin
+TransformBegin
+  Translate 0 2 0
+  CoordinateSystem "lamp"
+TransformEnd
+CoordSysTransform "lamp"
+Sphere 1 -1 1 360
+WorldEnd
+"#,
+    );
+    b.clean();
+    let s = b.one();
+    let lamp = s.coordinate_systems["lamp"];
+    assert!(close(
+        lamp.transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 2.0, 0.0)
+    ));
+    assert!(close(
+        s.primitives[0]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 2.0, 0.0)
+    ));
+}
+
+#[test]
+fn objects_are_instanced_with_the_current_transform_and_attributes() {
+    let b = build(
+        r#"WorldBegin
+ObjectBegin "leg"
+  Translate 0 0 1
+  Cylinder 0.1 0 1 360
+  Disk 1 0.1 360
+ObjectEnd
+AttributeBegin
+  Color [1 0 0]
+  Translate 5 0 0
+  ObjectInstance "leg"
+AttributeEnd
+ObjectInstance "leg"
+ObjectInstance "arm"
+WorldEnd
+"#,
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("no object has handle arm"));
+    let s = b.one();
+    assert_eq!(s.primitives.len(), 4);
+    assert!(close(
+        s.primitives[0]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(5.0, 0.0, 1.0)
+    ));
+    assert_eq!(s.primitives[0].attributes.color, Vec3::new(1.0, 0.0, 0.0));
+    assert!(close(
+        s.primitives[2]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 0.0, 1.0)
+    ));
+    assert_eq!(s.primitives[2].attributes.color, Vec3::ONE);
+}
+
+#[test]
+fn frames_give_one_scene_each_and_the_cli_filters_them() {
+    let text = r#"Format 64 48 1
+FrameBegin 1
+  WorldBegin Sphere 1 -1 1 360 WorldEnd
+FrameEnd
+FrameBegin 2
+  Format 100 100 1
+  WorldBegin Sphere 1 -1 1 360 Cone 1 1 360 WorldEnd
+FrameEnd
+FrameBegin 3
+  WorldBegin WorldEnd
+FrameEnd
+"#;
+    let b = build(text);
+    b.clean();
+    assert_eq!(b.scenes.len(), 3);
+    assert_eq!(b.scenes[1].frame, Some(2));
+    assert_eq!(b.scenes[1].options.xres, 100);
+    // Options set inside a frame end with it.
+    assert_eq!(b.scenes[2].options.xres, 64);
+    let b = build_with(text, |c| c.frames = Some((2, 3)));
+    assert_eq!(
+        b.scenes.iter().map(|s| s.frame).collect::<Vec<_>>(),
+        vec![Some(2), Some(3)]
+    );
+}
+
+#[test]
+fn conditional_rib() {
+    let text = r#"Option "user" "string pass" "shadow"
+FrameBegin 2
+WorldBegin
+IfBegin "$Frame == 1"
+  Sphere 1 -1 1 360
+ElseIf "$user:pass =~ 'sha.*' && $Frame >= 2"
+  Cone 1 1 360
+  IfBegin "1"
+    Disk 0 1 360
+  IfEnd
+Else
+  Cylinder 1 0 1 360
+IfEnd
+IfBegin "$nothing == 1"
+  Sphere 1 -1 1 360
+IfEnd
+WorldEnd
+FrameEnd
+"#;
+    let b = build(text);
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let w = b.warnings();
+    assert_eq!(w.len(), 1);
+    assert!(w[0].0.contains("unknown variable `$nothing`"));
+    let kinds: Vec<_> = b
+        .one()
+        .primitives
+        .iter()
+        .map(|p| match *p.geometry {
+            Geometry::Cone { .. } => "cone",
+            Geometry::Disk { .. } => "disk",
+            _ => "other",
+        })
+        .collect();
+    assert_eq!(kinds, vec!["cone", "disk"]);
+}
+
+#[test]
+fn read_archive_from_disk_with_cycle_detection() {
+    let dir = std::env::temp_dir().join(format!("arbor-scene-test-{}", std::process::id()));
+    let sub = dir.join("parts");
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::write(
+        sub.join("leg.rib"),
+        "Cylinder 0.1 0 1 360\nReadArchive \"foot.rib\"\n",
+    )
+    .unwrap();
+    // Found relative to the including file (parts/).
+    std::fs::write(sub.join("foot.rib"), "Disk 0 0.2 360\n").unwrap();
+    std::fs::write(
+        dir.join("loop.rib"),
+        "Sphere 1 -1 1 360\nReadArchive \"loop.rib\"\n",
+    )
+    .unwrap();
+    let main = dir.join("main.rib");
+    std::fs::write(
+        &main,
+        "WorldBegin\nReadArchive \"parts/leg.rib\"\nReadArchive \"loop.rib\"\nReadArchive \"missing.rib\"\nWorldEnd\n",
+    )
+    .unwrap();
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = arbor::rib::read_path(&main, &sources, &diags).unwrap();
+    let mut ctx = BuildContext::new(&sources, &diags);
+    ctx.base_dir = Some(dir.clone());
+    let scenes = build_scenes(reqs, &ctx);
+    let errs: Vec<String> = diags
+        .snapshot()
+        .into_iter()
+        .map(|(d, _)| d.message)
+        .collect();
+    assert_eq!(errs.len(), 2, "{errs:#?}");
+    assert!(
+        errs[0].starts_with("`ReadArchive` cycle:") && errs[0].contains("loop.rib → "),
+        "{}",
+        errs[0]
+    );
+    assert!(errs[1].contains("cannot find archive \"missing.rib\""));
+    assert_eq!(scenes[0].primitives.len(), 3);
+    assert!(matches!(
+        *scenes[0].primitives[1].geometry,
+        Geometry::Disk { .. }
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn inline_archives() {
+    let b = build(
+        r#"ArchiveBegin "pair"
+  Sphere 1 -1 1 360
+  Translate 2 0 0
+  Sphere 1 -1 1 360
+ArchiveEnd
+WorldBegin
+  ReadArchive "pair"
+  AttributeBegin Translate 0 5 0 ReadArchive "pair" AttributeEnd
+WorldEnd
+"#,
+    );
+    b.clean();
+    let s = b.one();
+    assert_eq!(s.primitives.len(), 4);
+    assert!(close(
+        s.primitives[3]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(4.0, 5.0, 0.0)
+    ));
+}
+
+#[test]
+fn search_paths_expand_previous_and_default() {
+    let b = build_with(
+        r#"Option "searchpath" "shader" "/a:@"
+Option "searchpath" "shader" "/b:&" "archive" "/arch"
+WorldBegin WorldEnd
+"#,
+        |c| {
+            c.shader_paths = vec!["/cli".into()];
+            c.base_dir = Some("/scene".into());
+        },
+    );
+    b.clean();
+    let p = &b.one().options.search_paths;
+    assert_eq!(p.shader, vec!["/cli", "/b", "/a", "/scene"]);
+    assert_eq!(p.archive, vec!["/arch"]);
+}
+
+#[test]
+fn lights_outside_the_world_and_illuminate_by_name() {
+    let b = build(
+        r#"LightSource "pointlight" 1
+WorldBegin
+LightSource "spotlight" "key" "coneangle" 0.5
+AttributeBegin
+  Illuminate "key" 0
+  Sphere 1 -1 1 360
+AttributeEnd
+Sphere 1 -1 1 360
+Illuminate "fill" 1
+WorldEnd
+"#,
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 2, "{e:#?}");
+    assert!(e[0].contains("scene.rib:1:1") && e[0].contains("outside `WorldBegin`"));
+    assert!(e[1].contains("no light has handle fill"));
+    let s = b.one();
+    assert_eq!(s.lights.len(), 1);
+    assert_eq!(s.lights[0].handle, "key");
+    assert!(s.primitives[0].attributes.lights_on.is_empty());
+    assert_eq!(s.primitives[1].attributes.lights_on, vec![0]);
+}
+
+#[test]
+fn unimplemented_requests_warn_once_with_a_count() {
+    let b = build(
+        r#"WorldBegin
+MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd
+MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd
+Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [""]
+Sphere 1 -1 1 360
+WorldEnd
+"#,
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let w = b.warnings();
+    assert_eq!(w.len(), 2, "{w:#?}");
+    assert!(w[0].0.contains("`MotionBegin`"));
+    assert_eq!(w[0].1, 2);
+    assert!(w[1].0.contains("`Blobby` is not implemented"));
+    // Only the first sample of each motion block is used.
+    assert_eq!(b.one().primitives[0].world_from_object, Mat4::IDENTITY);
+}
+
+#[test]
+fn error_handler_abort_stops_at_the_first_error() {
+    let b = build("ErrorHandler \"abort\"\nWorldBegin\nSphre 1\nBogus\nWorldEnd\n");
+    assert_eq!(b.errors().len(), 1, "{:#?}", b.errors());
+    let b =
+        build("ErrorHandler \"ignore\"\nWorldBegin\nSphre 1\nBogus\nSphere 1 -1 1 360 WorldEnd\n");
+    assert!(b.errors().is_empty());
+    assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn color_samples_convert_colors_to_rgb() {
+    let b = build(
+        r#"ColorSamples [0.5 0.5 0.5  0.5 0.5 0.5] [1 1 0 0 1 1]
+WorldBegin
+Color [0.2 0.4]
+Sphere 1 -1 1 360 "Cs" [1 0  0 1  1 1  0 0]
+WorldEnd
+"#,
+    );
+    b.clean();
+    let p = &b.one().primitives[0];
+    assert!(close(p.attributes.color, Vec3::splat(0.3)));
+    assert_eq!(p.primvars.floats("Cs").unwrap().len(), 12);
+}
+
+#[test]
+fn orientation_and_sides() {
+    let b = build(
+        r#"WorldBegin
+Sides 1
+Orientation "inside"
+Sphere 1 -1 1 360
+ReverseOrientation
+Sphere 1 -1 1 360
+Scale 1 1 -1
+Orientation "rh"
+Sphere 1 -1 1 360
+Sides 3
+WorldEnd
+"#,
+    );
+    assert_eq!(b.errors().len(), 1);
+    let s = b.one();
+    assert_eq!(s.primitives[0].attributes.sides, 1);
+    assert!(s.primitives[0].attributes.reverse_orientation);
+    assert!(!s.primitives[1].attributes.reverse_orientation);
+    // Camera space is left-handed; a mirrored object space is right-handed, so "rh" is its
+    // natural orientation.
+    assert!(!s.primitives[2].attributes.reverse_orientation);
+}
+
+#[test]
+fn patch_meshes_nurbs_curves_and_subdivision_meshes() {
+    let b = build(
+        r#"WorldBegin
+Basis "b-spline" 1 "b-spline" 1
+PatchMesh "bicubic" 5 "nonperiodic" 4 "nonperiodic" "Pz" [0 0 0 0 0  0 0 0 0 0  0 0 0 0 0  0 0 0 0 0]
+  "Cs" [1 1 1  1 1 1  1 1 1  1 1 1  1 1 1  1 1 1]
+NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 "Pw" [0 0 0 1  1 0 0 1  0 1 0 1  1 1 0 1]
+Curves "cubic" [4 5] "nonperiodic" "P" [0 0 0 1 0 0 2 0 0 3 0 0  0 1 0 1 1 0 2 1 0 3 1 0 4 1 0]
+  "width" [1 1  1 1 1]
+SubdivisionMesh "catmull-clark" [4] [0 1 2 3] ["interpolateboundary"] [0 0] [] [] "P" [0 0 0 1 0 0 1 1 0 0 1 0]
+Points "P" [0 0 0 1 1 1] "constantwidth" 0.1
+Geometry "teapot"
+WorldEnd
+"#,
+    );
+    b.clean();
+    let s = b.one();
+    assert_eq!(s.primitives.len(), 6);
+    assert!(matches!(
+        *s.primitives[0].geometry,
+        Geometry::PatchMesh {
+            bicubic: true,
+            nu: 5,
+            nv: 4,
+            ..
+        }
+    ));
+    assert!(matches!(
+        *s.primitives[2].geometry,
+        Geometry::Curves { cubic: true, .. }
+    ));
+    assert!(matches!(
+        *s.primitives[4].geometry,
+        Geometry::Points { npoints: 2 }
+    ));
+}
+
+#[test]
+fn bad_patch_mesh_sizes_are_explained() {
+    let b = build(
+        "WorldBegin\nPatchMesh \"bicubic\" 5 \"nonperiodic\" 4 \"nonperiodic\" \"P\" [0 0 0]\nWorldEnd\n",
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 1);
+    assert!(
+        e[0].contains("nu: 5 points; a bicubic mesh needs 4 + k·3"),
+        "{}",
+        e[0]
+    );
+}
