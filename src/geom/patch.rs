@@ -162,7 +162,7 @@ impl Surface for ParamPatch {
             for i in 0..N {
                 let u = self.u0 + (self.u1 - self.u0) * i as f32 / (N - 1) as f32;
                 let h = *raster_from_camera * self.shape.position(u, v).extend(1.0);
-                if !(h.w > 1e-6) {
+                if h.w.is_nan() || h.w <= 1e-6 {
                     return None;
                 }
                 q[j * N + i] = h.truncate().truncate() / h.w;

@@ -207,10 +207,10 @@ impl Quadric {
     pub fn normal(&self, u: f32, v: f32, dpdu: Vec3, dpdv: Vec3) -> Vec3 {
         let n = dpdu.cross(dpdv);
         let scale = dpdu.length_squared().max(dpdv.length_squared());
-        let n = if n.length_squared() > 1e-8 * scale * scale || scale == 0.0 {
+        let n = if n.length_squared() > 1e-12 * scale * scale || scale == 0.0 {
             n
         } else {
-            let v2 = if v > 0.5 { v - 1e-3 } else { v + 1e-3 };
+            let v2 = if v > 0.5 { v - 1e-5 } else { v + 1e-5 };
             let (_, a, b) = self.eval(u, v2);
             a.cross(b)
         };

@@ -86,7 +86,7 @@ fn bridge(pts: &[Vec2], poly: &mut Vec<usize>, h: &[usize]) {
             // Horizontal edge on the ray: its nearer end is a candidate.
             if a.y == mp.y {
                 for (pos, q) in [(i, a), ((i + 1) % n, b)] {
-                    if q.x >= mp.x && best.map_or(true, |(x, _)| q.x < x) {
+                    if q.x >= mp.x && best.is_none_or(|(x, _)| q.x < x) {
                         best = Some((q.x, pos));
                     }
                 }
@@ -101,7 +101,7 @@ fn bridge(pts: &[Vec2], poly: &mut Vec<usize>, h: &[usize]) {
         if x < mp.x {
             continue;
         }
-        if best.map_or(true, |(bx, _)| x < bx) {
+        if best.is_none_or(|(bx, _)| x < bx) {
             // The visible candidate: the edge end with the larger x.
             let pos = if a.x >= b.x { i } else { (i + 1) % n };
             best = Some((x, pos));
