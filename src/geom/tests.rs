@@ -904,3 +904,64 @@ fn quadric_profile_sphere_limits() {
     let b = q.bound(0.0, 1.0, 0.0, 1.0);
     assert!(close(b.min, Vec3::splat(-1.0), 1e-4) && close(b.max, Vec3::splat(1.0), 1e-4));
 }
+
+#[test]
+fn mirrored_polygon_front_face_is_counter_clockwise() {
+    // The clockwise triangle of `clockwise_polygon_faces_the_camera…`, mirrored in x: the camera
+    // now sees it counter-clockwise, and with a right-handed transform (orientation matching)
+    // that is the front face, so Ng still points at the camera.
+    let p = prim(
+        Geometry::Polygons {
+            nloops: vec![1],
+            nverts: vec![3],
+            verts: vec![0, 1, 2],
+            nvertices: 3,
+        },
+        vec![param(
+            "P",
+            Class::Vertex,
+            ParamType::Point,
+            &[0., 0., 0., 0., 1., 0., 1., 1., 0.],
+        )],
+        Attributes::default(),
+        Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0))
+            * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)),
+    );
+    let g = one(&p, Mat4::IDENTITY).split()[0].dice(2, 2);
+    assert!(close(g.ng[0], Vec3::new(0.0, 0.0, -1.0), 1e-6));
+    // s follows object x, so it is −(camera x) here.
+    assert!((0..4).all(|k| (g.s[k] + g.p[k].x).abs() < 1e-6));
+}
+
+#[test]
+fn st_and_hpoint_primvars() {
+    let mut st = param(
+        "st",
+        Class::Varying,
+        ParamType::Float,
+        &[0., 10., 1., 10., 0., 20., 1., 20.],
+    );
+    st.decl.array_len = 2;
+    let hp = param(
+        "Ph",
+        Class::Constant,
+        ParamType::HPoint,
+        &[2.0, 4.0, 6.0, 2.0],
+    );
+    let p = prim(
+        Geometry::Disk {
+            height: 0.0,
+            radius: 1.0,
+            thetamax: 360.0,
+        },
+        vec![st, hp],
+        Attributes::default(),
+        Mat4::IDENTITY,
+    );
+    let g = one(&p, Mat4::from_translation(Vec3::X)).dice(3, 3);
+    assert!((g.s[4] - 0.5).abs() < 1e-6 && (g.t[4] - 15.0).abs() < 1e-5);
+    assert!(g.primvar("st").is_none());
+    let ph = g.primvar("Ph").unwrap();
+    assert_eq!(ph.ty, ParamType::Point);
+    assert_eq!(ph.floats, vec![2.0, 2.0, 3.0]);
+}
