@@ -798,3 +798,369 @@ pub fn write_atomically(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Param, ParamData, ShaderRef};
+
+    /// A fresh empty folder under the system temp dir.
+    fn tmpdir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("arbor-film-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// 4×3 film: r = x/4, g = y/3, b = 0.5, a = 0.75, z = 1 + x + 10y, N = (x, y, −1).
+    fn film() -> Film {
+        let names = Film::standard_channels(&["N.x".into(), "N.y".into(), "N.z".into()]);
+        let mut f = Film::new(4, 3, names);
+        for y in 0..3 {
+            for x in 0..4 {
+                let p = f.pixel_mut(x, y);
+                p.copy_from_slice(&[
+                    x as f32 / 4.0,
+                    y as f32 / 3.0,
+                    0.5,
+                    0.75,
+                    1.0 + x as f32 + 10.0 * y as f32,
+                    x as f32,
+                    y as f32,
+                    -1.0,
+                ]);
+            }
+        }
+        f
+    }
+
+    fn display(name: &Path, kind: &str, mode: &str) -> Display {
+        Display {
+            name: name.display().to_string(),
+            kind: kind.into(),
+            mode: mode.into(),
+            params: ParamList::default(),
+            span: Span::default(),
+        }
+    }
+
+    fn opts(displays: Vec<Display>) -> Options {
+        let mut o = Options {
+            displays,
+            ..Options::default()
+        };
+        o.quantize_rgba.dither = 0.0;
+        o
+    }
+
+    fn string_param(name: &str, v: &str) -> Param {
+        Param {
+            name: name.into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::String,
+                array_len: 1,
+            },
+            data: ParamData::Strings(vec![v.into()]),
+            span: Span::default(),
+        }
+    }
+
+    fn q8(v: f32) -> u8 {
+        (v * 255.0).round() as u8
+    }
+
+    #[test]
+    fn png_8_and_16_bit_round_trip() {
+        let dir = tmpdir("png");
+        let f = film();
+        let p8 = dir.join("a.png");
+        let d = Diagnostics::new();
+        let out = write_displays(&f, &opts(vec![display(&p8, "png", "rgba")]), &d, None).unwrap();
+        assert_eq!(out, vec![p8.clone()]);
+        let img = image::open(&p8).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba8);
+        let img = img.to_rgba8();
+        for y in 0..3u32 {
+            for x in 0..4u32 {
+                let px = img.get_pixel(x, y).0;
+                assert_eq!(
+                    px,
+                    [q8(x as f32 / 4.0), q8(y as f32 / 3.0), 128, 191],
+                    "at {x},{y}"
+                );
+            }
+        }
+        // 16 bits, rgb
+        let p16 = dir.join("b.png");
+        let mut o = opts(vec![display(&p16, "png", "rgb")]);
+        o.quantize_rgba = Quantize {
+            one: 65535.0,
+            min: 0.0,
+            max: 65535.0,
+            dither: 0.0,
+        };
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p16).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgb16);
+        let px = img.to_rgb16().get_pixel(3, 2).0;
+        assert_eq!(px, [49151, 43690, 32768]);
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn tiff_8_16_and_float_round_trip() {
+        let dir = tmpdir("tiff");
+        let f = film();
+        let d = Diagnostics::new();
+        let (t8, t16, tf) = (dir.join("a.tif"), dir.join("b.tiff"), dir.join("c.tif"));
+        write_displays(&f, &opts(vec![display(&t8, "file", "rgb")]), &d, None).unwrap();
+        let img = image::open(&t8).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgb8);
+        assert_eq!(img.to_rgb8().get_pixel(2, 1).0, [128, 85, 128]);
+
+        let mut o = opts(vec![display(&t16, "tiff", "rgba")]);
+        o.quantize_rgba.one = 65535.0;
+        o.quantize_rgba.max = 65535.0;
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&t16).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba16);
+        assert_eq!(img.to_rgba16().get_pixel(1, 0).0, [16384, 0, 32768, 49151]);
+
+        let mut o = opts(vec![display(&tf, "tiff", "rgba")]);
+        o.quantize_rgba = Quantize {
+            one: 0.0,
+            min: 0.0,
+            max: 0.0,
+            dither: 0.0,
+        };
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&tf).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba32F);
+        let img = img.to_rgba32f();
+        for y in 0..3 {
+            for x in 0..4 {
+                assert_eq!(img.get_pixel(x, y).0, f.pixel(x as usize, y as usize)[..4]);
+            }
+        }
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn exr_half_float_and_output_variables() {
+        use exr::prelude::*;
+        let dir = tmpdir("exr");
+        let f = film();
+        let d = Diagnostics::new();
+        let (e1, e2, e3) = (dir.join("a.exr"), dir.join("n.exr"), dir.join("z.exr"));
+        let mut nd = display(&e2, "exr", "N");
+        nd.params.0.push(string_param("type", "float"));
+        let o = opts(vec![
+            display(&e1, "exr", "rgba"),
+            nd,
+            display(&e3, "openexr", "rgbaz"),
+        ]);
+        let out = write_displays(&f, &o, &d, None).unwrap();
+        assert_eq!(out.len(), 3);
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+
+        let read = |p: &Path| read_all_flat_layers_from_file(p).unwrap();
+        let names = |img: &FlatImage| -> Vec<String> {
+            img.layer_data[0]
+                .channel_data
+                .list
+                .iter()
+                .map(|c| c.name.to_string())
+                .collect()
+        };
+        let img = read(&e1);
+        assert_eq!(names(&img), ["A", "B", "G", "R"]);
+        let ch = &img.layer_data[0].channel_data.list;
+        // pixel (1, 2): index 2*4+1
+        match &ch[3].sample_data {
+            FlatSamples::F16(v) => assert_eq!(v[9].to_f32(), 0.25),
+            other => panic!("R should be half, got {other:?}"),
+        }
+        match &ch[1].sample_data {
+            FlatSamples::F16(v) => assert_eq!(v[9].to_f32(), 0.5),
+            other => panic!("{other:?}"),
+        }
+
+        let img = read(&e2);
+        assert_eq!(names(&img), ["N.x", "N.y", "N.z"]);
+        let ch = &img.layer_data[0].channel_data.list;
+        match (&ch[0].sample_data, &ch[1].sample_data, &ch[2].sample_data) {
+            (FlatSamples::F32(x), FlatSamples::F32(y), FlatSamples::F32(z)) => {
+                assert_eq!((x[9], y[9], z[9]), (1.0, 2.0, -1.0));
+            }
+            other => panic!("N should be float: {other:?}"),
+        }
+
+        let img = read(&e3);
+        assert_eq!(names(&img), ["A", "B", "G", "R", "Z"]);
+        match &img.layer_data[0].channel_data.list[4].sample_data {
+            FlatSamples::F32(z) => assert_eq!(z[9], 22.0),
+            other => panic!("Z should be float: {other:?}"),
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn zfile_and_shadow_hold_depth() {
+        let dir = tmpdir("zfile");
+        let f = film();
+        let d = Diagnostics::new();
+        let (z, s) = (dir.join("d.z"), dir.join("s.shd"));
+        let o = opts(vec![display(&z, "zfile", "z"), display(&s, "shadow", "z")]);
+        write_displays(&f, &o, &d, None).unwrap();
+        for p in [&z, &s] {
+            let zf = ZFile::from_bytes(&std::fs::read(p).unwrap()).unwrap();
+            assert_eq!((zf.width, zf.height), (4, 3));
+            assert_eq!(zf.depths[9], 22.0);
+            assert_eq!(zf.matrices, None);
+        }
+        let w = d.snapshot();
+        assert_eq!(w.len(), 1, "the shadow warning: {w:?}");
+        assert!(w[0].0.message.contains("MakeShadow"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn override_framebuffer_and_unsupported_modes() {
+        let dir = tmpdir("multi");
+        let f = film();
+        let d = Diagnostics::new();
+        let first = dir.join("first.tif");
+        let fb = dir.join("window");
+        let o = opts(vec![
+            display(&first, "file", "rgba"),
+            display(&fb, "framebuffer", "rgbaz"),
+        ]);
+        let over = dir.join("over.png");
+        let out = write_displays(&f, &o, &d, Some(&over)).unwrap();
+        assert_eq!(out, vec![over.clone(), dir.join("window.png")]);
+        assert!(!first.exists(), "the override replaces the first display");
+        assert_eq!(image::open(&over).unwrap().color(), image::ColorType::Rgba8);
+        let img = image::open(dir.join("window.png")).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba8, "z dropped from png");
+        let msgs: Vec<String> = d.snapshot().into_iter().map(|(d, _)| d.message).collect();
+        assert!(msgs.iter().any(|m| m.contains("framebuffer")), "{msgs:?}");
+        assert!(msgs.iter().any(|m| m.contains("z dropped")), "{msgs:?}");
+        // An override without a known extension is an error.
+        let bad = write_displays(&f, &o, &d, Some(&dir.join("x.jpg")));
+        assert_eq!(bad.unwrap_err().code, "film::output");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn odd_modes_warn_and_pick_the_closest() {
+        let f = film();
+        let d = Diagnostics::new();
+        let t = |mode: &str| Target {
+            path: "x.exr".into(),
+            format: Format::Exr,
+            mode: mode.into(),
+            params: ParamList::default(),
+            kind: "exr".into(),
+            span: Span::default(),
+        };
+        let names = |mode: &str| -> Vec<String> {
+            select_planes(&f, &t(mode), &d)
+                .into_iter()
+                .map(|p| p.name)
+                .collect()
+        };
+        assert_eq!(names("rgbz"), ["R", "G", "B", "Z"]);
+        assert_eq!(names("varying normal N"), ["N.x", "N.y", "N.z"]);
+        assert!(d.snapshot().is_empty());
+        assert_eq!(names("az"), ["A", "Z"]);
+        assert_eq!(names("bgr"), ["R", "G", "B"]);
+        assert_eq!(names("P"), ["P"], "missing variable still written (zeros)");
+        assert_eq!(d.snapshot().len(), 3);
+    }
+
+    #[test]
+    fn no_display_defaults_to_ri_png() {
+        let d = Diagnostics::new();
+        let t = plan(&Options::default(), &d, None).unwrap();
+        assert_eq!(t.len(), 1);
+        assert_eq!(t[0].path, PathBuf::from("ri.png"));
+        assert_eq!(t[0].format, Format::Png);
+        assert_eq!(t[0].mode, "rgba");
+        assert!(d.snapshot()[0].0.message.contains("no Display"));
+    }
+
+    #[test]
+    fn exposure_and_background_apply_before_quantize() {
+        let dir = tmpdir("expo");
+        let f = film();
+        let d = Diagnostics::new();
+        let p = dir.join("e.tif");
+        let mut o = opts(vec![display(&p, "tiff", "rgba")]);
+        o.quantize_rgba = Quantize {
+            one: 0.0,
+            min: 0.0,
+            max: 0.0,
+            dither: 0.0,
+        };
+        o.exposure = [2.0, 2.0];
+        o.imager = Some(ShaderRef {
+            name: "background".into(),
+            params: ParamList(vec![Param {
+                name: "background".into(),
+                decl: crate::scene::Decl {
+                    class: crate::scene::Class::Uniform,
+                    ty: crate::scene::ParamType::Color,
+                    array_len: 1,
+                },
+                data: ParamData::Floats(vec![0.0, 0.0, 1.0]),
+                span: Span::default(),
+            }]),
+            span: Span::default(),
+            world_from_shader: glam::Mat4::IDENTITY,
+        });
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p).unwrap().to_rgba32f();
+        // pixel (2, 0): r = sqrt(0.5·2) = 1, g = 0, b = sqrt(0.5·2) + 0.25·1, a = 1
+        let px = img.get_pixel(2, 0).0;
+        assert!((px[0] - 1.0).abs() < 1e-6);
+        assert_eq!(px[1], 0.0);
+        assert!((px[2] - 1.25).abs() < 1e-6);
+        assert_eq!(px[3], 1.0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn failed_writes_leave_no_file() {
+        let dir = tmpdir("atomic");
+        let target = dir.join("img.png");
+        // The encoder fails half-way: neither the target nor a temporary file remains.
+        let r = write_atomically(&target, |w| {
+            w.write_all(b"partial data").unwrap();
+            Err("encoder exploded".into())
+        });
+        let e = r.unwrap_err();
+        assert_eq!(e.code, "film::write");
+        assert!(e.message.contains("encoder exploded"));
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "no leftovers");
+        // An existing file survives a failed rewrite untouched.
+        std::fs::write(&target, b"old").unwrap();
+        let _ = write_atomically(&target, |_| Err("no".into()));
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        // A display into a missing folder: an error and no file.
+        let f = film();
+        let d = Diagnostics::new();
+        let missing = dir.join("nope").join("x.tif");
+        let r = write_displays(&f, &opts(vec![display(&missing, "tiff", "rgba")]), &d, None);
+        assert_eq!(r.unwrap_err().code, "film::write");
+        assert!(!missing.exists());
+        // Success replaces the file and leaves only it.
+        write_atomically(&target, |w| w.write_all(b"new").map_err(|e| e.to_string())).unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -243,23 +243,23 @@ pub fn filter_region(
                     let ny = (py_hi - py_lo + 1) as usize;
                     let vals = &buf.values[s * buf.channels..s * buf.channels + nch];
                     if separable && nx <= wx.len() && ny <= wy.len() {
-                        for i in 0..nx {
-                            wx[i] = filter.eval_x((px_lo + i as i64) as f32 + 0.5 - sx);
+                        for (i, wxi) in wx[..nx].iter_mut().enumerate() {
+                            *wxi = filter.eval_x((px_lo + i as i64) as f32 + 0.5 - sx);
                         }
-                        for j in 0..ny {
-                            wy[j] = filter.eval_y((py_lo + j as i64) as f32 + 0.5 - sy);
+                        for (j, wyj) in wy[..ny].iter_mut().enumerate() {
+                            *wyj = filter.eval_y((py_lo + j as i64) as f32 + 0.5 - sy);
                         }
-                        for j in 0..ny {
-                            if wy[j] == 0.0 {
+                        for (j, &wyj) in wy[..ny].iter().enumerate() {
+                            if wyj == 0.0 {
                                 continue;
                             }
-                            let row = (py_lo as usize + j - y0) * w;
-                            for i in 0..nx {
-                                let wgt = (wx[i] * wy[j]) as f64;
+                            let row = (py_lo as usize + j - y0) * w + px_lo as usize - x0;
+                            for (i, &wxi) in wx[..nx].iter().enumerate() {
+                                let wgt = (wxi * wyj) as f64;
                                 if wgt == 0.0 {
                                     continue;
                                 }
-                                let p = row + px_lo as usize + i - x0;
+                                let p = row + i;
                                 accumulate(&mut acc.sums[p * nch..p * nch + nch], vals, wgt);
                                 acc.wsum[p] += wgt;
                             }
@@ -335,12 +335,12 @@ fn own_mean(out: &mut [f32], buf: &SampleBuffer, rx: usize, ry: usize, nch: usiz
         return;
     };
     let n = r.len() as f64;
-    for c in 0..nch {
+    for (c, o) in out.iter_mut().enumerate().take(nch) {
         let s: f64 = r
             .clone()
             .map(|s| buf.values[s * buf.channels + c] as f64)
             .sum();
-        out[c] = (s / n) as f32;
+        *o = (s / n) as f32;
     }
 }
 
