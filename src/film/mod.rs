@@ -110,3 +110,25 @@ impl SampleBuffer {
         (m(filter.xwidth), m(filter.ywidth))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn new_buffer_has_stratum_centres_and_infinite_depth() {
+        let b = SampleBuffer::new(-1, 2, 3, 2, 2, 2, 6);
+        assert_eq!(b.positions.len(), 3 * 2 * 4);
+        assert_eq!(b.values.len(), 3 * 2 * 4 * 6);
+        // pixel (1, 1) of the buffer is raster pixel (0, 3); sample (1, 0) sits at (0.75, 3.25)
+        assert_eq!(b.positions[b.sample_index(1, 1, 1, 0)], [0.75, 3.25]);
+        assert_eq!(b.values[4], f32::INFINITY);
+        assert_eq!(b.values[3], 0.0);
+        let pf = crate::scene::PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 3.0,
+            ywidth: 2.0,
+        };
+        assert_eq!(SampleBuffer::margin(&pf), (2, 1));
+    }
+}

@@ -195,6 +195,12 @@ pub fn filter_region(
     if spp == 0 || nch == 0 {
         return;
     }
+    // A buffer shorter than its own dimensions is a hider bug; never index past it.
+    let nsamples = buf.width * buf.height * spp;
+    debug_assert!(buf.positions.len() >= nsamples && buf.values.len() >= nsamples * buf.channels);
+    if buf.positions.len() < nsamples || buf.values.len() < nsamples * buf.channels {
+        return;
+    }
     let (hx, hy) = filter.radius();
     let separable = filter.is_separable();
 
@@ -231,6 +237,9 @@ pub fn filter_region(
                 let base = (by * buf.width + bx) * spp;
                 for s in base..base + spp {
                     let [sx, sy] = buf.positions[s];
+                    if !(sx.is_finite() && sy.is_finite()) {
+                        continue; // a broken sample must not poison its neighbours
+                    }
                     // Output pixel range whose support contains the sample (clipped to the region).
                     let px_lo = ((sx - hx - 0.5).ceil() as i64).max(x0 as i64);
                     let px_hi = ((sx + hx - 0.5).floor() as i64).min(x1 as i64 - 1);
