@@ -1,0 +1,607 @@
+//! The frame driver: buckets in parallel, surfaces forwarded, grids shaded once.
+//!
+//! Input: a [`Scene`], a [`GridShader`] and [`RenderOptions`]. Output: a filtered [`Film`].
+//! Invariants:
+//! * every surface is bounded, culled, split or diced with decisions that depend only on the
+//!   surface and the camera; split children get keys derived from their parent's, so every
+//!   grid has the same identity whatever the bucket layout;
+//! * buckets are processed row by row: first every surface whose bound first reaches the row
+//!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
+//!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
+//!   needs are freed — memory holds only the grids overlapping the open row;
+//! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
+//!   covers it, so the image is identical for any bucket size or thread count.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use crate::diag::{Diag, Diagnostics};
+use crate::geom::{Bound, Surface};
+use crate::scene::{Options, Primitive, Scene};
+
+use super::camera::{check_options, crop_region, Camera, PixelRect};
+use super::dice::{decide, Decision, View};
+use super::film_stub::{filter_into, DepthFilter as FilmDepthFilter, Film};
+use super::hider::{make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid};
+use super::sampler::mix64;
+use super::stats::{Stage, Stats};
+use super::GridShader;
+
+/// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
+pub const DEFAULT_BUCKET: u32 = 16;
+/// Default most micropolygons per grid (`Option "limits" "gridsize"` overrides).
+pub const DEFAULT_GRID: usize = 1024;
+/// Default most eye-plane splits of one surface (`Option "limits" "eyesplits"` overrides).
+pub const DEFAULT_EYE_SPLITS: u32 = 10;
+/// Most splits of any kind along one path: a guard against surfaces that never shrink.
+pub const MAX_SPLIT_DEPTH: u32 = 48;
+
+/// How to run a frame (command-line overrides and hooks).
+#[derive(Clone, Default)]
+pub struct RenderOptions<'a> {
+    /// Worker threads; 0 = rayon's default (all cores).
+    pub threads: usize,
+    /// Bucket width and height in pixels; None = `Option "limits" "bucketsize"` or 16.
+    pub bucket_size: Option<[u32; 2]>,
+    /// Crop window (xmin, xmax, ymin, ymax in NDC) replacing the scene's.
+    pub crop: Option<[f32; 4]>,
+    /// Image size replacing Format's.
+    pub resolution: Option<(u32, u32)>,
+    /// Where to count statistics (the caller prints them); None = not kept.
+    pub stats: Option<&'a Stats>,
+    /// Called with (buckets done, buckets total) after each bucket, from worker threads.
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
+    /// Arbitrary output variables to carry to the film, after r g b a z.
+    pub aovs: Vec<Aov>,
+}
+
+/// Renders one frame of `scene` (see the module invariants).
+pub fn render_frame(
+    scene: &Scene,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let options = effective_options(&scene.options, opts);
+    check_options(&options, diags);
+    let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
+    let mut surfaces = Vec::new();
+    for (i, prim) in scene.primitives.iter().enumerate() {
+        surfaces.push(surfaces_for(i, prim, camera.camera_from_world, diags));
+    }
+    render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
+}
+
+/// The geometry entry point. TEMPORARY until the `geom` branch is merged: replace the body by
+/// `crate::geom::surfaces_for(index, prim, camera_from_world, diags)`.
+fn surfaces_for(
+    _index: usize,
+    prim: &Primitive,
+    _camera_from_world: Mat4,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    diags.report(
+        Diag::warning(
+            "render::geometry",
+            "geometry is not wired into the renderer in this build; primitive skipped",
+        )
+        .label(prim.span, "this primitive"),
+    );
+    Vec::new()
+}
+
+/// The scene's options with the command-line overrides applied.
+pub fn effective_options(options: &Options, opts: &RenderOptions) -> Options {
+    let mut o = options.clone();
+    if let Some((x, y)) = opts.resolution {
+        o.xres = x.max(1);
+        o.yres = y.max(1);
+    }
+    if let Some(c) = opts.crop {
+        o.crop_window = c;
+    }
+    o
+}
+
+/// Per-primitive attributes the driver needs, resolved once.
+#[derive(Clone, Copy, Debug)]
+struct PrimInfo {
+    /// Displacement bound in camera space.
+    disp: f32,
+    rate: f32,
+    matte: bool,
+    smooth: bool,
+    one_sided: bool,
+}
+
+fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnostics) -> PrimInfo {
+    let a = &prim.attributes;
+    let mut disp = 0.0;
+    if a.displacement_bound > 0.0 {
+        let space = a.displacement_bound_space.as_str();
+        let m = match space {
+            "object" => Some(camera.camera_from_world * prim.world_from_object),
+            "shader" => a
+                .displacement
+                .as_ref()
+                .map(|d| camera.camera_from_world * d.world_from_shader)
+                .or(Some(camera.camera_from_world * prim.world_from_object)),
+            other => camera.camera_from_space(other),
+        };
+        let m = m.unwrap_or_else(|| {
+            diags.report(
+                Diag::warning(
+                    "render::displacementbound",
+                    format!("unknown coordinate system \"{space}\" for displacementbound; using object space"),
+                )
+                .label(prim.span, "this primitive"),
+            );
+            camera.camera_from_world * prim.world_from_object
+        });
+        let scale = m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
+        disp = a.displacement_bound * scale;
+        if !disp.is_finite() {
+            disp = 0.0;
+        }
+    }
+    let _ = scene;
+    let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
+        a.shading_rate
+    } else {
+        1.0
+    };
+    PrimInfo {
+        disp,
+        rate,
+        matte: a.matte,
+        smooth: a.smooth_shading,
+        one_sided: a.sides == 1,
+    }
+}
+
+/// A surface waiting to be split or diced.
+#[derive(Debug)]
+struct Work {
+    surface: Box<dyn Surface>,
+    key: u64,
+    depth: u32,
+    eye_splits: u32,
+}
+
+enum Outcome {
+    Nothing,
+    Grid(Box<ShadedGrid>),
+}
+
+/// A shaded grid kept until the last bucket row that needs it is done.
+struct Kept {
+    grid: Box<ShadedGrid>,
+    rows: (usize, usize),
+    cols: (usize, usize),
+}
+
+/// The bucket layout over the crop region.
+#[derive(Clone, Copy, Debug)]
+struct Buckets {
+    crop: PixelRect,
+    image: PixelRect,
+    size: [i32; 2],
+    margin: [i32; 2],
+    cols: usize,
+    rows: usize,
+}
+
+impl Buckets {
+    fn rect(&self, col: usize, row: usize) -> PixelRect {
+        let x0 = self.crop.x0 + col as i32 * self.size[0];
+        let y0 = self.crop.y0 + row as i32 * self.size[1];
+        PixelRect {
+            x0,
+            y0,
+            x1: (x0 + self.size[0]).min(self.crop.x1),
+            y1: (y0 + self.size[1]).min(self.crop.y1),
+        }
+    }
+    /// The pixels a bucket samples: itself plus the filter margin, inside the image.
+    fn sample_rect(&self, col: usize, row: usize) -> PixelRect {
+        self.rect(col, row).grow(self.margin[0], self.margin[1]).intersect(self.image)
+    }
+    /// Bucket indices whose sample regions may contain raster positions in [lo, hi] along
+    /// one axis (`axis` 0 = x, 1 = y), clamped to the layout; None when there are none.
+    fn span(&self, lo: f32, hi: f32, axis: usize) -> Option<(usize, usize)> {
+        let (origin, end, n) = if axis == 0 {
+            (self.crop.x0, self.crop.x1, self.cols)
+        } else {
+            (self.crop.y0, self.crop.y1, self.rows)
+        };
+        let (s, m) = (self.size[axis] as i64, self.margin[axis] as i64);
+        let p0 = lo.floor() as i64;
+        let p1 = hi.floor() as i64;
+        if p1 < origin as i64 - m || p0 >= end as i64 + m {
+            return None;
+        }
+        let first = (p0 - origin as i64 - m).div_euclid(s).clamp(0, n as i64 - 1);
+        let last = (p1 - origin as i64 + m).div_euclid(s).clamp(0, n as i64 - 1);
+        (first <= last).then_some((first as usize, last as usize))
+    }
+}
+
+struct Frame<'a> {
+    scene: &'a Scene,
+    camera: &'a Camera,
+    view: View,
+    prims: Vec<PrimInfo>,
+    shader: &'a dyn GridShader,
+    hider: Box<dyn Hider>,
+    buckets: Buckets,
+    stats: &'a Stats,
+    diags: &'a Diagnostics,
+    aovs: Vec<Aov>,
+    eye_split_limit: u32,
+}
+
+impl Frame<'_> {
+    fn widened_bound(&self, w: &Work) -> Option<Bound> {
+        let info = self.prims.get(w.surface.primitive())?;
+        let b = w.surface.bound();
+        Some(if info.disp > 0.0 { b.grow(info.disp) } else { b })
+    }
+
+    /// The bucket row a surface first needs (at least `min_row`), or None when culled.
+    fn place(&self, w: &Work, min_row: usize) -> Option<usize> {
+        let b = self.widened_bound(w)?;
+        if self.view.outside(&b) {
+            return None;
+        }
+        match self.view.raster_bound(&b) {
+            // Reaching behind the eye: split where it is (its pieces are placed again).
+            None => Some(min_row),
+            Some(r) => self.buckets.span(r[1], r[3], 1).map(|(first, _)| first.max(min_row)),
+        }
+    }
+
+    fn step(&self, w: Work, row: usize) -> (Outcome, Vec<(usize, Work)>) {
+        let t0 = Instant::now();
+        let prim = w.surface.primitive();
+        let Some(info) = self.prims.get(prim).copied() else {
+            self.diags.report(Diag::error(
+                "render::surface",
+                format!("a surface names primitive {prim}, which does not exist"),
+            ));
+            return (Outcome::Nothing, Vec::new());
+        };
+        let Some(bound) = self.widened_bound(&w) else {
+            return (Outcome::Nothing, Vec::new());
+        };
+        let decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
+        match decision {
+            Decision::Cull => {
+                Stats::add(&self.stats.culled, 1);
+                self.stats.time(Stage::Dice, t0);
+                (Outcome::Nothing, Vec::new())
+            }
+            Decision::Split { eye } => {
+                let span = self.scene.primitives[prim].span;
+                if eye && w.eye_splits >= self.eye_split_limit {
+                    self.diags.report(
+                        Diag::warning(
+                            "render::eyesplits",
+                            "a surface still crosses the eye plane after the most eye splits; the piece is dropped",
+                        )
+                        .label(span, "this primitive")
+                        .help("move the camera or the geometry, or raise `Option \"limits\" \"eyesplits\"`"),
+                    );
+                    return (Outcome::Nothing, Vec::new());
+                }
+                if w.depth >= MAX_SPLIT_DEPTH {
+                    self.diags.report(
+                        Diag::warning(
+                            "render::splits",
+                            "a surface was split too many times without becoming small enough to dice; the piece is dropped",
+                        )
+                        .label(span, "this primitive"),
+                    );
+                    return (Outcome::Nothing, Vec::new());
+                }
+                Stats::add(&self.stats.splits, 1);
+                let children = w.surface.split();
+                let mut placed = Vec::with_capacity(children.len());
+                for (c, surface) in children.into_iter().enumerate() {
+                    let child = Work {
+                        surface,
+                        key: mix64(w.key ^ mix64(c as u64 + 1)),
+                        depth: w.depth + 1,
+                        eye_splits: w.eye_splits + eye as u32,
+                    };
+                    match self.place(&child, row) {
+                        Some(r) => placed.push((r, child)),
+                        None => Stats::add(&self.stats.culled, 1),
+                    }
+                }
+                self.stats.time(Stage::Dice, t0);
+                (Outcome::Nothing, placed)
+            }
+            Decision::Dice { nu, nv } => {
+                let mut grid = w.surface.dice(nu + 1, nv + 1);
+                let n = grid.nu * grid.nv;
+                if grid.nu < 2 || grid.nv < 2 || grid.p.len() != n || grid.ci.len() != n || grid.oi.len() != n {
+                    self.diags.report(Diag::error(
+                        "render::grid",
+                        format!(
+                            "a diced grid of primitive {prim} is malformed ({}×{} with {} points)",
+                            grid.nu,
+                            grid.nv,
+                            grid.p.len()
+                        ),
+                    ));
+                    return (Outcome::Nothing, Vec::new());
+                }
+                set_incident(&mut grid, self.camera.perspective);
+                let orient = orientation(&grid);
+                self.stats.time(Stage::Dice, t0);
+                let t1 = Instant::now();
+                self.shader.displace(self.scene, self.camera, prim, &mut grid);
+                set_incident(&mut grid, self.camera.perspective);
+                self.stats.time(Stage::Displace, t1);
+                let t2 = Instant::now();
+                self.shader.shade(self.scene, self.camera, prim, &mut grid);
+                self.stats.time(Stage::Shade, t2);
+                Stats::add(&self.stats.grids, 1);
+                Stats::add(&self.stats.micropolygons, (nu * nv) as u64);
+                Stats::add(&self.stats.shaded_points, n as u64);
+                let clip = self.view.raster_bound(&bound).unwrap_or([
+                    f32::NEG_INFINITY,
+                    f32::NEG_INFINITY,
+                    f32::INFINITY,
+                    f32::INFINITY,
+                ]);
+                let info = GridInfo {
+                    key: w.key,
+                    matte: info.matte,
+                    smooth: info.smooth,
+                    one_sided: info.one_sided,
+                    orientation: orient,
+                    clip,
+                };
+                if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
+                    self.diags.report(Diag::error(
+                        "render::grid",
+                        "shading changed the size of a grid; the grid is dropped",
+                    ));
+                    return (Outcome::Nothing, Vec::new());
+                }
+                let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+                if sg.is_empty() {
+                    return (Outcome::Nothing, Vec::new());
+                }
+                (Outcome::Grid(Box::new(sg)), Vec::new())
+            }
+        }
+    }
+}
+
+/// I = P − E: the eye at the origin for perspective views, straight along +z for orthographic.
+fn set_incident(grid: &mut crate::shade::Grid, perspective: bool) {
+    let n = grid.p.len();
+    grid.i.resize(n, Vec3::ZERO);
+    for (i, p) in grid.i.iter_mut().zip(&grid.p) {
+        *i = if perspective { *p } else { Vec3::new(0.0, 0.0, p.z) };
+    }
+}
+
+/// Renders `surfaces[i]` (the surfaces of primitive `i`) with the frame's camera: the body of
+/// [`render_frame`], usable with surfaces from anywhere.
+pub fn render_surfaces(
+    scene: &Scene,
+    options: &Options,
+    camera: &Camera,
+    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let run = || render_inner(scene, options, camera, surfaces, shader, opts, diags);
+    if opts.threads > 0 {
+        match rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build() {
+            Ok(pool) => return pool.install(run),
+            Err(e) => diags.report(Diag::warning(
+                "render::threads",
+                format!("could not start {} render threads ({e}); using the default pool", opts.threads),
+            )),
+        }
+    }
+    run()
+}
+
+fn render_inner(
+    scene: &Scene,
+    options: &Options,
+    camera: &Camera,
+    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let wall = Instant::now();
+    let local_stats = Stats::new();
+    let stats = opts.stats.unwrap_or(&local_stats);
+    let (xres, yres) = (camera.xres, camera.yres);
+    let image = PixelRect {
+        x0: 0,
+        y0: 0,
+        x1: xres as i32,
+        y1: yres as i32,
+    };
+    let crop = crop_region(xres, yres, options.crop_window);
+    let margin_of = |w: f32| if w.is_finite() && w > 0.0 { (w * 0.5).ceil() as i32 } else { 1 };
+    let margin = [margin_of(options.pixel_filter.xwidth), margin_of(options.pixel_filter.ywidth)];
+    let size = opts.bucket_size.map(|[x, y]| [x as i32, y as i32]).unwrap_or_else(|| {
+        match options.user_floats("limits:bucketsize") {
+            Some([x, y, ..]) => [*x as i32, *y as i32],
+            Some([x]) => [*x as i32, *x as i32],
+            _ => [DEFAULT_BUCKET as i32; 2],
+        }
+    });
+    let size = [size[0].clamp(1, 4096), size[1].clamp(1, 4096)];
+    let buckets = Buckets {
+        crop,
+        image,
+        size,
+        margin,
+        cols: crop.width().div_ceil(size[0] as usize).max(1),
+        rows: crop.height().div_ceil(size[1] as usize).max(1),
+    };
+    let max_grid = options
+        .user_floats("limits:gridsize")
+        .and_then(|f| f.first())
+        .map_or(DEFAULT_GRID, |&g| (g.max(1.0)) as usize);
+    let eye_split_limit = options
+        .user_floats("limits:eyesplits")
+        .and_then(|f| f.first())
+        .map_or(DEFAULT_EYE_SPLITS, |&g| g.max(0.0) as u32);
+    let view = View::new(camera, crop.grow(margin[0], margin[1]).intersect(image), max_grid);
+    let seed = mix64(scene.frame.unwrap_or(0) as i64 as u64);
+    let config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let depth_filter = match config.depth_filter {
+        DepthFilter::Max => FilmDepthFilter::Max,
+        DepthFilter::Average => FilmDepthFilter::Average,
+        // Midpoint is resolved per sample by the hider; the pixel keeps the nearest.
+        DepthFilter::Min | DepthFilter::Midpoint => FilmDepthFilter::Min,
+    };
+    let hider = make_hider(options, config, diags);
+    let prims: Vec<PrimInfo> = scene
+        .primitives
+        .iter()
+        .map(|p| prim_info(scene, camera, p, diags))
+        .collect();
+    let frame = Frame {
+        scene,
+        camera,
+        view,
+        prims,
+        shader,
+        hider,
+        buckets,
+        stats,
+        diags,
+        aovs: opts.aovs.clone(),
+        eye_split_limit,
+    };
+    let mut channel_names = Vec::new();
+    for a in &opts.aovs {
+        channel_names.extend(a.channel_names());
+    }
+    let mut film = Film::new(xres as usize, yres as usize, Film::standard_channels(&channel_names));
+
+    // Place every surface in the first bucket row it reaches.
+    Stats::add(&stats.primitives, scene.primitives.len() as u64);
+    let mut initial = Vec::new();
+    for (i, list) in surfaces.into_iter().enumerate() {
+        for (j, surface) in list.into_iter().enumerate() {
+            initial.push(Work {
+                surface,
+                key: mix64(mix64(i as u64) ^ (j as u64).wrapping_mul(0x9E37_79B9)),
+                depth: 0,
+                eye_splits: 0,
+            });
+        }
+    }
+    Stats::add(&stats.surfaces, initial.len() as u64);
+    let mut pending: Vec<Vec<Work>> = (0..buckets.rows).map(|_| Vec::new()).collect();
+    let placed: Vec<(Option<usize>, Work)> = initial
+        .into_par_iter()
+        .map(|w| (frame.place(&w, 0), w))
+        .collect();
+    for (row, w) in placed {
+        match row {
+            Some(r) => pending[r].push(w),
+            None => Stats::add(&stats.culled, 1),
+        }
+    }
+
+    let total = buckets.rows * buckets.cols;
+    let done = AtomicUsize::new(0);
+    let mut kept: Vec<Kept> = Vec::new();
+    for row in 0..buckets.rows {
+        // Split, dice and shade everything that starts in this row.
+        let mut frontier = std::mem::take(&mut pending[row]);
+        while !frontier.is_empty() {
+            let results: Vec<(Outcome, Vec<(usize, Work)>)> =
+                frontier.into_par_iter().map(|w| frame.step(w, row)).collect();
+            frontier = Vec::new();
+            for (outcome, children) in results {
+                for (r, w) in children {
+                    if r == row {
+                        frontier.push(w);
+                    } else {
+                        pending[r].push(w);
+                    }
+                }
+                match outcome {
+                    Outcome::Grid(g) => {
+                        let b = g.bound;
+                        let (Some(rows), Some(cols)) = (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
+                        else {
+                            continue;
+                        };
+                        stats.alloc(g.bytes());
+                        kept.push(Kept {
+                            grid: g,
+                            rows: (rows.0.max(row), rows.1.max(row)),
+                            cols,
+                        });
+                    }
+                    Outcome::Nothing => {}
+                }
+            }
+        }
+        // Hide the row's buckets in parallel.
+        let bufs: Vec<_> = (0..buckets.cols)
+            .into_par_iter()
+            .map(|col| {
+                let t = Instant::now();
+                let grids: Vec<&ShadedGrid> = kept
+                    .iter()
+                    .filter(|k| k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1)
+                    .map(|k| k.grid.as_ref())
+                    .collect();
+                let buf = frame.hider.hide(buckets.sample_rect(col, row), &grids, stats);
+                stats.time(Stage::Hide, t);
+                buf
+            })
+            .collect();
+        let t = Instant::now();
+        for (col, buf) in bufs.iter().enumerate() {
+            let r = buckets.rect(col, row);
+            filter_into(
+                &mut film,
+                buf,
+                &options.pixel_filter,
+                r.x0 as usize,
+                r.y0 as usize,
+                r.width(),
+                r.height(),
+                depth_filter,
+            );
+            Stats::add(&stats.buckets, 1);
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Some(p) = opts.progress {
+                p(d, total);
+            }
+        }
+        stats.time(Stage::Filter, t);
+        // Free the grids no later row needs.
+        kept.retain(|k| {
+            let keep = k.rows.1 > row;
+            if !keep {
+                stats.free(k.grid.bytes());
+            }
+            keep
+        });
+    }
+    stats.wall_ns.fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    film
+}
