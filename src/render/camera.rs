@@ -140,7 +140,10 @@ impl Camera {
                 let inv_t = 1.0 / (fov.to_radians() * 0.5).tan();
                 // z_s = f (z − n) / ((f − n) z): 0 at the near plane, 1 at the far plane.
                 let (a, b) = if far.is_finite() {
-                    (far / (far - near).max(f32::MIN_POSITIVE), -far * near / (far - near).max(f32::MIN_POSITIVE))
+                    (
+                        far / (far - near).max(f32::MIN_POSITIVE),
+                        -far * near / (far - near).max(f32::MIN_POSITIVE),
+                    )
                 } else {
                     (1.0, -near)
                 };
@@ -235,7 +238,125 @@ pub fn check_options(options: &Options, diags: &Diagnostics) {
     if options.near <= 0.0 {
         diags.report(Diag::warning(
             "render::camera",
-            format!("Clipping near plane {} must be positive; using ε", options.near),
+            format!(
+                "Clipping near plane {} must be positive; using ε",
+                options.near
+            ),
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam(xres: u32, yres: u32, projection: Projection) -> Camera {
+        let mut o = Options::default();
+        o.xres = xres;
+        o.yres = yres;
+        o.projection = projection;
+        Camera::from_options(&o, Mat4::IDENTITY, &HashMap::new())
+    }
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).abs().max_element() < 1e-3
+    }
+
+    #[test]
+    fn perspective_projects_known_points_to_known_pixels() {
+        // fov 90 on 640×480: screen window [-4/3, 4/3] × [-1, 1]; (1, 1, 2) → screen (0.5, 0.5)
+        // → NDC (0.6875, 0.25) → raster (440, 120).
+        let c = cam(640, 480, Projection::Perspective { fov: 90.0 });
+        assert!(close(
+            c.project(Vec3::new(1.0, 1.0, 2.0)),
+            Vec3::new(440.0, 120.0, 2.0)
+        ));
+        // The fov spans the shorter (vertical) side: y = z·tan(45°) is the top edge.
+        assert!(close(
+            c.project(Vec3::new(0.0, 3.0, 3.0)),
+            Vec3::new(320.0, 0.0, 3.0)
+        ));
+        // Portrait: the fov spans the horizontal side.
+        let c = cam(480, 640, Projection::Perspective { fov: 60.0 });
+        let t = 30f32.to_radians().tan();
+        assert!(close(
+            c.project(Vec3::new(2.0 * t, 0.0, 2.0)),
+            Vec3::new(480.0, 320.0, 2.0)
+        ));
+        // Raster space round-trips through camera_from_space (with a clipping range that
+        // keeps screen z well conditioned in f32).
+        let mut o = Options::default();
+        o.projection = Projection::Perspective { fov: 60.0 };
+        (o.near, o.far) = (0.1, 100.0);
+        let c = Camera::from_options(&o, Mat4::IDENTITY, &HashMap::new());
+        let p = Vec3::new(0.3, -0.2, 5.0);
+        let r = c.raster_from_camera().project_point3(p);
+        let back = c.camera_from_space("raster").unwrap().project_point3(r);
+        assert!(close(back, p));
+    }
+
+    #[test]
+    fn orthographic_maps_the_screen_window() {
+        let c = cam(200, 100, Projection::Orthographic);
+        // Window [-2, 2] × [-1, 1]: (−2, 1) is the top-left corner, (2, −1) the bottom-right.
+        assert!(close(
+            c.project(Vec3::new(-2.0, 1.0, 7.0)),
+            Vec3::new(0.0, 0.0, 7.0)
+        ));
+        assert!(close(
+            c.project(Vec3::new(2.0, -1.0, 7.0)),
+            Vec3::new(200.0, 100.0, 7.0)
+        ));
+    }
+
+    #[test]
+    fn crop_window_follows_the_spec_rounding() {
+        assert_eq!(
+            crop_region(640, 480, [0.1, 0.5, 0.0, 1.0]),
+            PixelRect {
+                x0: 64,
+                y0: 0,
+                x1: 320,
+                y1: 480
+            }
+        );
+        assert_eq!(
+            crop_region(10, 10, [0.0, 1.0, 0.0, 1.0]),
+            PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: 10,
+                y1: 10
+            }
+        );
+        // Per the spec's rounding a window this thin covers no pixel.
+        assert!(crop_region(10, 10, [0.55, 0.56, 0.0, 1.0]).is_empty());
+        let r = crop_region(10, 10, [0.55, 0.65, 0.0, 1.0]);
+        assert_eq!((r.x0, r.x1), (6, 7));
+    }
+
+    #[test]
+    fn named_spaces_are_camera_from_named() {
+        let mut o = Options::default();
+        o.projection = Projection::Perspective { fov: 45.0 };
+        let camera_from_world = Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0));
+        let mut cs = HashMap::new();
+        cs.insert(
+            "lamp".to_string(),
+            Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)),
+        );
+        let c = Camera::from_options(&o, camera_from_world, &cs);
+        let origin = c
+            .camera_from_space("lamp")
+            .unwrap()
+            .transform_point3(Vec3::ZERO);
+        assert!(close(origin, Vec3::new(1.0, 2.0, 8.0)));
+        assert!(close(
+            c.camera_from_space("world")
+                .unwrap()
+                .transform_point3(Vec3::ZERO),
+            Vec3::new(0.0, 0.0, 5.0)
+        ));
+        assert!(c.camera_from_space("nowhere").is_none());
     }
 }

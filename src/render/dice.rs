@@ -50,15 +50,22 @@ impl View {
     pub fn new(camera: &Camera, region: PixelRect, max_grid: usize) -> View {
         let raster_from_camera = camera.raster_from_camera();
         let screen_from_raster = camera.raster_from_screen.inverse();
-        let a = screen_from_raster.project_point3(Vec3::new(region.x0 as f32, region.y0 as f32, 0.0));
-        let b = screen_from_raster.project_point3(Vec3::new(region.x1 as f32, region.y1 as f32, 0.0));
+        let a =
+            screen_from_raster.project_point3(Vec3::new(region.x0 as f32, region.y0 as f32, 0.0));
+        let b =
+            screen_from_raster.project_point3(Vec3::new(region.x1 as f32, region.y1 as f32, 0.0));
         View {
             raster_from_camera,
             screen_from_camera: camera.screen_from_camera,
             perspective: camera.perspective,
             near: camera.near,
             far: camera.far,
-            region: [region.x0 as f32, region.y0 as f32, region.x1 as f32, region.y1 as f32],
+            region: [
+                region.x0 as f32,
+                region.y0 as f32,
+                region.x1 as f32,
+                region.y1 as f32,
+            ],
             screen: [a.x.min(b.x), a.x.max(b.x), a.y.min(b.y), a.y.max(b.y)],
             // Below this depth a projected bound is no longer meaningful in f32.
             eye_epsilon: if camera.perspective {
@@ -107,7 +114,12 @@ impl View {
         if b.min.z < self.eye_epsilon {
             return None;
         }
-        let mut r = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+        let mut r = [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ];
         for p in b.corners() {
             let [x, y] = self.to_raster(p);
             r[0] = r[0].min(x);
@@ -119,7 +131,10 @@ impl View {
     }
 
     fn overlaps_region(&self, r: &[f32; 4]) -> bool {
-        r[0] <= self.region[2] && r[2] >= self.region[0] && r[1] <= self.region[3] && r[3] >= self.region[1]
+        r[0] <= self.region[2]
+            && r[2] >= self.region[0]
+            && r[1] <= self.region[3]
+            && r[3] >= self.region[1]
     }
 }
 
@@ -227,7 +242,12 @@ pub(crate) mod tests {
             let lv = (self.p[2] - self.p[0]).length() + (self.p[3] - self.p[1]).length();
             let mk = |a: (f32, f32), b: (f32, f32), c: (f32, f32), d: (f32, f32), uv| {
                 let q = Quad {
-                    p: [self.at(a.0, a.1), self.at(b.0, b.1), self.at(c.0, c.1), self.at(d.0, d.1)],
+                    p: [
+                        self.at(a.0, a.1),
+                        self.at(b.0, b.1),
+                        self.at(c.0, c.1),
+                        self.at(d.0, d.1),
+                    ],
                     prim: self.prim,
                     uv,
                 };
@@ -285,7 +305,16 @@ pub(crate) mod tests {
         o.xres = res;
         o.yres = res;
         let cam = Camera::from_options(&o, Mat4::IDENTITY, &Default::default());
-        View::new(&cam, PixelRect { x0: 0, y0: 0, x1: res as i32, y1: res as i32 }, 1024)
+        View::new(
+            &cam,
+            PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: res as i32,
+                y1: res as i32,
+            },
+            1024,
+        )
     }
 
     #[test]
@@ -317,7 +346,16 @@ pub(crate) mod tests {
         o.yres = 64;
         o.projection = crate::scene::Projection::Perspective { fov: 90.0 };
         let cam = Camera::from_options(&o, Mat4::IDENTITY, &Default::default());
-        let v = View::new(&cam, PixelRect { x0: 0, y0: 0, x1: 64, y1: 64 }, 1024);
+        let v = View::new(
+            &cam,
+            PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: 64,
+                y1: 64,
+            },
+            1024,
+        );
         // A floor from behind the eye to z = 10.
         let q = Quad::new(
             Vec3::new(-1.0, -1.0, -1.0),
@@ -326,7 +364,10 @@ pub(crate) mod tests {
             Vec3::new(1.0, -1.0, 10.0),
             0,
         );
-        assert_eq!(decide(&q, &q.bound(), 1.0, &v), Decision::Split { eye: true });
+        assert_eq!(
+            decide(&q, &q.bound(), 1.0, &v),
+            Decision::Split { eye: true }
+        );
         let parent = q.bound();
         for c in q.split() {
             let b = c.bound();

@@ -25,7 +25,9 @@ use crate::scene::{Options, Primitive, Scene};
 use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
 use super::film_stub::{filter_into, DepthFilter as FilmDepthFilter, Film};
-use super::hider::{make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid};
+use super::hider::{
+    make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
+};
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
@@ -141,7 +143,12 @@ fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnosti
             );
             camera.camera_from_world * prim.world_from_object
         });
-        let scale = m.x_axis.truncate().length().max(m.y_axis.truncate().length()).max(m.z_axis.truncate().length());
+        let scale = m
+            .x_axis
+            .truncate()
+            .length()
+            .max(m.y_axis.truncate().length())
+            .max(m.z_axis.truncate().length());
         disp = a.displacement_bound * scale;
         if !disp.is_finite() {
             disp = 0.0;
@@ -207,7 +214,9 @@ impl Buckets {
     }
     /// The pixels a bucket samples: itself plus the filter margin, inside the image.
     fn sample_rect(&self, col: usize, row: usize) -> PixelRect {
-        self.rect(col, row).grow(self.margin[0], self.margin[1]).intersect(self.image)
+        self.rect(col, row)
+            .grow(self.margin[0], self.margin[1])
+            .intersect(self.image)
     }
     /// Bucket indices whose sample regions may contain raster positions in [lo, hi] along
     /// one axis (`axis` 0 = x, 1 = y), clamped to the layout; None when there are none.
@@ -217,14 +226,21 @@ impl Buckets {
         } else {
             (self.crop.y0, self.crop.y1, self.rows)
         };
+        if n == 0 {
+            return None;
+        }
         let (s, m) = (self.size[axis] as i64, self.margin[axis] as i64);
         let p0 = lo.floor() as i64;
         let p1 = hi.floor() as i64;
         if p1 < origin as i64 - m || p0 >= end as i64 + m {
             return None;
         }
-        let first = (p0 - origin as i64 - m).div_euclid(s).clamp(0, n as i64 - 1);
-        let last = (p1 - origin as i64 + m).div_euclid(s).clamp(0, n as i64 - 1);
+        let first = (p0 - origin as i64 - m)
+            .div_euclid(s)
+            .clamp(0, n as i64 - 1);
+        let last = (p1 - origin as i64 + m)
+            .div_euclid(s)
+            .clamp(0, n as i64 - 1);
         (first <= last).then_some((first as usize, last as usize))
     }
 }
@@ -247,7 +263,11 @@ impl Frame<'_> {
     fn widened_bound(&self, w: &Work) -> Option<Bound> {
         let info = self.prims.get(w.surface.primitive())?;
         let b = w.surface.bound();
-        Some(if info.disp > 0.0 { b.grow(info.disp) } else { b })
+        Some(if info.disp > 0.0 {
+            b.grow(info.disp)
+        } else {
+            b
+        })
     }
 
     /// The bucket row a surface first needs (at least `min_row`), or None when culled.
@@ -259,7 +279,10 @@ impl Frame<'_> {
         match self.view.raster_bound(&b) {
             // Reaching behind the eye: split where it is (its pieces are placed again).
             None => Some(min_row),
-            Some(r) => self.buckets.span(r[1], r[3], 1).map(|(first, _)| first.max(min_row)),
+            Some(r) => self
+                .buckets
+                .span(r[1], r[3], 1)
+                .map(|(first, _)| first.max(min_row)),
         }
     }
 
@@ -327,7 +350,12 @@ impl Frame<'_> {
             Decision::Dice { nu, nv } => {
                 let mut grid = w.surface.dice(nu + 1, nv + 1);
                 let n = grid.nu * grid.nv;
-                if grid.nu < 2 || grid.nv < 2 || grid.p.len() != n || grid.ci.len() != n || grid.oi.len() != n {
+                if grid.nu < 2
+                    || grid.nv < 2
+                    || grid.p.len() != n
+                    || grid.ci.len() != n
+                    || grid.oi.len() != n
+                {
                     self.diags.report(Diag::error(
                         "render::grid",
                         format!(
@@ -343,7 +371,8 @@ impl Frame<'_> {
                 let orient = orientation(&grid);
                 self.stats.time(Stage::Dice, t0);
                 let t1 = Instant::now();
-                self.shader.displace(self.scene, self.camera, prim, &mut grid);
+                self.shader
+                    .displace(self.scene, self.camera, prim, &mut grid);
                 set_incident(&mut grid, self.camera.perspective);
                 self.stats.time(Stage::Displace, t1);
                 let t2 = Instant::now();
@@ -388,7 +417,11 @@ fn set_incident(grid: &mut crate::shade::Grid, perspective: bool) {
     let n = grid.p.len();
     grid.i.resize(n, Vec3::ZERO);
     for (i, p) in grid.i.iter_mut().zip(&grid.p) {
-        *i = if perspective { *p } else { Vec3::new(0.0, 0.0, p.z) };
+        *i = if perspective {
+            *p
+        } else {
+            Vec3::new(0.0, 0.0, p.z)
+        };
     }
 }
 
@@ -405,11 +438,17 @@ pub fn render_surfaces(
 ) -> Film {
     let run = || render_inner(scene, options, camera, surfaces, shader, opts, diags);
     if opts.threads > 0 {
-        match rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build() {
+        match rayon::ThreadPoolBuilder::new()
+            .num_threads(opts.threads)
+            .build()
+        {
             Ok(pool) => return pool.install(run),
             Err(e) => diags.report(Diag::warning(
                 "render::threads",
-                format!("could not start {} render threads ({e}); using the default pool", opts.threads),
+                format!(
+                    "could not start {} render threads ({e}); using the default pool",
+                    opts.threads
+                ),
             )),
         }
     }
@@ -436,23 +475,34 @@ fn render_inner(
         y1: yres as i32,
     };
     let crop = crop_region(xres, yres, options.crop_window);
-    let margin_of = |w: f32| if w.is_finite() && w > 0.0 { (w * 0.5).ceil() as i32 } else { 1 };
-    let margin = [margin_of(options.pixel_filter.xwidth), margin_of(options.pixel_filter.ywidth)];
-    let size = opts.bucket_size.map(|[x, y]| [x as i32, y as i32]).unwrap_or_else(|| {
-        match options.user_floats("limits:bucketsize") {
+    let margin_of = |w: f32| {
+        if w.is_finite() && w > 0.0 {
+            (w * 0.5).ceil() as i32
+        } else {
+            1
+        }
+    };
+    let margin = [
+        margin_of(options.pixel_filter.xwidth),
+        margin_of(options.pixel_filter.ywidth),
+    ];
+    let size = opts
+        .bucket_size
+        .map(|[x, y]| [x as i32, y as i32])
+        .unwrap_or_else(|| match options.user_floats("limits:bucketsize") {
             Some([x, y, ..]) => [*x as i32, *y as i32],
             Some([x]) => [*x as i32, *x as i32],
             _ => [DEFAULT_BUCKET as i32; 2],
-        }
-    });
+        });
     let size = [size[0].clamp(1, 4096), size[1].clamp(1, 4096)];
     let buckets = Buckets {
         crop,
         image,
         size,
         margin,
-        cols: crop.width().div_ceil(size[0] as usize).max(1),
-        rows: crop.height().div_ceil(size[1] as usize).max(1),
+        // An empty crop region renders no bucket at all.
+        cols: crop.width().div_ceil(size[0] as usize),
+        rows: crop.height().div_ceil(size[1] as usize),
     };
     let max_grid = options
         .user_floats("limits:gridsize")
@@ -462,7 +512,11 @@ fn render_inner(
         .user_floats("limits:eyesplits")
         .and_then(|f| f.first())
         .map_or(DEFAULT_EYE_SPLITS, |&g| g.max(0.0) as u32);
-    let view = View::new(camera, crop.grow(margin[0], margin[1]).intersect(image), max_grid);
+    let view = View::new(
+        camera,
+        crop.grow(margin[0], margin[1]).intersect(image),
+        max_grid,
+    );
     let seed = mix64(scene.frame.unwrap_or(0) as i64 as u64);
     let config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
     let depth_filter = match config.depth_filter {
@@ -494,7 +548,11 @@ fn render_inner(
     for a in &opts.aovs {
         channel_names.extend(a.channel_names());
     }
-    let mut film = Film::new(xres as usize, yres as usize, Film::standard_channels(&channel_names));
+    let mut film = Film::new(
+        xres as usize,
+        yres as usize,
+        Film::standard_channels(&channel_names),
+    );
 
     // Place every surface in the first bucket row it reaches.
     Stats::add(&stats.primitives, scene.primitives.len() as u64);
@@ -529,8 +587,10 @@ fn render_inner(
         // Split, dice and shade everything that starts in this row.
         let mut frontier = std::mem::take(&mut pending[row]);
         while !frontier.is_empty() {
-            let results: Vec<(Outcome, Vec<(usize, Work)>)> =
-                frontier.into_par_iter().map(|w| frame.step(w, row)).collect();
+            let results: Vec<(Outcome, Vec<(usize, Work)>)> = frontier
+                .into_par_iter()
+                .map(|w| frame.step(w, row))
+                .collect();
             frontier = Vec::new();
             for (outcome, children) in results {
                 for (r, w) in children {
@@ -543,7 +603,8 @@ fn render_inner(
                 match outcome {
                     Outcome::Grid(g) => {
                         let b = g.bound;
-                        let (Some(rows), Some(cols)) = (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
+                        let (Some(rows), Some(cols)) =
+                            (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
                         else {
                             continue;
                         };
@@ -565,10 +626,14 @@ fn render_inner(
                 let t = Instant::now();
                 let grids: Vec<&ShadedGrid> = kept
                     .iter()
-                    .filter(|k| k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1)
+                    .filter(|k| {
+                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
+                    })
                     .map(|k| k.grid.as_ref())
                     .collect();
-                let buf = frame.hider.hide(buckets.sample_rect(col, row), &grids, stats);
+                let buf = frame
+                    .hider
+                    .hide(buckets.sample_rect(col, row), &grids, stats);
                 stats.time(Stage::Hide, t);
                 buf
             })
@@ -602,6 +667,375 @@ fn render_inner(
             keep
         });
     }
-    stats.wall_ns.fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    stats
+        .wall_ns
+        .fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);
     film
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::render::dice::tests::Quad;
+    use crate::render::DefaultShader;
+    use crate::scene::{Attributes, Geometry, PixelFilter, Projection};
+    use crate::shade::Grid;
+
+    /// `Ci = Cs·Os`, `Oi = Os` with Cs/Os from the primitive's Color/Opacity: a "constant"
+    /// surface.
+    struct Constant;
+    impl GridShader for Constant {
+        fn displace(&self, _: &Scene, _: &Camera, _: usize, _: &mut Grid) {}
+        fn shade(&self, scene: &Scene, _: &Camera, prim: usize, g: &mut Grid) {
+            let a = &scene.primitives[prim].attributes;
+            for k in 0..g.len() {
+                g.cs[k] = a.color;
+                g.os[k] = a.opacity;
+                g.oi[k] = a.opacity;
+                g.ci[k] = a.color * a.opacity;
+            }
+        }
+    }
+
+    fn primitive(attributes: Attributes) -> Primitive {
+        Primitive {
+            geometry: Arc::new(Geometry::Points { npoints: 0 }),
+            primvars: Arc::default(),
+            attributes: Arc::new(attributes),
+            world_from_object: Mat4::IDENTITY,
+            span: Default::default(),
+        }
+    }
+
+    fn scene(xres: u32, yres: u32, projection: Projection, prims: Vec<Attributes>) -> Scene {
+        let mut s = Scene::default();
+        s.options.xres = xres;
+        s.options.yres = yres;
+        s.options.projection = projection;
+        s.options.pixel_filter = PixelFilter {
+            name: "box".into(),
+            xwidth: 1.0,
+            ywidth: 1.0,
+        };
+        s.primitives = prims.into_iter().map(primitive).collect();
+        s
+    }
+
+    fn attrs(color: Vec3, opacity: Vec3) -> Attributes {
+        Attributes {
+            color,
+            opacity,
+            ..Attributes::default()
+        }
+    }
+
+    fn render(
+        scene: &Scene,
+        quads: &[Quad],
+        shader: &dyn GridShader,
+        opts: &RenderOptions,
+    ) -> (Film, Diagnostics) {
+        let diags = Diagnostics::new();
+        let options = effective_options(&scene.options, opts);
+        let camera =
+            Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
+        let mut surfaces: Vec<Vec<Box<dyn Surface>>> =
+            (0..scene.primitives.len()).map(|_| Vec::new()).collect();
+        for q in quads {
+            surfaces[q.prim].push(Box::new(q.clone()));
+        }
+        let film = render_surfaces(scene, &options, &camera, surfaces, shader, opts, &diags);
+        (film, diags)
+    }
+
+    #[test]
+    fn constant_surface_over_the_frame_is_exactly_its_colour() {
+        let c = Vec3::new(0.2, 0.4, 0.6);
+        let s = scene(32, 24, Projection::Orthographic, vec![attrs(c, Vec3::ONE)]);
+        let quads = [Quad::rect(-2.0, -2.0, 2.0, 2.0, 5.0, 0)];
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert!(!diags.has_errors());
+        for y in 0..24 {
+            for x in 0..32 {
+                let p = film.pixel(x, y);
+                for ch in 0..3 {
+                    assert!((p[ch] - c[ch]).abs() < 1e-6, "pixel {x},{y}: {p:?}");
+                }
+                assert!((p[3] - 1.0).abs() < 1e-6);
+                assert_eq!(p[4], 5.0);
+            }
+        }
+    }
+
+    #[test]
+    fn half_plane_edge_pixel_has_half_coverage() {
+        // Raster pixel (8, 8) of a 16×16 image over the screen [-1,1]²: its centre is at
+        // screen (0.0625, −0.0625). A half-plane whose edge passes through that centre covers
+        // exactly half the pixel's area, at any angle.
+        let centre = Vec3::new(0.0625, -0.0625, 3.0);
+        for (deg, spp) in [(20.0f32, 4.0f32), (47.0, 8.0), (110.0, 16.0)] {
+            let (sn, cs) = deg.to_radians().sin_cos();
+            let rot = |x: f32, y: f32| centre + Vec3::new(cs * x - sn * y, sn * x + cs * y, 0.0);
+            let q = Quad::new(
+                rot(-10.0, -10.0),
+                rot(0.0, -10.0),
+                rot(-10.0, 10.0),
+                rot(0.0, 10.0),
+                0,
+            );
+            let mut s = scene(
+                16,
+                16,
+                Projection::Orthographic,
+                vec![attrs(Vec3::ONE, Vec3::ONE)],
+            );
+            s.options.pixel_samples = [spp, spp];
+            let (film, _) = render(&s, &[q], &Constant, &RenderOptions::default());
+            let cov = film.pixel(8, 8)[3];
+            let tol = 2.0 / spp; // 2/√(spp²)
+            assert!((cov - 0.5).abs() <= tol, "angle {deg}: coverage {cov}");
+            assert!(cov > 0.0 && cov < 1.0, "angle {deg}: coverage {cov}");
+            // Five pixels from the edge along its normal (raster y points down): fully in / out.
+            let at = |d: f32| {
+                let (x, y) = (8.5 + d * cs, 8.5 - d * sn);
+                film.pixel(x as usize, y as usize)[3]
+            };
+            assert_eq!((at(-5.0), at(5.0)), (1.0, 0.0), "angle {deg}");
+        }
+    }
+
+    #[test]
+    fn four_half_transparent_layers_composite_front_to_back() {
+        let half = Vec3::splat(0.5);
+        let s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, half); 4],
+        );
+        let quads: Vec<Quad> = (0..4)
+            .map(|i| Quad::rect(-2.0, -2.0, 2.0, 2.0, 1.0 + i as f32, i))
+            .collect();
+        let (film, _) = render(&s, &quads, &Constant, &RenderOptions::default());
+        let expect = 1.0 - 0.5f32.powi(4);
+        for y in 0..8 {
+            for x in 0..8 {
+                let p = film.pixel(x, y);
+                assert!((p[3] - expect).abs() < 1e-6, "{p:?}");
+                // Colour 1 · opacity 0.5 per layer, premultiplied: also 1 − 0.5⁴.
+                assert!((p[0] - expect).abs() < 1e-6, "{p:?}");
+                // No layer is opaque: nothing sets the depth.
+                assert_eq!(p[4], f32::INFINITY);
+            }
+        }
+    }
+
+    /// A small perspective scene with overlapping, tilted, transparent and one-sided pieces.
+    fn busy_scene() -> (Scene, Vec<Quad>) {
+        let mut a0 = attrs(Vec3::new(1.0, 0.5, 0.25), Vec3::ONE);
+        a0.shading_rate = 0.5;
+        let mut a1 = attrs(Vec3::new(0.3, 0.9, 0.4), Vec3::new(0.5, 0.6, 0.7));
+        a1.smooth_shading = true;
+        let mut a2 = attrs(Vec3::ONE, Vec3::ONE);
+        a2.sides = 1;
+        let mut s = scene(
+            48,
+            36,
+            Projection::Perspective { fov: 60.0 },
+            vec![a0, a1, a2],
+        );
+        s.options.pixel_samples = [3.0, 3.0];
+        let quads = vec![
+            Quad::new(
+                Vec3::new(-3.0, -1.0, 2.0),
+                Vec3::new(3.0, -1.0, 2.0),
+                Vec3::new(-3.0, -1.0, 20.0),
+                Vec3::new(3.0, -1.0, 20.0),
+                0,
+            ),
+            Quad::new(
+                Vec3::new(-1.0, -0.8, 4.0),
+                Vec3::new(0.7, -0.5, 3.0),
+                Vec3::new(-0.6, 0.9, 5.0),
+                Vec3::new(1.2, 1.0, 4.0),
+                1,
+            ),
+            Quad::rect(0.2, -0.3, 1.5, 0.6, 3.5, 2),
+            // Facing away: culled by Sides 1.
+            Quad::new(
+                Vec3::new(-1.5, 0.2, 3.0),
+                Vec3::new(-1.5, 1.0, 3.0),
+                Vec3::new(-0.2, 0.2, 3.0),
+                Vec3::new(-0.2, 1.0, 3.0),
+                2,
+            ),
+        ];
+        (s, quads)
+    }
+
+    #[test]
+    fn output_is_identical_for_any_thread_count_and_bucket_size() {
+        let (s, quads) = busy_scene();
+        let run = |threads, size| {
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                ..Default::default()
+            };
+            render(&s, &quads, &DefaultShader, &opts).0
+        };
+        let a = run(1, [16, 16]);
+        let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+        let covered = (0..36)
+            .flat_map(|y| (0..48).map(move |x| (x, y)))
+            .filter(|&(x, y)| a.pixel(x, y)[3] > 0.0)
+            .count();
+        assert!(
+            covered > 200,
+            "the scene covers part of the frame ({covered} pixels)"
+        );
+        for (threads, size) in [(2, [32, 32]), (2, [16, 16]), (1, [7, 5]), (2, [64, 64])] {
+            let b = run(threads, size);
+            assert!(
+                bits(&a) == bits(&b),
+                "threads {threads}, bucket {size:?} differ"
+            );
+        }
+    }
+
+    #[test]
+    fn crop_window_renders_only_its_region() {
+        let (mut s, quads) = busy_scene();
+        let full = render(&s, &quads, &DefaultShader, &RenderOptions::default()).0;
+        s.options.crop_window = [0.25, 0.75, 0.5, 1.0];
+        let region = crop_region(48, 36, s.options.crop_window);
+        assert_eq!(
+            region,
+            PixelRect {
+                x0: 12,
+                y0: 18,
+                x1: 36,
+                y1: 36
+            }
+        );
+        let cropped = render(&s, &quads, &DefaultShader, &RenderOptions::default()).0;
+        let mut inside_hit = 0;
+        for y in 0..36 {
+            for x in 0..48 {
+                let (p, q) = (full.pixel(x, y), cropped.pixel(x, y));
+                if region.contains(x as i32, y as i32) {
+                    assert_eq!(p, q, "pixel {x},{y}");
+                    inside_hit += (q[3] > 0.0) as usize;
+                } else {
+                    assert_eq!(q[3], 0.0);
+                    assert_eq!(q[4], f32::INFINITY);
+                }
+            }
+        }
+        assert!(inside_hit > 50);
+        // The --crop override does the same.
+        s.options.crop_window = [0.0, 1.0, 0.0, 1.0];
+        let opts = RenderOptions {
+            crop: Some([0.25, 0.75, 0.5, 1.0]),
+            ..Default::default()
+        };
+        let over = render(&s, &quads, &DefaultShader, &opts).0;
+        assert_eq!(
+            over.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            cropped.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn a_point_lands_on_its_projected_pixel() {
+        // Perspective fov 90 on 32×24: screen window [-4/3, 4/3] × [-1, 1], x_s = x/z.
+        // Pixel (10, 5) spans x_s ∈ [-4/3 + 10/12, -4/3 + 11/12], y_s ∈ [1 − 6/12, 1 − 5/12].
+        let z = 3.0;
+        let (xs0, xs1) = (-4.0 / 3.0 + 10.0 / 12.0, -4.0 / 3.0 + 11.0 / 12.0);
+        let (ys0, ys1) = (1.0 - 6.0 / 12.0, 1.0 - 5.0 / 12.0);
+        let s = scene(
+            32,
+            24,
+            Projection::Perspective { fov: 90.0 },
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        let q = Quad::rect(xs0 * z, ys0 * z, xs1 * z, ys1 * z, z, 0);
+        let (film, _) = render(&s, &[q], &Constant, &RenderOptions::default());
+        for y in 0..24 {
+            for x in 0..32 {
+                let a = film.pixel(x, y)[3];
+                if (x, y) == (10, 5) {
+                    assert!((a - 1.0).abs() < 1e-6, "{a}");
+                    assert!((film.pixel(x, y)[4] - z).abs() < 1e-5);
+                } else {
+                    assert_eq!(a, 0.0, "pixel {x},{y}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn one_sided_back_faces_and_mattes() {
+        let mut one = attrs(Vec3::ONE, Vec3::ONE);
+        one.sides = 1;
+        let mut matte = attrs(Vec3::ONE, Vec3::ONE);
+        matte.matte = true;
+        let s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![one, matte, attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        // A rectangle facing the camera, the same one flipped (u along −x: facing away).
+        let front = Quad::rect(-2.0, -2.0, 0.0, 2.0, 2.0, 0);
+        let back = Quad::new(
+            Vec3::new(2.0, -2.0, 2.0),
+            Vec3::new(0.0, -2.0, 2.0),
+            Vec3::new(2.0, 2.0, 2.0),
+            Vec3::new(0.0, 2.0, 2.0),
+            0,
+        );
+        let (film, _) = render(&s, &[front, back], &Constant, &RenderOptions::default());
+        assert_eq!(film.pixel(1, 4)[3], 1.0);
+        assert_eq!(film.pixel(6, 4)[3], 0.0);
+        // A matte in front of a white surface: a hole with the matte's depth.
+        let quads = [
+            Quad::rect(-2.0, -2.0, 0.0, 2.0, 1.0, 1),
+            Quad::rect(-2.0, -2.0, 2.0, 2.0, 4.0, 2),
+        ];
+        let (film, _) = render(&s, &quads, &Constant, &RenderOptions::default());
+        let (hole, lit) = (film.pixel(1, 4), film.pixel(6, 4));
+        assert_eq!(&hole[..4], &[0.0; 4]);
+        assert_eq!(hole[4], 1.0);
+        assert_eq!(&lit[..5], &[1.0, 1.0, 1.0, 1.0, 4.0]);
+    }
+
+    #[test]
+    fn stats_and_progress_are_reported() {
+        let (s, quads) = busy_scene();
+        let stats = Stats::new();
+        let calls = Mutex::new(Vec::new());
+        let progress = |d: usize, t: usize| calls.lock().unwrap().push((d, t));
+        let opts = RenderOptions {
+            stats: Some(&stats),
+            progress: Some(&progress),
+            bucket_size: Some([16, 16]),
+            ..Default::default()
+        };
+        render(&s, &quads, &DefaultShader, &opts);
+        let calls = calls.into_inner().unwrap();
+        // 48×36 in 16-pixel buckets: 3 × 3.
+        assert_eq!(calls.len(), 9);
+        assert_eq!(*calls.last().unwrap(), (9, 9));
+        assert_eq!(Stats::get(&stats.surfaces), 4);
+        assert!(Stats::get(&stats.grids) >= 4);
+        assert!(Stats::get(&stats.micropolygons) > 100);
+        assert!(Stats::get(&stats.shaded_points) > Stats::get(&stats.micropolygons));
+        assert!(Stats::get(&stats.samples_hit) > 0);
+        assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
+        assert!(Stats::get(&stats.peak_bytes) > 0);
+    }
 }

@@ -30,7 +30,10 @@ impl Film {
         }
     }
     pub fn standard_channels(aovs: &[String]) -> Vec<String> {
-        let mut v: Vec<String> = ["r", "g", "b", "a", "z"].iter().map(|s| s.to_string()).collect();
+        let mut v: Vec<String> = ["r", "g", "b", "a", "z"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         v.extend(aovs.iter().cloned());
         v
     }
@@ -73,7 +76,8 @@ pub fn filter_into(
             }
             let first = buf.sample_index(bx as usize, by as usize, 0, 0);
             let mut sum = vec![0f64; nch];
-            let (mut zmin, mut zmax, mut zsum, mut zn) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0);
+            let (mut zmin, mut zmax, mut zsum, mut zn) =
+                (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0);
             for s in first..first + spp {
                 let v = &buf.values[s * buf.channels..(s + 1) * buf.channels];
                 for c in 0..nch {

@@ -44,8 +44,18 @@ impl GridShader for DefaultShader {
         grid.ci.resize(n, glam::Vec3::ZERO);
         grid.oi.resize(n, glam::Vec3::ONE);
         for k in 0..n {
-            let nn = grid.n.get(k).copied().unwrap_or_default().normalize_or_zero();
-            let ii = grid.i.get(k).copied().unwrap_or_default().normalize_or_zero();
+            let nn = grid
+                .n
+                .get(k)
+                .copied()
+                .unwrap_or_default()
+                .normalize_or_zero();
+            let ii = grid
+                .i
+                .get(k)
+                .copied()
+                .unwrap_or_default()
+                .normalize_or_zero();
             let facing = if nn == glam::Vec3::ZERO || ii == glam::Vec3::ZERO {
                 1.0
             } else {

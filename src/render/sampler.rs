@@ -42,7 +42,10 @@ pub fn sample_position(
 ) -> [f32; 2] {
     let (jx, jy) = if jitter {
         let s = (sy * xs + sx) as u32;
-        (unit(hash(px, py, s, seed, 1)), unit(hash(px, py, s, seed, 2)))
+        (
+            unit(hash(px, py, s, seed, 1)),
+            unit(hash(px, py, s, seed, 2)),
+        )
     } else {
         (0.5, 0.5)
     };

@@ -116,6 +116,8 @@ mod tests {
         Stats::add(&s.grids, 3);
         let text = s.to_string();
         assert!(text.contains("grids"));
-        assert!(text.lines().any(|l| l.contains("grids") && l.trim_end().ends_with('3')));
+        assert!(text
+            .lines()
+            .any(|l| l.contains("grids") && l.trim_end().ends_with('3')));
     }
 }

@@ -42,8 +42,14 @@ impl Aov {
     pub fn channel_names(&self) -> Vec<String> {
         match (self.ty, self.width()) {
             (_, 1) => vec![self.name.clone()],
-            (ParamType::Color, 3) => ["r", "g", "b"].iter().map(|c| format!("{}.{c}", self.name)).collect(),
-            (_, 3) => ["x", "y", "z"].iter().map(|c| format!("{}.{c}", self.name)).collect(),
+            (ParamType::Color, 3) => ["r", "g", "b"]
+                .iter()
+                .map(|c| format!("{}.{c}", self.name))
+                .collect(),
+            (_, 3) => ["x", "y", "z"]
+                .iter()
+                .map(|c| format!("{}.{c}", self.name))
+                .collect(),
             (_, w) => (0..w).map(|c| format!("{}.{c}", self.name)).collect(),
         }
     }
@@ -153,7 +159,12 @@ impl ShadedGrid {
             off += a.width();
         }
         let mut live = Vec::with_capacity((nu.max(1) - 1) * (nv.max(1) - 1));
-        let mut b = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+        let mut b = [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ];
         for j in 0..nv.saturating_sub(1) {
             for i in 0..nu.saturating_sub(1) {
                 let k = j * nu + i;
@@ -333,7 +344,12 @@ impl HiderConfig {
             options
                 .user_floats(key)
                 .filter(|f| !f.is_empty())
-                .map(|f| f.iter().take(3).fold(f32::INFINITY, |a, &b| a.min(b)).clamp(0.0, 1.0))
+                .map(|f| {
+                    f.iter()
+                        .take(3)
+                        .fold(f32::INFINITY, |a, &b| a.min(b))
+                        .clamp(0.0, 1.0)
+                })
                 .unwrap_or(0.996)
         };
         let normal_from_world = camera.camera_from_world.inverse().transpose();
@@ -374,7 +390,9 @@ impl HiderConfig {
                 p
             }
         } else {
-            let p = self.camera_from_raster.transform_point3(Vec3::new(x, y, 0.0));
+            let p = self
+                .camera_from_raster
+                .transform_point3(Vec3::new(x, y, 0.0));
             Vec3::new(p.x, p.y, z)
         }
     }

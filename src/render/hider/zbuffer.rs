@@ -39,7 +39,9 @@ pub fn empty_buffer(cfg: &HiderConfig, rect: PixelRect) -> SampleBuffer {
         for px in rect.x0..rect.x1 {
             for sy in 0..ys {
                 for sx in 0..xs {
-                    positions.push(sample_position(px, py, sx, sy, xs, ys, cfg.jitter, cfg.seed));
+                    positions.push(sample_position(
+                        px, py, sx, sy, xs, ys, cfg.jitter, cfg.seed,
+                    ));
                 }
             }
         }
@@ -98,7 +100,17 @@ struct Bucket<'c> {
 impl<'c> Bucket<'c> {
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn insert(&mut self, s: usize, z: f32, key: u64, sub: u32, c: [f32; 3], o: [f32; 3], matte: bool, aov: &[f32]) {
+    fn insert(
+        &mut self,
+        s: usize,
+        z: f32,
+        key: u64,
+        sub: u32,
+        c: [f32; 3],
+        o: [f32; 3],
+        matte: bool,
+        aov: &[f32],
+    ) {
         self.hits += 1;
         let opaque = o[0].min(o[1]).min(o[2]) >= self.cfg.zthreshold;
         let (fz, fk, fs) = self.front[s];
@@ -148,9 +160,15 @@ impl<'c> Bucket<'c> {
 #[inline]
 fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
     if (a[0], a[1]) < (b[0], b[1]) {
-        ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]), true)
+        (
+            (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]),
+            true,
+        )
     } else {
-        (-((a[0] - b[0]) * (p[1] - b[1]) - (a[1] - b[1]) * (p[0] - b[0])), false)
+        (
+            -((a[0] - b[0]) * (p[1] - b[1]) - (a[1] - b[1]) * (p[0] - b[0])),
+            false,
+        )
     }
 }
 
@@ -215,7 +233,12 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
             }
             let k = j * nu + i;
             let corner = [k, k + 1, k + nu + 1, k + nu];
-            let (mut x0, mut y0, mut x1, mut y1) = (f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+            let (mut x0, mut y0, mut x1, mut y1) = (
+                f32::INFINITY,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::NEG_INFINITY,
+            );
             for &c in &corner {
                 let [x, y] = g.xy[c];
                 x0 = x0.min(x);
@@ -245,13 +268,17 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 }
             }
             // Two triangles sharing the diagonal corner[0]–corner[2].
-            for (t, tri) in [[corner[0], corner[1], corner[2]], [corner[0], corner[2], corner[3]]]
-                .into_iter()
-                .enumerate()
+            for (t, tri) in [
+                [corner[0], corner[1], corner[2]],
+                [corner[0], corner[2], corner[3]],
+            ]
+            .into_iter()
+            .enumerate()
             {
                 let mut v = [g.xy[tri[0]], g.xy[tri[1]], g.xy[tri[2]]];
                 let mut idx = tri;
-                let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+                let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
+                    - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
                 if area == 0.0 || !area.is_finite() {
                     continue;
                 }
@@ -276,7 +303,9 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
                 for py in py0..=py1 {
                     for px in px0..=px1 {
-                        let base = ((py - rect.y0) as usize * rect.width() + (px - rect.x0) as usize) * spp;
+                        let base = ((py - rect.y0) as usize * rect.width()
+                            + (px - rect.x0) as usize)
+                            * spp;
                         for s in base..base + spp {
                             let pos = buf.positions[s];
                             if pos[0] < tx0 || pos[0] > tx1 || pos[1] < ty0 || pos[1] > ty1 {
@@ -295,15 +324,21 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                             if !inside(e2) {
                                 continue;
                             }
-                            let (w0, w1, w2) = (e0.0 * inv_area, e1.0 * inv_area, e2.0 * inv_area);
-                            let q = w0 * dq[0] + w1 * dq[1] + w2 * dq[2];
+                            let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
+                            let w0 = 1.0 - w1 - w2;
+                            // Relative to vertex 0, so a constant depth stays exact.
+                            let q = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
                             let z = if cfg.perspective { 1.0 / q } else { q };
                             if !(z >= cfg.near && z <= cfg.far) {
                                 continue;
                             }
                             if !cfg.clip_planes.is_empty() {
                                 let p = cfg.camera_point(pos[0], pos[1], z);
-                                if cfg.clip_planes.iter().any(|pl| pl.truncate().dot(p) + pl.w > 0.0) {
+                                if cfg
+                                    .clip_planes
+                                    .iter()
+                                    .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
+                                {
                                     continue;
                                 }
                             }
@@ -355,7 +390,9 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
         if list.len() > 1 {
             list.sort_unstable_by(|&x, &y| {
                 let (p, q) = (&b.points[x as usize], &b.points[y as usize]);
-                p.z.total_cmp(&q.z).then(p.key.cmp(&q.key)).then(p.sub.cmp(&q.sub))
+                p.z.total_cmp(&q.z)
+                    .then(p.key.cmp(&q.key))
+                    .then(p.sub.cmp(&q.sub))
             });
         }
         let out = &mut buf.values[s * ch..(s + 1) * ch];
