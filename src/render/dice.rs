@@ -69,7 +69,7 @@ impl View {
             screen: [a.x.min(b.x), a.x.max(b.x), a.y.min(b.y), a.y.max(b.y)],
             // Below this depth a projected bound is no longer meaningful in f32.
             eye_epsilon: if camera.perspective {
-                camera.near.min(1e-4).max(1e-7)
+                camera.near.clamp(1e-7, 1e-4)
             } else {
                 f32::NEG_INFINITY
             },

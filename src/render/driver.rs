@@ -1038,4 +1038,117 @@ mod tests {
         assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
         assert!(Stats::get(&stats.peak_bytes) > 0);
     }
+
+    fn string_param(name: &str, value: &str) -> crate::scene::Param {
+        crate::scene::Param {
+            name: name.into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::String,
+                array_len: 1,
+            },
+            data: crate::scene::ParamData::Strings(vec![value.into()]),
+            span: Default::default(),
+        }
+    }
+
+    #[test]
+    fn midpoint_depth_is_halfway_to_the_second_surface() {
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE); 2],
+        );
+        s.options
+            .hider
+            .params
+            .0
+            .push(string_param("depthfilter", "midpoint"));
+        let quads = [
+            Quad::rect(-2.0, -2.0, 0.0, 2.0, 2.0, 0),
+            Quad::rect(-2.0, -2.0, 2.0, 2.0, 6.0, 1),
+        ];
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert!(diags.snapshot().is_empty());
+        assert_eq!(film.pixel(1, 3)[4], 4.0);
+        assert_eq!(film.pixel(6, 3)[4], 6.0);
+        // An unknown filter warns and keeps the nearest depth.
+        s.options.hider.params.0[0] = string_param("depthfilter", "median");
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert_eq!(film.pixel(1, 3)[4], 2.0);
+        assert!(diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.code == "render::hider"));
+    }
+
+    #[test]
+    fn clipping_planes_cut_away_their_positive_side() {
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        s.options.clipping_planes.push((Vec3::ZERO, Vec3::X));
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 2.0, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        for y in 0..8 {
+            for x in 0..8 {
+                assert_eq!(
+                    film.pixel(x, y)[3],
+                    if x < 4 { 1.0 } else { 0.0 },
+                    "pixel {x},{y}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn unjittered_samples_sit_at_stratum_centres() {
+        // A vertical edge at raster x = 4.5 (screen x = 0.125 on 8 pixels over [-1, 1]):
+        // with "jitter" 0 and 2×2 samples, exactly the left two strata of pixel 4 are covered.
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        s.options.hider.params.0.push(crate::scene::Param {
+            name: "jitter".into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::Float,
+                array_len: 1,
+            },
+            data: crate::scene::ParamData::Floats(vec![0.0]),
+            span: Default::default(),
+        });
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 0.125, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        assert_eq!(film.pixel(4, 2)[3], 0.5);
+        assert_eq!(film.pixel(3, 2)[3], 1.0);
+        assert_eq!(film.pixel(5, 2)[3], 0.0);
+        // The null hider sees nothing.
+        s.options.hider.name = "null".into();
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 2.0, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        assert!(film
+            .data
+            .chunks(5)
+            .all(|p| p[3] == 0.0 && p[4] == f32::INFINITY));
+    }
 }

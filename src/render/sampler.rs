@@ -30,6 +30,7 @@ pub fn unit(h: u64) -> f32 {
 /// Raster position of stratum (sx, sy) of pixel (px, py) with `xs × ys` strata: jittered
 /// uniformly inside the stratum, or its centre when `jitter` is false.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 pub fn sample_position(
     px: i32,
     py: i32,

@@ -321,7 +321,7 @@ impl HiderConfig {
             ps[1].round().clamp(1.0, 64.0) as usize,
         ];
         let params = &options.hider.params;
-        let jitter = params.float("jitter").map_or(true, |j| j != 0.0);
+        let jitter = params.float("jitter") != Some(0.0);
         let depth_filter = match params.string("depthfilter") {
             None | Some("min") => DepthFilter::Min,
             Some("max") => DepthFilter::Max,

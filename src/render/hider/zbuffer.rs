@@ -8,6 +8,9 @@
 //! hit exactly once; per-sample visible points are composited front to back in the total order
 //! (depth, grid key, micropolygon), so results do not depend on the order grids arrive in.
 
+// Colour loops index several parallel arrays by channel.
+#![allow(clippy::needless_range_loop)]
+
 use crate::film::SampleBuffer;
 
 use super::super::camera::PixelRect;
