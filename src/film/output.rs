@@ -1,0 +1,1166 @@
+//! Display output: the filtered [`Film`] → image files, one per `Display` request.
+//!
+//! Input: the film, the frame's [`Options`] (Exposure, Imager, Quantize, Display list) and an
+//! optional CLI output path. Output: the written files' paths.
+//! Pipeline (RISpec §4.1.4): exposure → imager (`background`) → quantize/dither → encode.
+//! Invariants: every file is written to a temporary name in its own directory and renamed, so
+//! a failed write never leaves a partial image; colours stay premultiplied by alpha; requests
+//! this module cannot honour exactly produce a warning and the closest output, never silence.
+//!
+//! Display types: `file` (TIFF; PNG/EXR when the name says so), `tiff`, `png`, `exr`/`openexr`,
+//! `zfile`, `shadow` (zfile for now), `framebuffer` (no window: a PNG named after the display).
+//! Modes: `rgb`, `rgba`, `a`, `z`, `rgbz`, `rgbaz`, `Ci`, or output-variable names
+//! (comma-separated; a name `N` selects film channels `N` or `N.*`).
+//! Bit depth: from the quantizer — `one` = 0 → float, `max` ≤ 255 → 8 bits, else 16 bits.
+//! EXR ignores Quantize (it stores the unquantized values, half by default, `"float"` on
+//! request; depth is always stored as 32-bit float).
+
+use std::borrow::Cow;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use image::ImageEncoder;
+
+use super::quantize::{apply_background, apply_exposure, is_float, quantize};
+use super::resolve::Film;
+use super::zfile::ZFile;
+use crate::diag::{Diag, Diagnostics, Span};
+use crate::scene::{Display, Options, ParamList, Quantize};
+
+/// File formats the film can write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Tiff,
+    Png,
+    Exr,
+    ZFile,
+}
+
+impl Format {
+    /// The format a file extension names (`png`, `tif`/`tiff`, `exr`, `z`/`zfile`).
+    pub fn from_extension(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        Some(match ext.as_str() {
+            "png" => Format::Png,
+            "tif" | "tiff" => Format::Tiff,
+            "exr" => Format::Exr,
+            "z" | "zfile" => Format::ZFile,
+            _ => return None,
+        })
+    }
+}
+
+/// One output file to produce.
+#[derive(Clone, Debug)]
+struct Target {
+    path: PathBuf,
+    format: Format,
+    mode: String,
+    params: ParamList,
+    kind: String,
+    span: Span,
+}
+
+/// Writes every display of the frame. Errors of individual displays are reported into `diags`
+/// (after the first, which is returned) so one failing display does not stop the others.
+pub fn write_displays(
+    film: &Film,
+    opts: &Options,
+    diags: &Diagnostics,
+    output_override: Option<&Path>,
+) -> Result<Vec<PathBuf>, Diag> {
+    let img = prepare(film, opts, diags);
+    let targets = plan(opts, diags, output_override)?;
+    let mut written = Vec::new();
+    let mut first_err = None;
+    for t in &targets {
+        match write_target(&img, t, opts, diags) {
+            Ok(()) => written.push(t.path.clone()),
+            Err(e) => {
+                if first_err.is_none() {
+                    first_err = Some(e);
+                } else {
+                    diags.report(e);
+                }
+            }
+        }
+    }
+    match first_err {
+        Some(e) => Err(e),
+        None => Ok(written),
+    }
+}
+
+/// Exposure then the imager, on a copy only when something changes.
+fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, Film> {
+    let [gain, gamma] = opts.exposure;
+    let mut img = Cow::Borrowed(film);
+    if gain != 1.0 || gamma != 1.0 {
+        if !(gamma > 0.0 && gamma.is_finite()) {
+            diags.report(
+                Diag::warning(
+                    "film::exposure",
+                    format!("Exposure gamma {gamma} must be positive; using 1"),
+                )
+                .help("Exposure gain gamma, e.g. Exposure 1 2.2"),
+            );
+        }
+        apply_exposure(img.to_mut(), gain, gamma);
+    }
+    if let Some(imager) = &opts.imager {
+        if imager.name == "background" {
+            let c = imager
+                .params
+                .floats("background")
+                .or_else(|| imager.params.floats("bgcolor"))
+                .filter(|f| !f.is_empty());
+            let color = match c {
+                Some(f) if f.len() >= 3 => [f[0], f[1], f[2]],
+                Some(f) => [f[0]; 3],
+                None => [1.0; 3],
+            };
+            apply_background(img.to_mut(), color);
+        } else {
+            diags.report(
+                Diag::warning(
+                    "film::imager",
+                    format!(
+                        "Imager shader `{}` is not run yet (only the standard `background` \
+                         imager is); the image is written without it",
+                        imager.name
+                    ),
+                )
+                .label(imager.span, "this Imager"),
+            );
+        }
+    }
+    img
+}
+
+/// The list of files to write, with the CLI override applied.
+fn plan(
+    opts: &Options,
+    diags: &Diagnostics,
+    output_override: Option<&Path>,
+) -> Result<Vec<Target>, Diag> {
+    let mut displays: Vec<Display> = opts.displays.clone();
+    if displays.is_empty() {
+        let name = output_override
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "ri.png".into());
+        if output_override.is_none() {
+            diags.report(
+                Diag::warning(
+                    "film::display",
+                    "no Display request: writing the image to `ri.png`",
+                )
+                .help("add e.g. Display \"image.tif\" \"file\" \"rgba\" before WorldBegin"),
+            );
+        }
+        displays.push(Display {
+            name,
+            kind: "file".into(),
+            mode: "rgba".into(),
+            params: ParamList::default(),
+            span: Span::default(),
+        });
+    }
+    let mut out = Vec::with_capacity(displays.len());
+    for (i, d) in displays.iter().enumerate() {
+        if d.name.trim().is_empty() {
+            return Err(
+                Diag::error("film::display", "Display has an empty file name")
+                    .label(d.span, "this Display")
+                    .help("Display \"name.tif\" \"file\" \"rgba\""),
+            );
+        }
+        let mut path = PathBuf::from(&d.name);
+        let kind = d.kind.to_ascii_lowercase();
+        let by_ext = Format::from_extension(&path);
+        let format = match kind.as_str() {
+            "tiff" => Format::Tiff,
+            "file" => match by_ext {
+                Some(Format::ZFile) | None => Format::Tiff,
+                Some(f) => f,
+            },
+            "png" => Format::Png,
+            "exr" | "openexr" => Format::Exr,
+            "zfile" => Format::ZFile,
+            "shadow" => {
+                diags.report(
+                    Diag::warning(
+                        "film::display",
+                        format!(
+                            "shadow display `{}`: written as an arbor zfile for now; \
+                             MakeShadow-style shadow textures come later",
+                            d.name
+                        ),
+                    )
+                    .label(d.span, "this Display"),
+                );
+                Format::ZFile
+            }
+            "framebuffer" => {
+                path = path.with_extension("png");
+                diags.report(
+                    Diag::warning(
+                        "film::framebuffer",
+                        format!(
+                            "framebuffer display `{}`: no window here, writing `{}` instead",
+                            d.name,
+                            path.display()
+                        ),
+                    )
+                    .label(d.span, "this Display"),
+                );
+                Format::Png
+            }
+            other => {
+                let f = match by_ext {
+                    Some(f) => f,
+                    None => {
+                        path = path.with_extension("png");
+                        Format::Png
+                    }
+                };
+                diags.report(
+                    Diag::warning(
+                        "film::display",
+                        format!(
+                            "unknown display type `{other}`; writing `{}` as {f:?}",
+                            path.display()
+                        ),
+                    )
+                    .label(d.span, "this Display")
+                    .help("display types: file, tiff, png, exr, zfile, shadow, framebuffer"),
+                );
+                f
+            }
+        };
+        let mut t = Target {
+            path,
+            format,
+            mode: d.mode.clone(),
+            params: d.params.clone(),
+            kind,
+            span: d.span,
+        };
+        if i == 0 {
+            if let Some(o) = output_override {
+                t.format = Format::from_extension(o).ok_or_else(|| {
+                    Diag::error(
+                        "film::output",
+                        format!("cannot tell the image format of `{}`", o.display()),
+                    )
+                    .help("use an extension: .png, .tif, .tiff, .exr or .z")
+                })?;
+                t.path = o.to_path_buf();
+            }
+        }
+        out.push(t);
+    }
+    Ok(out)
+}
+
+/// One output channel: where it comes from in the film and what it is called.
+#[derive(Clone, Debug, PartialEq)]
+struct Plane {
+    /// Film channel; `None` writes zeros (an output variable the film lacks).
+    src: Option<usize>,
+    name: String,
+    depth: bool,
+}
+
+/// The planes a display mode selects from the film.
+fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
+    // A mode may carry a type declaration ("varying normal N"): keep its last word.
+    let mode = t.mode.split_whitespace().last().unwrap_or("").to_string();
+    let std = |name: &str, exr: &str| Plane {
+        src: film.channel(name),
+        name: exr.to_string(),
+        depth: name == "z",
+    };
+    let standard = |rgb: bool, a: bool, z: bool| {
+        let mut v = Vec::new();
+        if rgb {
+            v.extend([std("r", "R"), std("g", "G"), std("b", "B")]);
+        }
+        if a {
+            v.push(std("a", "A"));
+        }
+        if z {
+            v.push(std("z", "Z"));
+        }
+        v
+    };
+    match mode.as_str() {
+        "rgb" | "Ci" => return standard(true, false, false),
+        "rgba" => return standard(true, true, false),
+        "a" => return standard(false, true, false),
+        "z" => return standard(false, false, true),
+        "rgbz" => return standard(true, false, true),
+        "rgbaz" => return standard(true, true, true),
+        "" => {
+            diags.report(
+                Diag::warning("film::display", "Display has an empty mode; using \"rgba\"")
+                    .label(t.span, "this Display"),
+            );
+            return standard(true, true, false);
+        }
+        _ => {}
+    }
+    if mode.chars().all(|c| "rgbaz".contains(c)) {
+        let rgb = mode.contains(['r', 'g', 'b']);
+        let (a, z) = (mode.contains('a'), mode.contains('z'));
+        let closest = format!(
+            "{}{}{}",
+            if rgb { "rgb" } else { "" },
+            if a { "a" } else { "" },
+            if z { "z" } else { "" }
+        );
+        diags.report(
+            Diag::warning(
+                "film::display",
+                format!("display mode \"{mode}\" is not supported; using \"{closest}\""),
+            )
+            .label(t.span, "this Display")
+            .help("modes: rgb, rgba, a, z, rgbz, rgbaz, or output variable names"),
+        );
+        return standard(rgb, a, z);
+    }
+    let mut planes = Vec::new();
+    for name in mode.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let idx = film.aov_channels(name);
+        if idx.is_empty() {
+            diags.report(
+                Diag::warning(
+                    "film::display",
+                    format!(
+                        "output variable `{name}` was not rendered; its channel is written as 0"
+                    ),
+                )
+                .label(t.span, "this Display")
+                .help("the surface shader must declare it as an `output varying` parameter"),
+            );
+            planes.push(Plane {
+                src: None,
+                name: name.to_string(),
+                depth: false,
+            });
+        } else {
+            for i in idx {
+                planes.push(Plane {
+                    src: Some(i),
+                    name: film.channel_names[i].clone(),
+                    depth: film.channel_names[i] == "z",
+                });
+            }
+        }
+    }
+    planes
+}
+
+/// Per-display overrides of Quantize (`"quantize" [zero one min max]`, `"dither" [d]`) and
+/// warnings for parameters nobody reads.
+fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quantize, Quantize) {
+    let (mut qc, mut qz) = (opts.quantize_rgba, opts.quantize_z);
+    for p in t.params.iter() {
+        match p.name.as_str() {
+            "quantize" => {
+                let f = p.data.floats();
+                if f.len() == 4 {
+                    if f[0] != 0.0 {
+                        diags.report(
+                            Diag::warning(
+                                "film::display",
+                                "display \"quantize\" zero offset is not supported; ignored",
+                            )
+                            .label(p.span, "here"),
+                        );
+                    }
+                    qc = Quantize {
+                        one: f[1],
+                        min: f[2],
+                        max: f[3],
+                        ..qc
+                    };
+                    qz = Quantize {
+                        one: f[1],
+                        min: f[2],
+                        max: f[3],
+                        ..qz
+                    };
+                } else {
+                    diags.report(
+                        Diag::warning(
+                            "film::display",
+                            "display \"quantize\" takes 4 numbers [zero one min max]; ignored",
+                        )
+                        .label(p.span, "here"),
+                    );
+                }
+            }
+            "dither" => {
+                if let Some(&d) = p.data.floats().first() {
+                    qc.dither = d;
+                    qz.dither = d;
+                }
+            }
+            "float" | "half" | "type" | "pixeltype" | "exrpixeltype" | "compression"
+            | "exrcompression"
+                if t.format == Format::Exr => {}
+            other => diags.report(
+                Diag::warning(
+                    "film::display",
+                    format!(
+                        "display parameter `{other}` is not used by the `{}` display; ignored",
+                        t.kind
+                    ),
+                )
+                .label(p.span, "here"),
+            ),
+        }
+    }
+    (qc, qz)
+}
+
+fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) -> Result<(), Diag> {
+    let (qc, qz) = display_quantizers(t, opts, diags);
+    let warn = |msg: String| {
+        diags.report(Diag::warning("film::display", msg).label(t.span, "this Display"));
+    };
+    let (w, h) = (film.width, film.height);
+    if t.format == Format::ZFile {
+        let mode = t.mode.trim();
+        if mode != "z" {
+            warn(format!(
+                "{} display `{}` writes depth only; mode \"{mode}\" ignored",
+                t.kind,
+                t.path.display()
+            ));
+        }
+        let zc = film.channel("z");
+        let depths = (0..w * h)
+            .map(|i| zc.map_or(f32::INFINITY, |z| film.data[i * film.channels() + z]))
+            .collect();
+        let z = ZFile {
+            width: w as u32,
+            height: h as u32,
+            matrices: None,
+            depths,
+        };
+        let bytes = z.to_bytes();
+        return write_atomically(&t.path, |f| f.write_all(&bytes).map_err(|e| e.to_string()))
+            .map_err(|d| d.label(t.span, "this Display"));
+    }
+
+    let mut planes = select_planes(film, t, diags);
+    if t.format == Format::Exr {
+        return write_exr(film, t, &planes, diags);
+    }
+
+    // PNG and TIFF: no depth next to colour, at most 4 channels.
+    let fmt_name = if t.format == Format::Png {
+        "png"
+    } else {
+        "tiff"
+    };
+    if planes.len() > 1 && planes.iter().any(|p| p.depth) {
+        planes.retain(|p| !p.depth);
+        warn(format!(
+            "{fmt_name} cannot hold depth next to colour; z dropped from `{}` (use exr, or a \
+             separate \"z\" display)",
+            t.path.display()
+        ));
+    }
+    if planes.len() > 4 {
+        planes.truncate(4);
+        warn(format!(
+            "{fmt_name} holds at most 4 channels; `{}` keeps the first 4",
+            t.path.display()
+        ));
+    }
+    let depth_only = planes.len() == 1 && planes[0].depth;
+    let mut q = if depth_only { qz } else { qc };
+    // Depth with a float quantizer in an integer-only image: normalise the finite range.
+    let mut znorm = None;
+    let float_out = is_float(&q);
+    if float_out && (t.format == Format::Png || (depth_only && t.format == Format::Tiff)) {
+        if depth_only {
+            let zc = planes[0].src;
+            let (lo, hi) = finite_range(film, zc);
+            znorm = Some((lo, hi));
+            warn(format!(
+                "{fmt_name} cannot hold float depth in one channel; `{}` holds depth {lo}..{hi} \
+                 scaled to 0..65535 (use zfile, exr, or Quantize \"z\")",
+                t.path.display()
+            ));
+        } else {
+            warn(format!(
+                "png cannot hold floats (Quantize one = 0); `{}` written with 16 bits",
+                t.path.display()
+            ));
+        }
+        q = Quantize {
+            one: 65535.0,
+            min: 0.0,
+            max: 65535.0,
+            dither: if depth_only { 0.0 } else { q.dither },
+        };
+    }
+    let float_out = is_float(&q);
+    let nout = match planes.len() {
+        2 if t.format == Format::Tiff => {
+            warn(format!(
+                "tiff has no 2-channel colour type; `{}` padded to 3 channels",
+                t.path.display()
+            ));
+            3
+        }
+        n => n,
+    };
+    if nout == 0 {
+        return Err(Diag::error(
+            "film::display",
+            format!("display `{}` selects no channels", t.path.display()),
+        )
+        .label(t.span, "this Display"));
+    }
+    let sample = |x: usize, y: usize, k: usize| -> f32 {
+        let Some(p) = planes.get(k) else { return 0.0 };
+        let Some(c) = p.src else { return 0.0 };
+        let v = film.data[(y * w + x) * film.channels() + c];
+        match znorm {
+            Some((lo, hi)) if p.depth => {
+                if v.is_finite() && hi > lo {
+                    (v - lo) / (hi - lo)
+                } else if v.is_finite() {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
+            _ => v,
+        }
+    };
+
+    use image::ExtendedColorType as E;
+    let path = &t.path;
+    let result = if float_out {
+        // TIFF float: RGB/RGBA only; a single channel is replicated to RGB.
+        let (ct, n, rep) = match nout {
+            1 => {
+                warn(format!(
+                    "the tiff encoder has no 1-channel float type; `{}` repeats the channel \
+                     as RGB",
+                    path.display()
+                ));
+                (E::Rgb32F, 3, true)
+            }
+            3 => (E::Rgb32F, 3, false),
+            _ => (E::Rgba32F, 4, false),
+        };
+        let mut bytes = Vec::with_capacity(w * h * n * 4);
+        for y in 0..h {
+            for x in 0..w {
+                for k in 0..n {
+                    let v = sample(x, y, if rep { 0 } else { k });
+                    bytes.extend_from_slice(&v.to_ne_bytes());
+                }
+            }
+        }
+        encode(path, t.format, &bytes, w, h, ct)
+    } else {
+        let sixteen = q.max > 255.0;
+        let ct = match (nout, sixteen) {
+            (1, false) => E::L8,
+            (2, false) => E::La8,
+            (3, false) => E::Rgb8,
+            (_, false) => E::Rgba8,
+            (1, true) => E::L16,
+            (2, true) => E::La16,
+            (3, true) => E::Rgb16,
+            (_, true) => E::Rgba16,
+        };
+        let mut bytes = Vec::with_capacity(w * h * nout * if sixteen { 2 } else { 1 });
+        for y in 0..h {
+            for x in 0..w {
+                for k in 0..nout {
+                    let v = quantize(sample(x, y, k), &q, x as u32, y as u32, k as u32);
+                    if sixteen {
+                        bytes.extend_from_slice(&(v.clamp(0.0, 65535.0) as u16).to_ne_bytes());
+                    } else {
+                        bytes.push(v.clamp(0.0, 255.0) as u8);
+                    }
+                }
+            }
+        }
+        encode(path, t.format, &bytes, w, h, ct)
+    };
+    result.map_err(|d| d.label(t.span, "this Display"))
+}
+
+fn finite_range(film: &Film, zc: Option<usize>) -> (f32, f32) {
+    let Some(zc) = zc else { return (0.0, 0.0) };
+    let n = film.channels();
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for px in film.data.chunks_exact(n) {
+        let z = px[zc];
+        if z.is_finite() {
+            lo = lo.min(z);
+            hi = hi.max(z);
+        }
+    }
+    if lo > hi {
+        (0.0, 0.0)
+    } else {
+        (lo, hi)
+    }
+}
+
+fn encode(
+    path: &Path,
+    format: Format,
+    bytes: &[u8],
+    w: usize,
+    h: usize,
+    ct: image::ExtendedColorType,
+) -> Result<(), Diag> {
+    write_atomically(path, |f| {
+        let r =
+            match format {
+                Format::Png => image::codecs::png::PngEncoder::new(f)
+                    .write_image(bytes, w as u32, h as u32, ct),
+                _ => image::codecs::tiff::TiffEncoder::new(f)
+                    .write_image(bytes, w as u32, h as u32, ct),
+            };
+        r.map_err(|e| e.to_string())
+    })
+}
+
+fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> Result<(), Diag> {
+    use exr::prelude::*;
+    let mut float = false;
+    let mut compression = Compression::ZIP16;
+    for p in t.params.iter() {
+        match p.name.as_str() {
+            "float" => float = true,
+            "half" => float = false,
+            "type" | "pixeltype" | "exrpixeltype" => {
+                match p.data.strings().first().map(|s| s.as_str()) {
+                    Some("float") => float = true,
+                    Some("half") => float = false,
+                    other => diags.report(
+                        Diag::warning(
+                            "film::display",
+                            format!(
+                                "exr pixel type {other:?} is not \"half\" or \"float\"; using half"
+                            ),
+                        )
+                        .label(p.span, "here"),
+                    ),
+                }
+            }
+            "compression" | "exrcompression" => {
+                compression = match p
+                    .data
+                    .strings()
+                    .first()
+                    .map(|s| s.to_ascii_lowercase())
+                    .as_deref()
+                {
+                    Some("none") => Compression::Uncompressed,
+                    Some("rle") => Compression::RLE,
+                    Some("zips") => Compression::ZIP1,
+                    Some("zip") => Compression::ZIP16,
+                    Some("piz") => Compression::PIZ,
+                    Some("pxr24") => Compression::PXR24,
+                    other => {
+                        diags.report(
+                            Diag::warning(
+                                "film::display",
+                                format!("exr compression {other:?} is not supported; using zip"),
+                            )
+                            .label(p.span, "here")
+                            .help("compression: none, rle, zips, zip, piz, pxr24"),
+                        );
+                        Compression::ZIP16
+                    }
+                };
+            }
+            _ => {}
+        }
+    }
+    let (w, h) = (film.width, film.height);
+    let n = film.channels();
+    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    let mut seen = std::collections::HashSet::new();
+    for p in planes {
+        if !seen.insert(p.name.clone()) {
+            continue;
+        }
+        let vals: Vec<f32> = match p.src {
+            Some(c) => (0..w * h).map(|i| film.data[i * n + c]).collect(),
+            None => vec![0.0; w * h],
+        };
+        // Depth keeps 32 bits: half cannot resolve camera-space distances.
+        let samples = if float || p.depth {
+            FlatSamples::F32(vals)
+        } else {
+            FlatSamples::F16(vals.into_iter().map(f16::from_f32).collect())
+        };
+        channels.push(AnyChannel::new(p.name.as_str(), samples));
+    }
+    if channels.is_empty() {
+        return Err(Diag::error(
+            "film::display",
+            format!("display `{}` selects no channels", t.path.display()),
+        )
+        .label(t.span, "this Display"));
+    }
+    let encoding = Encoding {
+        compression,
+        blocks: Blocks::ScanLines,
+        line_order: LineOrder::Increasing,
+    };
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        encoding,
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+    write_atomically(&t.path, |f| {
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(f)
+            .map_err(|e| e.to_string())
+    })
+    .map_err(|d| d.label(t.span, "this Display"))
+}
+
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `path` through a temporary file in the same directory, renamed into place only when
+/// `write` succeeds; on any failure the temporary file is removed and `path` is untouched.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<(), String>,
+) -> Result<(), Diag> {
+    let fail = |what: String| {
+        Diag::error(
+            "film::write",
+            format!("cannot write `{}`: {what}", path.display()),
+        )
+        .help("check that the folder exists and is writable")
+    };
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| fail("the path names no file".into()))?
+        .to_string_lossy()
+        .into_owned();
+    let tmp = dir.join(format!(
+        ".{file_name}.{}.{}.tmp",
+        std::process::id(),
+        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let file = File::options()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(|e| fail(e.to_string()))?;
+    let mut bw = BufWriter::new(file);
+    let result = match write(&mut bw) {
+        Ok(()) => bw
+            .into_inner()
+            .map_err(|e| e.to_string())
+            .and_then(|f| f.sync_all().map_err(|e| e.to_string())),
+        Err(e) => {
+            drop(bw); // close before removing
+            Err(e)
+        }
+    };
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(fail(e));
+    }
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(fail(e.to_string()));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Param, ParamData, ShaderRef};
+
+    /// A fresh empty folder under the system temp dir.
+    fn tmpdir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("arbor-film-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// 4×3 film: r = x/4, g = y/3, b = 0.5, a = 0.75, z = 1 + x + 10y, N = (x, y, −1).
+    fn film() -> Film {
+        let names = Film::standard_channels(&["N.x".into(), "N.y".into(), "N.z".into()]);
+        let mut f = Film::new(4, 3, names);
+        for y in 0..3 {
+            for x in 0..4 {
+                let p = f.pixel_mut(x, y);
+                p.copy_from_slice(&[
+                    x as f32 / 4.0,
+                    y as f32 / 3.0,
+                    0.5,
+                    0.75,
+                    1.0 + x as f32 + 10.0 * y as f32,
+                    x as f32,
+                    y as f32,
+                    -1.0,
+                ]);
+            }
+        }
+        f
+    }
+
+    fn display(name: &Path, kind: &str, mode: &str) -> Display {
+        Display {
+            name: name.display().to_string(),
+            kind: kind.into(),
+            mode: mode.into(),
+            params: ParamList::default(),
+            span: Span::default(),
+        }
+    }
+
+    fn opts(displays: Vec<Display>) -> Options {
+        let mut o = Options {
+            displays,
+            ..Options::default()
+        };
+        o.quantize_rgba.dither = 0.0;
+        o
+    }
+
+    fn string_param(name: &str, v: &str) -> Param {
+        Param {
+            name: name.into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::String,
+                array_len: 1,
+            },
+            data: ParamData::Strings(vec![v.into()]),
+            span: Span::default(),
+        }
+    }
+
+    fn q8(v: f32) -> u8 {
+        (v * 255.0).round() as u8
+    }
+
+    #[test]
+    fn png_8_and_16_bit_round_trip() {
+        let dir = tmpdir("png");
+        let f = film();
+        let p8 = dir.join("a.png");
+        let d = Diagnostics::new();
+        let out = write_displays(&f, &opts(vec![display(&p8, "png", "rgba")]), &d, None).unwrap();
+        assert_eq!(out, vec![p8.clone()]);
+        let img = image::open(&p8).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba8);
+        let img = img.to_rgba8();
+        for y in 0..3u32 {
+            for x in 0..4u32 {
+                let px = img.get_pixel(x, y).0;
+                assert_eq!(
+                    px,
+                    [q8(x as f32 / 4.0), q8(y as f32 / 3.0), 128, 191],
+                    "at {x},{y}"
+                );
+            }
+        }
+        // 16 bits, rgb
+        let p16 = dir.join("b.png");
+        let mut o = opts(vec![display(&p16, "png", "rgb")]);
+        o.quantize_rgba = Quantize {
+            one: 65535.0,
+            min: 0.0,
+            max: 65535.0,
+            dither: 0.0,
+        };
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p16).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgb16);
+        let px = img.to_rgb16().get_pixel(3, 2).0;
+        assert_eq!(px, [49151, 43690, 32768]);
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn tiff_8_16_and_float_round_trip() {
+        let dir = tmpdir("tiff");
+        let f = film();
+        let d = Diagnostics::new();
+        let (t8, t16, tf) = (dir.join("a.tif"), dir.join("b.tiff"), dir.join("c.tif"));
+        write_displays(&f, &opts(vec![display(&t8, "file", "rgb")]), &d, None).unwrap();
+        let img = image::open(&t8).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgb8);
+        assert_eq!(img.to_rgb8().get_pixel(2, 1).0, [128, 85, 128]);
+
+        let mut o = opts(vec![display(&t16, "tiff", "rgba")]);
+        o.quantize_rgba.one = 65535.0;
+        o.quantize_rgba.max = 65535.0;
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&t16).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba16);
+        assert_eq!(img.to_rgba16().get_pixel(1, 0).0, [16384, 0, 32768, 49151]);
+
+        let mut o = opts(vec![display(&tf, "tiff", "rgba")]);
+        o.quantize_rgba = Quantize {
+            one: 0.0,
+            min: 0.0,
+            max: 0.0,
+            dither: 0.0,
+        };
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&tf).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba32F);
+        let img = img.to_rgba32f();
+        for y in 0..3 {
+            for x in 0..4 {
+                assert_eq!(img.get_pixel(x, y).0, f.pixel(x as usize, y as usize)[..4]);
+            }
+        }
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn exr_half_float_and_output_variables() {
+        use exr::prelude::*;
+        let dir = tmpdir("exr");
+        let f = film();
+        let d = Diagnostics::new();
+        let (e1, e2, e3) = (dir.join("a.exr"), dir.join("n.exr"), dir.join("z.exr"));
+        let mut nd = display(&e2, "exr", "N");
+        nd.params.0.push(string_param("type", "float"));
+        let o = opts(vec![
+            display(&e1, "exr", "rgba"),
+            nd,
+            display(&e3, "openexr", "rgbaz"),
+        ]);
+        let out = write_displays(&f, &o, &d, None).unwrap();
+        assert_eq!(out.len(), 3);
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+
+        let read = |p: &Path| read_all_flat_layers_from_file(p).unwrap();
+        let names = |img: &FlatImage| -> Vec<String> {
+            img.layer_data[0]
+                .channel_data
+                .list
+                .iter()
+                .map(|c| c.name.to_string())
+                .collect()
+        };
+        let img = read(&e1);
+        assert_eq!(names(&img), ["A", "B", "G", "R"]);
+        let ch = &img.layer_data[0].channel_data.list;
+        // pixel (1, 2): index 2*4+1
+        match &ch[3].sample_data {
+            FlatSamples::F16(v) => assert_eq!(v[9].to_f32(), 0.25),
+            other => panic!("R should be half, got {other:?}"),
+        }
+        match &ch[1].sample_data {
+            FlatSamples::F16(v) => assert_eq!(v[9].to_f32(), 0.5),
+            other => panic!("{other:?}"),
+        }
+
+        let img = read(&e2);
+        assert_eq!(names(&img), ["N.x", "N.y", "N.z"]);
+        let ch = &img.layer_data[0].channel_data.list;
+        match (&ch[0].sample_data, &ch[1].sample_data, &ch[2].sample_data) {
+            (FlatSamples::F32(x), FlatSamples::F32(y), FlatSamples::F32(z)) => {
+                assert_eq!((x[9], y[9], z[9]), (1.0, 2.0, -1.0));
+            }
+            other => panic!("N should be float: {other:?}"),
+        }
+
+        let img = read(&e3);
+        assert_eq!(names(&img), ["A", "B", "G", "R", "Z"]);
+        match &img.layer_data[0].channel_data.list[4].sample_data {
+            FlatSamples::F32(z) => assert_eq!(z[9], 22.0),
+            other => panic!("Z should be float: {other:?}"),
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn zfile_and_shadow_hold_depth() {
+        let dir = tmpdir("zfile");
+        let f = film();
+        let d = Diagnostics::new();
+        let (z, s) = (dir.join("d.z"), dir.join("s.shd"));
+        let o = opts(vec![display(&z, "zfile", "z"), display(&s, "shadow", "z")]);
+        write_displays(&f, &o, &d, None).unwrap();
+        for p in [&z, &s] {
+            let zf = ZFile::from_bytes(&std::fs::read(p).unwrap()).unwrap();
+            assert_eq!((zf.width, zf.height), (4, 3));
+            assert_eq!(zf.depths[9], 22.0);
+            assert_eq!(zf.matrices, None);
+        }
+        let w = d.snapshot();
+        assert_eq!(w.len(), 1, "the shadow warning: {w:?}");
+        assert!(w[0].0.message.contains("MakeShadow"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn override_framebuffer_and_unsupported_modes() {
+        let dir = tmpdir("multi");
+        let f = film();
+        let d = Diagnostics::new();
+        let first = dir.join("first.tif");
+        let fb = dir.join("window");
+        let o = opts(vec![
+            display(&first, "file", "rgba"),
+            display(&fb, "framebuffer", "rgbaz"),
+        ]);
+        let over = dir.join("over.png");
+        let out = write_displays(&f, &o, &d, Some(&over)).unwrap();
+        assert_eq!(out, vec![over.clone(), dir.join("window.png")]);
+        assert!(!first.exists(), "the override replaces the first display");
+        assert_eq!(image::open(&over).unwrap().color(), image::ColorType::Rgba8);
+        let img = image::open(dir.join("window.png")).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba8, "z dropped from png");
+        let msgs: Vec<String> = d.snapshot().into_iter().map(|(d, _)| d.message).collect();
+        assert!(msgs.iter().any(|m| m.contains("framebuffer")), "{msgs:?}");
+        assert!(msgs.iter().any(|m| m.contains("z dropped")), "{msgs:?}");
+        // An override without a known extension is an error.
+        let bad = write_displays(&f, &o, &d, Some(&dir.join("x.jpg")));
+        assert_eq!(bad.unwrap_err().code, "film::output");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn odd_modes_warn_and_pick_the_closest() {
+        let f = film();
+        let d = Diagnostics::new();
+        let t = |mode: &str| Target {
+            path: "x.exr".into(),
+            format: Format::Exr,
+            mode: mode.into(),
+            params: ParamList::default(),
+            kind: "exr".into(),
+            span: Span::default(),
+        };
+        let names = |mode: &str| -> Vec<String> {
+            select_planes(&f, &t(mode), &d)
+                .into_iter()
+                .map(|p| p.name)
+                .collect()
+        };
+        assert_eq!(names("rgbz"), ["R", "G", "B", "Z"]);
+        assert_eq!(names("varying normal N"), ["N.x", "N.y", "N.z"]);
+        assert!(d.snapshot().is_empty());
+        assert_eq!(names("az"), ["A", "Z"]);
+        assert_eq!(names("bgr"), ["R", "G", "B"]);
+        assert_eq!(names("P"), ["P"], "missing variable still written (zeros)");
+        assert_eq!(d.snapshot().len(), 3);
+    }
+
+    #[test]
+    fn no_display_defaults_to_ri_png() {
+        let d = Diagnostics::new();
+        let t = plan(&Options::default(), &d, None).unwrap();
+        assert_eq!(t.len(), 1);
+        assert_eq!(t[0].path, PathBuf::from("ri.png"));
+        assert_eq!(t[0].format, Format::Png);
+        assert_eq!(t[0].mode, "rgba");
+        assert!(d.snapshot()[0].0.message.contains("no Display"));
+    }
+
+    #[test]
+    fn exposure_and_background_apply_before_quantize() {
+        let dir = tmpdir("expo");
+        let f = film();
+        let d = Diagnostics::new();
+        let p = dir.join("e.tif");
+        let mut o = opts(vec![display(&p, "tiff", "rgba")]);
+        o.quantize_rgba = Quantize {
+            one: 0.0,
+            min: 0.0,
+            max: 0.0,
+            dither: 0.0,
+        };
+        o.exposure = [2.0, 2.0];
+        o.imager = Some(ShaderRef {
+            name: "background".into(),
+            params: ParamList(vec![Param {
+                name: "background".into(),
+                decl: crate::scene::Decl {
+                    class: crate::scene::Class::Uniform,
+                    ty: crate::scene::ParamType::Color,
+                    array_len: 1,
+                },
+                data: ParamData::Floats(vec![0.0, 0.0, 1.0]),
+                span: Span::default(),
+            }]),
+            span: Span::default(),
+            world_from_shader: glam::Mat4::IDENTITY,
+        });
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p).unwrap().to_rgba32f();
+        // pixel (2, 0): r = sqrt(0.5·2) = 1, g = 0, b = sqrt(0.5·2) + 0.25·1, a = 1
+        let px = img.get_pixel(2, 0).0;
+        assert!((px[0] - 1.0).abs() < 1e-6);
+        assert_eq!(px[1], 0.0);
+        assert!((px[2] - 1.25).abs() < 1e-6);
+        assert_eq!(px[3], 1.0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn failed_writes_leave_no_file() {
+        let dir = tmpdir("atomic");
+        let target = dir.join("img.png");
+        // The encoder fails half-way: neither the target nor a temporary file remains.
+        let r = write_atomically(&target, |w| {
+            w.write_all(b"partial data").unwrap();
+            Err("encoder exploded".into())
+        });
+        let e = r.unwrap_err();
+        assert_eq!(e.code, "film::write");
+        assert!(e.message.contains("encoder exploded"));
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "no leftovers");
+        // An existing file survives a failed rewrite untouched.
+        std::fs::write(&target, b"old").unwrap();
+        let _ = write_atomically(&target, |_| Err("no".into()));
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        // A display into a missing folder: an error and no file.
+        let f = film();
+        let d = Diagnostics::new();
+        let missing = dir.join("nope").join("x.tif");
+        let r = write_displays(&f, &opts(vec![display(&missing, "tiff", "rgba")]), &d, None);
+        assert_eq!(r.unwrap_err().code, "film::write");
+        assert!(!missing.exists());
+        // Success replaces the file and leaves only it.
+        write_atomically(&target, |w| w.write_all(b"new").map_err(|e| e.to_string())).unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

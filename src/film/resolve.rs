@@ -1,0 +1,579 @@
+//! Resolve: hider samples → filtered pixels of the [`Film`].
+//!
+//! Input: a [`SampleBuffer`] covering one bucket region plus the filter margin, a pixel filter
+//! and a depth filter. Output: the region's pixels written into the full-frame [`Film`].
+//! Invariants: each pixel is Σ wᵢ·cᵢ / Σ wᵢ over the samples inside its filter support, with wᵢ
+//! from the sample's actual (jittered) position; sums are in f64 so a constant image comes out
+//! exactly constant. Samples in pixels outside the image do not exist (the weights renormalise).
+//! Depth (channel `z`) is never pixel-filtered: it combines only the pixel's own samples.
+
+use super::filter::Filter;
+use super::SampleBuffer;
+use crate::diag::{Diag, Diagnostics};
+use crate::scene::{Hider, PixelFilter};
+
+/// The full filtered image: `channel_names.len()` floats per pixel, rows top to bottom.
+/// Channels are `r g b a z` then the arbitrary output variables (a float AOV `name`, a colour
+/// `name.r name.g name.b`, a point/vector/normal `name.x name.y name.z`), in [`SampleBuffer`]
+/// order. Colours are premultiplied by alpha.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Film {
+    pub width: usize,
+    pub height: usize,
+    pub channel_names: Vec<String>,
+    pub data: Vec<f32>,
+}
+
+impl Film {
+    /// A black, transparent film with depth = +∞.
+    pub fn new(width: usize, height: usize, channel_names: Vec<String>) -> Film {
+        let nch = channel_names.len();
+        let mut data = vec![0.0; width * height * nch];
+        if let Some(z) = channel_names.iter().position(|c| c == "z") {
+            for px in data.chunks_exact_mut(nch.max(1)) {
+                px[z] = f32::INFINITY;
+            }
+        }
+        Film {
+            width,
+            height,
+            channel_names,
+            data,
+        }
+    }
+
+    /// The standard channels `r g b a z` followed by `aovs`.
+    pub fn standard_channels(aovs: &[String]) -> Vec<String> {
+        let mut v: Vec<String> = ["r", "g", "b", "a", "z"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        v.extend(aovs.iter().cloned());
+        v
+    }
+
+    pub fn channels(&self) -> usize {
+        self.channel_names.len()
+    }
+
+    /// Index of the channel called `name`.
+    pub fn channel(&self, name: &str) -> Option<usize> {
+        self.channel_names.iter().position(|c| c == name)
+    }
+
+    /// The channels of an output variable: `name` itself, else every `name.<component>`.
+    pub fn aov_channels(&self, name: &str) -> Vec<usize> {
+        if let Some(i) = self.channel(name) {
+            return vec![i];
+        }
+        let prefix = format!("{name}.");
+        self.channel_names
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.starts_with(&prefix))
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    /// The floats of pixel (x, y).
+    pub fn pixel(&self, x: usize, y: usize) -> &[f32] {
+        let n = self.channels();
+        let i = (y * self.width + x) * n;
+        &self.data[i..i + n]
+    }
+
+    pub fn pixel_mut(&mut self, x: usize, y: usize) -> &mut [f32] {
+        let n = self.channels();
+        let i = (y * self.width + x) * n;
+        &mut self.data[i..i + n]
+    }
+}
+
+/// How a pixel's depth combines its samples (`Hider "hidden" "depthfilter"`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DepthFilter {
+    /// The nearest sample depth (the default).
+    #[default]
+    Min,
+    Max,
+    /// The mean of the finite sample depths (+∞ when none hit anything).
+    Average,
+}
+
+impl DepthFilter {
+    /// The depth filter a hider asks for. `midpoint` needs the depth of the second-nearest
+    /// surface per sample, which the hider does not keep: it warns and gives `Min`.
+    pub fn from_hider(hider: &Hider, diags: &Diagnostics) -> DepthFilter {
+        match hider.params.string("depthfilter") {
+            None => DepthFilter::Min,
+            Some(s) => DepthFilter::from_name(s, diags),
+        }
+    }
+
+    pub fn from_name(name: &str, diags: &Diagnostics) -> DepthFilter {
+        match name {
+            "min" => DepthFilter::Min,
+            "max" => DepthFilter::Max,
+            "average" => DepthFilter::Average,
+            "midpoint" => {
+                diags.report(
+                    Diag::warning(
+                        "film::depthfilter",
+                        "depthfilter \"midpoint\" is not implemented yet (it needs the \
+                         second-nearest surface per sample); using \"min\"",
+                    )
+                    .help("use \"min\", \"max\" or \"average\""),
+                );
+                DepthFilter::Min
+            }
+            other => {
+                diags.report(
+                    Diag::warning(
+                        "film::depthfilter",
+                        format!("unknown depthfilter `{other}`; using \"min\""),
+                    )
+                    .help("depthfilter is one of \"min\", \"max\", \"average\", \"midpoint\""),
+                );
+                DepthFilter::Min
+            }
+        }
+    }
+}
+
+/// Filters pixels `x0..x0+w`, `y0..y0+h` of `film` from `buf` (see [`filter_region`]).
+#[allow(clippy::too_many_arguments)]
+pub fn filter_into(
+    film: &mut Film,
+    buf: &SampleBuffer,
+    filter: &PixelFilter,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    depth_filter: DepthFilter,
+) {
+    let f = Filter::from_scene(filter);
+    filter_region(film, buf, &f, x0, y0, w, h, depth_filter);
+}
+
+/// Scratch accumulators for one region, reused across calls to avoid reallocating.
+#[derive(Default)]
+struct Accum {
+    sums: Vec<f64>,
+    wsum: Vec<f64>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Accum> = std::cell::RefCell::new(Accum::default());
+}
+
+/// Filters the region's pixels with a prepared filter. The buffer should cover the region
+/// plus ⌈width/2⌉ pixels each side (clipped at the image edge); missing samples simply drop
+/// out of the weighted average. Pixels outside the film are ignored.
+#[allow(clippy::too_many_arguments)]
+pub fn filter_region(
+    film: &mut Film,
+    buf: &SampleBuffer,
+    filter: &Filter,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    depth_filter: DepthFilter,
+) {
+    // Clip the region to the film.
+    let x1 = (x0 + w).min(film.width);
+    let y1 = (y0 + h).min(film.height);
+    if x0 >= x1 || y0 >= y1 {
+        return;
+    }
+    let (w, h) = (x1 - x0, y1 - y0);
+    let nch_film = film.channels();
+    let nch = nch_film.min(buf.channels);
+    let zc = film.channel("z").filter(|&z| z < nch);
+    let spp = buf.samples_per_pixel();
+    if spp == 0 || nch == 0 {
+        return;
+    }
+    // A buffer shorter than its own dimensions is a hider bug; never index past it.
+    let nsamples = buf.width * buf.height * spp;
+    debug_assert!(buf.positions.len() >= nsamples && buf.values.len() >= nsamples * buf.channels);
+    if buf.positions.len() < nsamples || buf.values.len() < nsamples * buf.channels {
+        return;
+    }
+    let (hx, hy) = filter.radius();
+    let separable = filter.is_separable();
+
+    SCRATCH.with(|cell| {
+        let mut acc = cell.borrow_mut();
+        let acc = &mut *acc;
+        acc.sums.clear();
+        acc.sums.resize(w * h * nch, 0.0);
+        acc.wsum.clear();
+        acc.wsum.resize(w * h, 0.0);
+
+        // Output columns/rows a sample can reach: |p + 0.5 − s| ≤ half width.
+        let reach = (hx.ceil() as i64 + 1, hy.ceil() as i64 + 1);
+        let mut wx = [0f32; 64];
+        let mut wy = [0f32; 64];
+
+        for by in 0..buf.height {
+            let ry = buf.y0 as i64 + by as i64;
+            if ry < 0 || ry >= film.height as i64 {
+                continue; // samples outside the image do not exist
+            }
+            // Skip buffer rows too far from the region to contribute.
+            if ry + reach.1 < y0 as i64 || ry - reach.1 >= y1 as i64 {
+                continue;
+            }
+            for bx in 0..buf.width {
+                let rx = buf.x0 as i64 + bx as i64;
+                if rx < 0 || rx >= film.width as i64 {
+                    continue;
+                }
+                if rx + reach.0 < x0 as i64 || rx - reach.0 >= x1 as i64 {
+                    continue;
+                }
+                let base = (by * buf.width + bx) * spp;
+                for s in base..base + spp {
+                    let [sx, sy] = buf.positions[s];
+                    if !(sx.is_finite() && sy.is_finite()) {
+                        continue; // a broken sample must not poison its neighbours
+                    }
+                    // Output pixel range whose support contains the sample (clipped to the region).
+                    let px_lo = ((sx - hx - 0.5).ceil() as i64).max(x0 as i64);
+                    let px_hi = ((sx + hx - 0.5).floor() as i64).min(x1 as i64 - 1);
+                    let py_lo = ((sy - hy - 0.5).ceil() as i64).max(y0 as i64);
+                    let py_hi = ((sy + hy - 0.5).floor() as i64).min(y1 as i64 - 1);
+                    if px_lo > px_hi || py_lo > py_hi {
+                        continue;
+                    }
+                    let nx = (px_hi - px_lo + 1) as usize;
+                    let ny = (py_hi - py_lo + 1) as usize;
+                    let vals = &buf.values[s * buf.channels..s * buf.channels + nch];
+                    if separable && nx <= wx.len() && ny <= wy.len() {
+                        for (i, wxi) in wx[..nx].iter_mut().enumerate() {
+                            *wxi = filter.eval_x((px_lo + i as i64) as f32 + 0.5 - sx);
+                        }
+                        for (j, wyj) in wy[..ny].iter_mut().enumerate() {
+                            *wyj = filter.eval_y((py_lo + j as i64) as f32 + 0.5 - sy);
+                        }
+                        for (j, &wyj) in wy[..ny].iter().enumerate() {
+                            if wyj == 0.0 {
+                                continue;
+                            }
+                            let row = (py_lo as usize + j - y0) * w + px_lo as usize - x0;
+                            for (i, &wxi) in wx[..nx].iter().enumerate() {
+                                let wgt = (wxi * wyj) as f64;
+                                if wgt == 0.0 {
+                                    continue;
+                                }
+                                let p = row + i;
+                                accumulate(&mut acc.sums[p * nch..p * nch + nch], vals, wgt);
+                                acc.wsum[p] += wgt;
+                            }
+                        }
+                    } else {
+                        for py in py_lo..=py_hi {
+                            let dy = py as f32 + 0.5 - sy;
+                            let row = (py as usize - y0) * w;
+                            for px in px_lo..=px_hi {
+                                let wgt = filter.eval(px as f32 + 0.5 - sx, dy) as f64;
+                                if wgt == 0.0 {
+                                    continue;
+                                }
+                                let p = row + px as usize - x0;
+                                accumulate(&mut acc.sums[p * nch..p * nch + nch], vals, wgt);
+                                acc.wsum[p] += wgt;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+
+        // Normalise into the film; depth from the pixel's own samples.
+        for j in 0..h {
+            let ry = y0 + j;
+            for i in 0..w {
+                let rx = x0 + i;
+                let p = j * w + i;
+                let out_base = (ry * film.width + rx) * nch_film;
+                let out = &mut film.data[out_base..out_base + nch];
+                let ws = acc.wsum[p];
+                if ws.abs() > 1e-12 {
+                    let inv = 1.0 / ws;
+                    for (o, &s) in out.iter_mut().zip(&acc.sums[p * nch..p * nch + nch]) {
+                        *o = (s * inv) as f32;
+                    }
+                } else {
+                    // Nothing (or weights cancelling) in the support: fall back to the plain
+                    // mean of the pixel's own samples, else zero.
+                    own_mean(out, buf, rx, ry, nch);
+                }
+                if let Some(zc) = zc {
+                    out[zc] = own_depth(buf, rx, ry, zc, depth_filter);
+                }
+            }
+        }
+    });
+}
+
+#[inline]
+fn accumulate(sums: &mut [f64], vals: &[f32], w: f64) {
+    for (s, &v) in sums.iter_mut().zip(vals) {
+        *s += w * v as f64;
+    }
+}
+
+/// The buffer pixel holding raster pixel (rx, ry), if the buffer covers it.
+fn own_samples(buf: &SampleBuffer, rx: usize, ry: usize) -> Option<std::ops::Range<usize>> {
+    let bx = rx as i64 - buf.x0 as i64;
+    let by = ry as i64 - buf.y0 as i64;
+    if bx < 0 || by < 0 || bx >= buf.width as i64 || by >= buf.height as i64 {
+        return None;
+    }
+    let spp = buf.samples_per_pixel();
+    let base = (by as usize * buf.width + bx as usize) * spp;
+    Some(base..base + spp)
+}
+
+fn own_mean(out: &mut [f32], buf: &SampleBuffer, rx: usize, ry: usize, nch: usize) {
+    out.iter_mut().for_each(|o| *o = 0.0);
+    let Some(r) = own_samples(buf, rx, ry) else {
+        return;
+    };
+    let n = r.len() as f64;
+    for (c, o) in out.iter_mut().enumerate().take(nch) {
+        let s: f64 = r
+            .clone()
+            .map(|s| buf.values[s * buf.channels + c] as f64)
+            .sum();
+        *o = (s / n) as f32;
+    }
+}
+
+fn own_depth(buf: &SampleBuffer, rx: usize, ry: usize, zc: usize, df: DepthFilter) -> f32 {
+    let Some(r) = own_samples(buf, rx, ry) else {
+        return f32::INFINITY;
+    };
+    let zs = r.map(|s| buf.values[s * buf.channels + zc]);
+    match df {
+        DepthFilter::Min => zs.fold(f32::INFINITY, f32::min),
+        DepthFilter::Max => zs.fold(f32::NEG_INFINITY, f32::max),
+        DepthFilter::Average => {
+            let (mut sum, mut n) = (0.0f64, 0usize);
+            for z in zs.filter(|z| z.is_finite()) {
+                sum += z as f64;
+                n += 1;
+            }
+            if n == 0 {
+                f32::INFINITY
+            } else {
+                (sum / n as f64) as f32
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::film::filter::{FilterKind, FILTER_NAMES};
+
+    /// A buffer over raster pixels [x0, x0+w) × [y0, y0+h), jittered deterministically.
+    fn buffer(
+        x0: i32,
+        y0: i32,
+        w: usize,
+        h: usize,
+        spp: usize,
+        channels: usize,
+        value: impl Fn(f32, f32, usize) -> f32,
+    ) -> SampleBuffer {
+        let mut b = SampleBuffer {
+            x0,
+            y0,
+            width: w,
+            height: h,
+            spp_x: spp,
+            spp_y: spp,
+            channels,
+            ..Default::default()
+        };
+        let mut k = 0u32;
+        for py in 0..h {
+            for px in 0..w {
+                for sy in 0..spp {
+                    for sx in 0..spp {
+                        k = k.wrapping_mul(747796405).wrapping_add(2891336453);
+                        let jx = ((k >> 8) & 0xffff) as f32 / 65536.0;
+                        let jy = ((k >> 16) & 0xff) as f32 / 256.0;
+                        let x = (x0 + px as i32) as f32 + (sx as f32 + jx) / spp as f32;
+                        let y = (y0 + py as i32) as f32 + (sy as f32 + jy) / spp as f32;
+                        b.positions.push([x, y]);
+                        for c in 0..channels {
+                            b.values.push(value(x, y, c));
+                        }
+                    }
+                }
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn constant_buffer_stays_exactly_constant_with_every_filter() {
+        let consts = [0.3f32, 0.7, 0.123_456_7, 1.0, 0.9];
+        for name in FILTER_NAMES {
+            for &(xw, yw) in &[(1.0f32, 1.0f32), (2.0, 2.0), (3.0, 2.5), (4.0, 4.0)] {
+                let pf = PixelFilter {
+                    name: name.into(),
+                    xwidth: xw,
+                    ywidth: yw,
+                };
+                let (w, h) = (8usize, 6usize);
+                let mut film = Film::new(w, h, Film::standard_channels(&[]));
+                // Whole image in two buckets, each with its margin clipped at the edges.
+                let m = (xw.max(yw) / 2.0).ceil() as i32;
+                for &(bx0, bw) in &[(0usize, 5usize), (5, 3)] {
+                    let bx = (bx0 as i32 - m).max(0);
+                    let bxe = (bx0 as i32 + bw as i32 + m).min(w as i32);
+                    let buf = buffer(bx, 0, (bxe - bx) as usize, h, 3, 5, |_, _, c| consts[c]);
+                    filter_into(&mut film, &buf, &pf, bx0, 0, bw, h, DepthFilter::Min);
+                }
+                for y in 0..h {
+                    for x in 0..w {
+                        assert_eq!(film.pixel(x, y), &consts[..], "{name} {xw}x{yw} at {x},{y}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn half_covered_edge_gives_half_with_box() {
+        // Coverage 1 left of x = 2.5, 0 right of it; pixel 2 is half covered.
+        let pf = PixelFilter {
+            name: "box".into(),
+            xwidth: 1.0,
+            ywidth: 1.0,
+        };
+        // Regular (unjittered) 4×4 samples so the answer is exact.
+        let mut buf = buffer(0, 0, 5, 1, 4, 5, |_, _, _| 0.0);
+        for (i, p) in buf.positions.iter_mut().enumerate() {
+            let px = i / 16;
+            let (sy, sx) = ((i % 16) / 4, i % 4);
+            *p = [px as f32 + (sx as f32 + 0.5) / 4.0, (sy as f32 + 0.5) / 4.0];
+            let cov = if p[0] < 2.5 { 1.0 } else { 0.0 };
+            for c in 0..4 {
+                buf.values[i * 5 + c] = cov;
+            }
+        }
+        let mut film = Film::new(5, 1, Film::standard_channels(&[]));
+        filter_into(&mut film, &buf, &pf, 0, 0, 5, 1, DepthFilter::Min);
+        assert_eq!(film.pixel(1, 0)[3], 1.0);
+        assert_eq!(film.pixel(2, 0)[3], 0.5);
+        assert_eq!(film.pixel(3, 0)[3], 0.0);
+    }
+
+    #[test]
+    fn bucket_split_does_not_change_the_result() {
+        let pf = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 2.0,
+            ywidth: 2.0,
+        };
+        let (w, h) = (9usize, 7usize);
+        let val = |x: f32, y: f32, c: usize| (x * 0.37 + y * 0.11 + c as f32).sin();
+        let whole = buffer(0, 0, w, h, 2, 5, val);
+        let mut a = Film::new(w, h, Film::standard_channels(&[]));
+        filter_into(&mut a, &whole, &pf, 0, 0, w, h, DepthFilter::Min);
+        // Same samples, region by region: cut sub-buffers out of the whole buffer.
+        let mut b = Film::new(w, h, Film::standard_channels(&[]));
+        for &(rx, ry, rw, rh) in &[
+            (0usize, 0usize, 4usize, 3usize),
+            (4, 0, 5, 3),
+            (0, 3, 4, 4),
+            (4, 3, 5, 4),
+        ] {
+            let bx0 = rx.saturating_sub(1);
+            let by0 = ry.saturating_sub(1);
+            let bx1 = (rx + rw + 1).min(w);
+            let by1 = (ry + rh + 1).min(h);
+            let mut sub = SampleBuffer {
+                x0: bx0 as i32,
+                y0: by0 as i32,
+                width: bx1 - bx0,
+                height: by1 - by0,
+                spp_x: 2,
+                spp_y: 2,
+                channels: 5,
+                ..Default::default()
+            };
+            for py in by0..by1 {
+                for px in bx0..bx1 {
+                    for s in 0..4 {
+                        let i = (py * w + px) * 4 + s;
+                        sub.positions.push(whole.positions[i]);
+                        sub.values
+                            .extend_from_slice(&whole.values[i * 5..i * 5 + 5]);
+                    }
+                }
+            }
+            filter_into(&mut b, &sub, &pf, rx, ry, rw, rh, DepthFilter::Min);
+        }
+        assert_eq!(a.data, b.data);
+    }
+
+    #[test]
+    fn depth_min_max_average() {
+        let mut buf = buffer(0, 0, 1, 1, 2, 5, |_, _, _| 0.5);
+        let zs = [4.0, 2.0, f32::INFINITY, 3.0];
+        for (i, z) in zs.iter().enumerate() {
+            buf.values[i * 5 + 4] = *z;
+        }
+        let pf = PixelFilter {
+            name: "box".into(),
+            xwidth: 1.0,
+            ywidth: 1.0,
+        };
+        let run = |buf: &SampleBuffer, df| {
+            let mut film = Film::new(1, 1, Film::standard_channels(&[]));
+            filter_into(&mut film, buf, &pf, 0, 0, 1, 1, df);
+            film.pixel(0, 0)[4]
+        };
+        assert_eq!(run(&buf, DepthFilter::Min), 2.0);
+        assert_eq!(run(&buf, DepthFilter::Max), f32::INFINITY);
+        assert_eq!(run(&buf, DepthFilter::Average), 3.0, "infinity ignored");
+        // All misses: average stays infinite.
+        for i in 0..4 {
+            buf.values[i * 5 + 4] = f32::INFINITY;
+        }
+        assert_eq!(run(&buf, DepthFilter::Average), f32::INFINITY);
+    }
+
+    #[test]
+    fn depthfilter_names() {
+        let d = Diagnostics::new();
+        assert_eq!(DepthFilter::from_name("average", &d), DepthFilter::Average);
+        assert_eq!(DepthFilter::from_name("max", &d), DepthFilter::Max);
+        assert!(d.snapshot().is_empty());
+        assert_eq!(DepthFilter::from_name("midpoint", &d), DepthFilter::Min);
+        assert_eq!(d.snapshot().len(), 1);
+    }
+
+    #[test]
+    fn aov_channels_by_prefix() {
+        let film = Film::new(
+            1,
+            1,
+            Film::standard_channels(&["N.x".into(), "N.y".into(), "N.z".into(), "s".into()]),
+        );
+        assert_eq!(film.aov_channels("N"), vec![5, 6, 7]);
+        assert_eq!(film.aov_channels("s"), vec![8]);
+        assert!(film.aov_channels("P").is_empty());
+        assert_eq!(film.pixel(0, 0)[4], f32::INFINITY);
+        let _ = FilterKind::Box;
+    }
+}
