@@ -1,0 +1,1154 @@
+//! The frame driver: buckets in parallel, surfaces forwarded, grids shaded once.
+//!
+//! Input: a [`Scene`], a [`GridShader`] and [`RenderOptions`]. Output: a filtered [`Film`].
+//! Invariants:
+//! * every surface is bounded, culled, split or diced with decisions that depend only on the
+//!   surface and the camera; split children get keys derived from their parent's, so every
+//!   grid has the same identity whatever the bucket layout;
+//! * buckets are processed row by row: first every surface whose bound first reaches the row
+//!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
+//!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
+//!   needs are freed — memory holds only the grids overlapping the open row;
+//! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
+//!   covers it, so the image is identical for any bucket size or thread count.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use crate::diag::{Diag, Diagnostics};
+use crate::geom::{Bound, Surface};
+use crate::scene::{Options, Primitive, Scene};
+
+use super::camera::{check_options, crop_region, Camera, PixelRect};
+use super::dice::{decide, Decision, View};
+use super::film_stub::{filter_into, DepthFilter as FilmDepthFilter, Film};
+use super::hider::{
+    make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
+};
+use super::sampler::mix64;
+use super::stats::{Stage, Stats};
+use super::GridShader;
+
+/// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
+pub const DEFAULT_BUCKET: u32 = 16;
+/// Default most micropolygons per grid (`Option "limits" "gridsize"` overrides).
+pub const DEFAULT_GRID: usize = 1024;
+/// Default most eye-plane splits of one surface (`Option "limits" "eyesplits"` overrides).
+pub const DEFAULT_EYE_SPLITS: u32 = 10;
+/// Most splits of any kind along one path: a guard against surfaces that never shrink.
+pub const MAX_SPLIT_DEPTH: u32 = 48;
+
+/// How to run a frame (command-line overrides and hooks).
+#[derive(Clone, Default)]
+pub struct RenderOptions<'a> {
+    /// Worker threads; 0 = rayon's default (all cores).
+    pub threads: usize,
+    /// Bucket width and height in pixels; None = `Option "limits" "bucketsize"` or 16.
+    pub bucket_size: Option<[u32; 2]>,
+    /// Crop window (xmin, xmax, ymin, ymax in NDC) replacing the scene's.
+    pub crop: Option<[f32; 4]>,
+    /// Image size replacing Format's.
+    pub resolution: Option<(u32, u32)>,
+    /// Where to count statistics (the caller prints them); None = not kept.
+    pub stats: Option<&'a Stats>,
+    /// Called with (buckets done, buckets total) after each bucket, from worker threads.
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
+    /// Arbitrary output variables to carry to the film, after r g b a z.
+    pub aovs: Vec<Aov>,
+}
+
+/// Renders one frame of `scene` (see the module invariants).
+pub fn render_frame(
+    scene: &Scene,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let options = effective_options(&scene.options, opts);
+    check_options(&options, diags);
+    let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
+    let mut surfaces = Vec::new();
+    for (i, prim) in scene.primitives.iter().enumerate() {
+        surfaces.push(surfaces_for(i, prim, camera.camera_from_world, diags));
+    }
+    render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
+}
+
+/// The geometry entry point. TEMPORARY until the `geom` branch is merged: replace the body by
+/// `crate::geom::surfaces_for(index, prim, camera_from_world, diags)`.
+fn surfaces_for(
+    _index: usize,
+    prim: &Primitive,
+    _camera_from_world: Mat4,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    diags.report(
+        Diag::warning(
+            "render::geometry",
+            "geometry is not wired into the renderer in this build; primitive skipped",
+        )
+        .label(prim.span, "this primitive"),
+    );
+    Vec::new()
+}
+
+/// The scene's options with the command-line overrides applied.
+pub fn effective_options(options: &Options, opts: &RenderOptions) -> Options {
+    let mut o = options.clone();
+    if let Some((x, y)) = opts.resolution {
+        o.xres = x.max(1);
+        o.yres = y.max(1);
+    }
+    if let Some(c) = opts.crop {
+        o.crop_window = c;
+    }
+    o
+}
+
+/// Per-primitive attributes the driver needs, resolved once.
+#[derive(Clone, Copy, Debug)]
+struct PrimInfo {
+    /// Displacement bound in camera space.
+    disp: f32,
+    rate: f32,
+    matte: bool,
+    smooth: bool,
+    one_sided: bool,
+}
+
+fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnostics) -> PrimInfo {
+    let a = &prim.attributes;
+    let mut disp = 0.0;
+    if a.displacement_bound > 0.0 {
+        let space = a.displacement_bound_space.as_str();
+        let m = match space {
+            "object" => Some(camera.camera_from_world * prim.world_from_object),
+            "shader" => a
+                .displacement
+                .as_ref()
+                .map(|d| camera.camera_from_world * d.world_from_shader)
+                .or(Some(camera.camera_from_world * prim.world_from_object)),
+            other => camera.camera_from_space(other),
+        };
+        let m = m.unwrap_or_else(|| {
+            diags.report(
+                Diag::warning(
+                    "render::displacementbound",
+                    format!("unknown coordinate system \"{space}\" for displacementbound; using object space"),
+                )
+                .label(prim.span, "this primitive"),
+            );
+            camera.camera_from_world * prim.world_from_object
+        });
+        let scale = m
+            .x_axis
+            .truncate()
+            .length()
+            .max(m.y_axis.truncate().length())
+            .max(m.z_axis.truncate().length());
+        disp = a.displacement_bound * scale;
+        if !disp.is_finite() {
+            disp = 0.0;
+        }
+    }
+    let _ = scene;
+    let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
+        a.shading_rate
+    } else {
+        1.0
+    };
+    PrimInfo {
+        disp,
+        rate,
+        matte: a.matte,
+        smooth: a.smooth_shading,
+        one_sided: a.sides == 1,
+    }
+}
+
+/// A surface waiting to be split or diced.
+#[derive(Debug)]
+struct Work {
+    surface: Box<dyn Surface>,
+    key: u64,
+    depth: u32,
+    eye_splits: u32,
+}
+
+enum Outcome {
+    Nothing,
+    Grid(Box<ShadedGrid>),
+}
+
+/// A shaded grid kept until the last bucket row that needs it is done.
+struct Kept {
+    grid: Box<ShadedGrid>,
+    rows: (usize, usize),
+    cols: (usize, usize),
+}
+
+/// The bucket layout over the crop region.
+#[derive(Clone, Copy, Debug)]
+struct Buckets {
+    crop: PixelRect,
+    image: PixelRect,
+    size: [i32; 2],
+    margin: [i32; 2],
+    cols: usize,
+    rows: usize,
+}
+
+impl Buckets {
+    fn rect(&self, col: usize, row: usize) -> PixelRect {
+        let x0 = self.crop.x0 + col as i32 * self.size[0];
+        let y0 = self.crop.y0 + row as i32 * self.size[1];
+        PixelRect {
+            x0,
+            y0,
+            x1: (x0 + self.size[0]).min(self.crop.x1),
+            y1: (y0 + self.size[1]).min(self.crop.y1),
+        }
+    }
+    /// The pixels a bucket samples: itself plus the filter margin, inside the image.
+    fn sample_rect(&self, col: usize, row: usize) -> PixelRect {
+        self.rect(col, row)
+            .grow(self.margin[0], self.margin[1])
+            .intersect(self.image)
+    }
+    /// Bucket indices whose sample regions may contain raster positions in [lo, hi] along
+    /// one axis (`axis` 0 = x, 1 = y), clamped to the layout; None when there are none.
+    fn span(&self, lo: f32, hi: f32, axis: usize) -> Option<(usize, usize)> {
+        let (origin, end, n) = if axis == 0 {
+            (self.crop.x0, self.crop.x1, self.cols)
+        } else {
+            (self.crop.y0, self.crop.y1, self.rows)
+        };
+        if n == 0 {
+            return None;
+        }
+        let (s, m) = (self.size[axis] as i64, self.margin[axis] as i64);
+        let p0 = lo.floor() as i64;
+        let p1 = hi.floor() as i64;
+        if p1 < origin as i64 - m || p0 >= end as i64 + m {
+            return None;
+        }
+        let first = (p0 - origin as i64 - m)
+            .div_euclid(s)
+            .clamp(0, n as i64 - 1);
+        let last = (p1 - origin as i64 + m)
+            .div_euclid(s)
+            .clamp(0, n as i64 - 1);
+        (first <= last).then_some((first as usize, last as usize))
+    }
+}
+
+struct Frame<'a> {
+    scene: &'a Scene,
+    camera: &'a Camera,
+    view: View,
+    prims: Vec<PrimInfo>,
+    shader: &'a dyn GridShader,
+    hider: Box<dyn Hider>,
+    buckets: Buckets,
+    stats: &'a Stats,
+    diags: &'a Diagnostics,
+    aovs: Vec<Aov>,
+    eye_split_limit: u32,
+}
+
+impl Frame<'_> {
+    fn widened_bound(&self, w: &Work) -> Option<Bound> {
+        let info = self.prims.get(w.surface.primitive())?;
+        let b = w.surface.bound();
+        Some(if info.disp > 0.0 {
+            b.grow(info.disp)
+        } else {
+            b
+        })
+    }
+
+    /// The bucket row a surface first needs (at least `min_row`), or None when culled.
+    fn place(&self, w: &Work, min_row: usize) -> Option<usize> {
+        let b = self.widened_bound(w)?;
+        if self.view.outside(&b) {
+            return None;
+        }
+        match self.view.raster_bound(&b) {
+            // Reaching behind the eye: split where it is (its pieces are placed again).
+            None => Some(min_row),
+            Some(r) => self
+                .buckets
+                .span(r[1], r[3], 1)
+                .map(|(first, _)| first.max(min_row)),
+        }
+    }
+
+    fn step(&self, w: Work, row: usize) -> (Outcome, Vec<(usize, Work)>) {
+        let t0 = Instant::now();
+        let prim = w.surface.primitive();
+        let Some(info) = self.prims.get(prim).copied() else {
+            self.diags.report(Diag::error(
+                "render::surface",
+                format!("a surface names primitive {prim}, which does not exist"),
+            ));
+            return (Outcome::Nothing, Vec::new());
+        };
+        let Some(bound) = self.widened_bound(&w) else {
+            return (Outcome::Nothing, Vec::new());
+        };
+        let decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
+        match decision {
+            Decision::Cull => {
+                Stats::add(&self.stats.culled, 1);
+                self.stats.time(Stage::Dice, t0);
+                (Outcome::Nothing, Vec::new())
+            }
+            Decision::Split { eye } => {
+                let span = self.scene.primitives[prim].span;
+                if eye && w.eye_splits >= self.eye_split_limit {
+                    self.diags.report(
+                        Diag::warning(
+                            "render::eyesplits",
+                            "a surface still crosses the eye plane after the most eye splits; the piece is dropped",
+                        )
+                        .label(span, "this primitive")
+                        .help("move the camera or the geometry, or raise `Option \"limits\" \"eyesplits\"`"),
+                    );
+                    return (Outcome::Nothing, Vec::new());
+                }
+                if w.depth >= MAX_SPLIT_DEPTH {
+                    self.diags.report(
+                        Diag::warning(
+                            "render::splits",
+                            "a surface was split too many times without becoming small enough to dice; the piece is dropped",
+                        )
+                        .label(span, "this primitive"),
+                    );
+                    return (Outcome::Nothing, Vec::new());
+                }
+                Stats::add(&self.stats.splits, 1);
+                let children = w.surface.split();
+                let mut placed = Vec::with_capacity(children.len());
+                for (c, surface) in children.into_iter().enumerate() {
+                    let child = Work {
+                        surface,
+                        key: mix64(w.key ^ mix64(c as u64 + 1)),
+                        depth: w.depth + 1,
+                        eye_splits: w.eye_splits + eye as u32,
+                    };
+                    match self.place(&child, row) {
+                        Some(r) => placed.push((r, child)),
+                        None => Stats::add(&self.stats.culled, 1),
+                    }
+                }
+                self.stats.time(Stage::Dice, t0);
+                (Outcome::Nothing, placed)
+            }
+            Decision::Dice { nu, nv } => {
+                let mut grid = w.surface.dice(nu + 1, nv + 1);
+                let n = grid.nu * grid.nv;
+                if grid.nu < 2
+                    || grid.nv < 2
+                    || grid.p.len() != n
+                    || grid.ci.len() != n
+                    || grid.oi.len() != n
+                {
+                    self.diags.report(Diag::error(
+                        "render::grid",
+                        format!(
+                            "a diced grid of primitive {prim} is malformed ({}×{} with {} points)",
+                            grid.nu,
+                            grid.nv,
+                            grid.p.len()
+                        ),
+                    ));
+                    return (Outcome::Nothing, Vec::new());
+                }
+                set_incident(&mut grid, self.camera.perspective);
+                let orient = orientation(&grid);
+                self.stats.time(Stage::Dice, t0);
+                let t1 = Instant::now();
+                self.shader
+                    .displace(self.scene, self.camera, prim, &mut grid);
+                set_incident(&mut grid, self.camera.perspective);
+                self.stats.time(Stage::Displace, t1);
+                let t2 = Instant::now();
+                self.shader.shade(self.scene, self.camera, prim, &mut grid);
+                self.stats.time(Stage::Shade, t2);
+                Stats::add(&self.stats.grids, 1);
+                Stats::add(&self.stats.micropolygons, (nu * nv) as u64);
+                Stats::add(&self.stats.shaded_points, n as u64);
+                let clip = self.view.raster_bound(&bound).unwrap_or([
+                    f32::NEG_INFINITY,
+                    f32::NEG_INFINITY,
+                    f32::INFINITY,
+                    f32::INFINITY,
+                ]);
+                let info = GridInfo {
+                    key: w.key,
+                    matte: info.matte,
+                    smooth: info.smooth,
+                    one_sided: info.one_sided,
+                    orientation: orient,
+                    clip,
+                };
+                if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
+                    self.diags.report(Diag::error(
+                        "render::grid",
+                        "shading changed the size of a grid; the grid is dropped",
+                    ));
+                    return (Outcome::Nothing, Vec::new());
+                }
+                let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+                if sg.is_empty() {
+                    return (Outcome::Nothing, Vec::new());
+                }
+                (Outcome::Grid(Box::new(sg)), Vec::new())
+            }
+        }
+    }
+}
+
+/// I = P − E: the eye at the origin for perspective views, straight along +z for orthographic.
+fn set_incident(grid: &mut crate::shade::Grid, perspective: bool) {
+    let n = grid.p.len();
+    grid.i.resize(n, Vec3::ZERO);
+    for (i, p) in grid.i.iter_mut().zip(&grid.p) {
+        *i = if perspective {
+            *p
+        } else {
+            Vec3::new(0.0, 0.0, p.z)
+        };
+    }
+}
+
+/// Renders `surfaces[i]` (the surfaces of primitive `i`) with the frame's camera: the body of
+/// [`render_frame`], usable with surfaces from anywhere.
+pub fn render_surfaces(
+    scene: &Scene,
+    options: &Options,
+    camera: &Camera,
+    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let run = || render_inner(scene, options, camera, surfaces, shader, opts, diags);
+    if opts.threads > 0 {
+        match rayon::ThreadPoolBuilder::new()
+            .num_threads(opts.threads)
+            .build()
+        {
+            Ok(pool) => return pool.install(run),
+            Err(e) => diags.report(Diag::warning(
+                "render::threads",
+                format!(
+                    "could not start {} render threads ({e}); using the default pool",
+                    opts.threads
+                ),
+            )),
+        }
+    }
+    run()
+}
+
+fn render_inner(
+    scene: &Scene,
+    options: &Options,
+    camera: &Camera,
+    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+) -> Film {
+    let wall = Instant::now();
+    let local_stats = Stats::new();
+    let stats = opts.stats.unwrap_or(&local_stats);
+    let (xres, yres) = (camera.xres, camera.yres);
+    let image = PixelRect {
+        x0: 0,
+        y0: 0,
+        x1: xres as i32,
+        y1: yres as i32,
+    };
+    let crop = crop_region(xres, yres, options.crop_window);
+    let margin_of = |w: f32| {
+        if w.is_finite() && w > 0.0 {
+            (w * 0.5).ceil() as i32
+        } else {
+            1
+        }
+    };
+    let margin = [
+        margin_of(options.pixel_filter.xwidth),
+        margin_of(options.pixel_filter.ywidth),
+    ];
+    let size = opts
+        .bucket_size
+        .map(|[x, y]| [x as i32, y as i32])
+        .unwrap_or_else(|| match options.user_floats("limits:bucketsize") {
+            Some([x, y, ..]) => [*x as i32, *y as i32],
+            Some([x]) => [*x as i32, *x as i32],
+            _ => [DEFAULT_BUCKET as i32; 2],
+        });
+    let size = [size[0].clamp(1, 4096), size[1].clamp(1, 4096)];
+    let buckets = Buckets {
+        crop,
+        image,
+        size,
+        margin,
+        // An empty crop region renders no bucket at all.
+        cols: crop.width().div_ceil(size[0] as usize),
+        rows: crop.height().div_ceil(size[1] as usize),
+    };
+    let max_grid = options
+        .user_floats("limits:gridsize")
+        .and_then(|f| f.first())
+        .map_or(DEFAULT_GRID, |&g| (g.max(1.0)) as usize);
+    let eye_split_limit = options
+        .user_floats("limits:eyesplits")
+        .and_then(|f| f.first())
+        .map_or(DEFAULT_EYE_SPLITS, |&g| g.max(0.0) as u32);
+    let view = View::new(
+        camera,
+        crop.grow(margin[0], margin[1]).intersect(image),
+        max_grid,
+    );
+    let seed = mix64(scene.frame.unwrap_or(0) as i64 as u64);
+    let config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let depth_filter = match config.depth_filter {
+        DepthFilter::Max => FilmDepthFilter::Max,
+        DepthFilter::Average => FilmDepthFilter::Average,
+        // Midpoint is resolved per sample by the hider; the pixel keeps the nearest.
+        DepthFilter::Min | DepthFilter::Midpoint => FilmDepthFilter::Min,
+    };
+    let hider = make_hider(options, config, diags);
+    let prims: Vec<PrimInfo> = scene
+        .primitives
+        .iter()
+        .map(|p| prim_info(scene, camera, p, diags))
+        .collect();
+    let frame = Frame {
+        scene,
+        camera,
+        view,
+        prims,
+        shader,
+        hider,
+        buckets,
+        stats,
+        diags,
+        aovs: opts.aovs.clone(),
+        eye_split_limit,
+    };
+    let mut channel_names = Vec::new();
+    for a in &opts.aovs {
+        channel_names.extend(a.channel_names());
+    }
+    let mut film = Film::new(
+        xres as usize,
+        yres as usize,
+        Film::standard_channels(&channel_names),
+    );
+
+    // Place every surface in the first bucket row it reaches.
+    Stats::add(&stats.primitives, scene.primitives.len() as u64);
+    let mut initial = Vec::new();
+    for (i, list) in surfaces.into_iter().enumerate() {
+        for (j, surface) in list.into_iter().enumerate() {
+            initial.push(Work {
+                surface,
+                key: mix64(mix64(i as u64) ^ (j as u64).wrapping_mul(0x9E37_79B9)),
+                depth: 0,
+                eye_splits: 0,
+            });
+        }
+    }
+    Stats::add(&stats.surfaces, initial.len() as u64);
+    let mut pending: Vec<Vec<Work>> = (0..buckets.rows).map(|_| Vec::new()).collect();
+    let placed: Vec<(Option<usize>, Work)> = initial
+        .into_par_iter()
+        .map(|w| (frame.place(&w, 0), w))
+        .collect();
+    for (row, w) in placed {
+        match row {
+            Some(r) => pending[r].push(w),
+            None => Stats::add(&stats.culled, 1),
+        }
+    }
+
+    let total = buckets.rows * buckets.cols;
+    let done = AtomicUsize::new(0);
+    let mut kept: Vec<Kept> = Vec::new();
+    for row in 0..buckets.rows {
+        // Split, dice and shade everything that starts in this row.
+        let mut frontier = std::mem::take(&mut pending[row]);
+        while !frontier.is_empty() {
+            let results: Vec<(Outcome, Vec<(usize, Work)>)> = frontier
+                .into_par_iter()
+                .map(|w| frame.step(w, row))
+                .collect();
+            frontier = Vec::new();
+            for (outcome, children) in results {
+                for (r, w) in children {
+                    if r == row {
+                        frontier.push(w);
+                    } else {
+                        pending[r].push(w);
+                    }
+                }
+                match outcome {
+                    Outcome::Grid(g) => {
+                        let b = g.bound;
+                        let (Some(rows), Some(cols)) =
+                            (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
+                        else {
+                            continue;
+                        };
+                        stats.alloc(g.bytes());
+                        kept.push(Kept {
+                            grid: g,
+                            rows: (rows.0.max(row), rows.1.max(row)),
+                            cols,
+                        });
+                    }
+                    Outcome::Nothing => {}
+                }
+            }
+        }
+        // Hide the row's buckets in parallel.
+        let bufs: Vec<_> = (0..buckets.cols)
+            .into_par_iter()
+            .map(|col| {
+                let t = Instant::now();
+                let grids: Vec<&ShadedGrid> = kept
+                    .iter()
+                    .filter(|k| {
+                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
+                    })
+                    .map(|k| k.grid.as_ref())
+                    .collect();
+                let buf = frame
+                    .hider
+                    .hide(buckets.sample_rect(col, row), &grids, stats);
+                stats.time(Stage::Hide, t);
+                buf
+            })
+            .collect();
+        let t = Instant::now();
+        for (col, buf) in bufs.iter().enumerate() {
+            let r = buckets.rect(col, row);
+            filter_into(
+                &mut film,
+                buf,
+                &options.pixel_filter,
+                r.x0 as usize,
+                r.y0 as usize,
+                r.width(),
+                r.height(),
+                depth_filter,
+            );
+            Stats::add(&stats.buckets, 1);
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Some(p) = opts.progress {
+                p(d, total);
+            }
+        }
+        stats.time(Stage::Filter, t);
+        // Free the grids no later row needs.
+        kept.retain(|k| {
+            let keep = k.rows.1 > row;
+            if !keep {
+                stats.free(k.grid.bytes());
+            }
+            keep
+        });
+    }
+    stats
+        .wall_ns
+        .fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    film
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::render::dice::tests::Quad;
+    use crate::render::DefaultShader;
+    use crate::scene::{Attributes, Geometry, PixelFilter, Projection};
+    use crate::shade::Grid;
+
+    /// `Ci = Cs·Os`, `Oi = Os` with Cs/Os from the primitive's Color/Opacity: a "constant"
+    /// surface.
+    struct Constant;
+    impl GridShader for Constant {
+        fn displace(&self, _: &Scene, _: &Camera, _: usize, _: &mut Grid) {}
+        fn shade(&self, scene: &Scene, _: &Camera, prim: usize, g: &mut Grid) {
+            let a = &scene.primitives[prim].attributes;
+            for k in 0..g.len() {
+                g.cs[k] = a.color;
+                g.os[k] = a.opacity;
+                g.oi[k] = a.opacity;
+                g.ci[k] = a.color * a.opacity;
+            }
+        }
+    }
+
+    fn primitive(attributes: Attributes) -> Primitive {
+        Primitive {
+            geometry: Arc::new(Geometry::Points { npoints: 0 }),
+            primvars: Arc::default(),
+            attributes: Arc::new(attributes),
+            world_from_object: Mat4::IDENTITY,
+            span: Default::default(),
+        }
+    }
+
+    fn scene(xres: u32, yres: u32, projection: Projection, prims: Vec<Attributes>) -> Scene {
+        let mut s = Scene::default();
+        s.options.xres = xres;
+        s.options.yres = yres;
+        s.options.projection = projection;
+        s.options.pixel_filter = PixelFilter {
+            name: "box".into(),
+            xwidth: 1.0,
+            ywidth: 1.0,
+        };
+        s.primitives = prims.into_iter().map(primitive).collect();
+        s
+    }
+
+    fn attrs(color: Vec3, opacity: Vec3) -> Attributes {
+        Attributes {
+            color,
+            opacity,
+            ..Attributes::default()
+        }
+    }
+
+    fn render(
+        scene: &Scene,
+        quads: &[Quad],
+        shader: &dyn GridShader,
+        opts: &RenderOptions,
+    ) -> (Film, Diagnostics) {
+        let diags = Diagnostics::new();
+        let options = effective_options(&scene.options, opts);
+        let camera =
+            Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
+        let mut surfaces: Vec<Vec<Box<dyn Surface>>> =
+            (0..scene.primitives.len()).map(|_| Vec::new()).collect();
+        for q in quads {
+            surfaces[q.prim].push(Box::new(q.clone()));
+        }
+        let film = render_surfaces(scene, &options, &camera, surfaces, shader, opts, &diags);
+        (film, diags)
+    }
+
+    #[test]
+    fn constant_surface_over_the_frame_is_exactly_its_colour() {
+        let c = Vec3::new(0.2, 0.4, 0.6);
+        let s = scene(32, 24, Projection::Orthographic, vec![attrs(c, Vec3::ONE)]);
+        let quads = [Quad::rect(-2.0, -2.0, 2.0, 2.0, 5.0, 0)];
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert!(!diags.has_errors());
+        for y in 0..24 {
+            for x in 0..32 {
+                let p = film.pixel(x, y);
+                for ch in 0..3 {
+                    assert!((p[ch] - c[ch]).abs() < 1e-6, "pixel {x},{y}: {p:?}");
+                }
+                assert!((p[3] - 1.0).abs() < 1e-6);
+                assert_eq!(p[4], 5.0);
+            }
+        }
+    }
+
+    #[test]
+    fn half_plane_edge_pixel_has_half_coverage() {
+        // Raster pixel (8, 8) of a 16×16 image over the screen [-1,1]²: its centre is at
+        // screen (0.0625, −0.0625). A half-plane whose edge passes through that centre covers
+        // exactly half the pixel's area, at any angle.
+        let centre = Vec3::new(0.0625, -0.0625, 3.0);
+        for (deg, spp) in [(20.0f32, 4.0f32), (47.0, 8.0), (110.0, 16.0)] {
+            let (sn, cs) = deg.to_radians().sin_cos();
+            let rot = |x: f32, y: f32| centre + Vec3::new(cs * x - sn * y, sn * x + cs * y, 0.0);
+            let q = Quad::new(
+                rot(-10.0, -10.0),
+                rot(0.0, -10.0),
+                rot(-10.0, 10.0),
+                rot(0.0, 10.0),
+                0,
+            );
+            let mut s = scene(
+                16,
+                16,
+                Projection::Orthographic,
+                vec![attrs(Vec3::ONE, Vec3::ONE)],
+            );
+            s.options.pixel_samples = [spp, spp];
+            let (film, _) = render(&s, &[q], &Constant, &RenderOptions::default());
+            let cov = film.pixel(8, 8)[3];
+            let tol = 2.0 / spp; // 2/√(spp²)
+            assert!((cov - 0.5).abs() <= tol, "angle {deg}: coverage {cov}");
+            assert!(cov > 0.0 && cov < 1.0, "angle {deg}: coverage {cov}");
+            // Five pixels from the edge along its normal (raster y points down): fully in / out.
+            let at = |d: f32| {
+                let (x, y) = (8.5 + d * cs, 8.5 - d * sn);
+                film.pixel(x as usize, y as usize)[3]
+            };
+            assert_eq!((at(-5.0), at(5.0)), (1.0, 0.0), "angle {deg}");
+        }
+    }
+
+    #[test]
+    fn four_half_transparent_layers_composite_front_to_back() {
+        let half = Vec3::splat(0.5);
+        let s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, half); 4],
+        );
+        let quads: Vec<Quad> = (0..4)
+            .map(|i| Quad::rect(-2.0, -2.0, 2.0, 2.0, 1.0 + i as f32, i))
+            .collect();
+        let (film, _) = render(&s, &quads, &Constant, &RenderOptions::default());
+        let expect = 1.0 - 0.5f32.powi(4);
+        for y in 0..8 {
+            for x in 0..8 {
+                let p = film.pixel(x, y);
+                assert!((p[3] - expect).abs() < 1e-6, "{p:?}");
+                // Colour 1 · opacity 0.5 per layer, premultiplied: also 1 − 0.5⁴.
+                assert!((p[0] - expect).abs() < 1e-6, "{p:?}");
+                // No layer is opaque: nothing sets the depth.
+                assert_eq!(p[4], f32::INFINITY);
+            }
+        }
+    }
+
+    /// A small perspective scene with overlapping, tilted, transparent and one-sided pieces.
+    fn busy_scene() -> (Scene, Vec<Quad>) {
+        let mut a0 = attrs(Vec3::new(1.0, 0.5, 0.25), Vec3::ONE);
+        a0.shading_rate = 0.5;
+        let mut a1 = attrs(Vec3::new(0.3, 0.9, 0.4), Vec3::new(0.5, 0.6, 0.7));
+        a1.smooth_shading = true;
+        let mut a2 = attrs(Vec3::ONE, Vec3::ONE);
+        a2.sides = 1;
+        let mut s = scene(
+            48,
+            36,
+            Projection::Perspective { fov: 60.0 },
+            vec![a0, a1, a2],
+        );
+        s.options.pixel_samples = [3.0, 3.0];
+        let quads = vec![
+            Quad::new(
+                Vec3::new(-3.0, -1.0, 2.0),
+                Vec3::new(3.0, -1.0, 2.0),
+                Vec3::new(-3.0, -1.0, 20.0),
+                Vec3::new(3.0, -1.0, 20.0),
+                0,
+            ),
+            Quad::new(
+                Vec3::new(-1.0, -0.8, 4.0),
+                Vec3::new(0.7, -0.5, 3.0),
+                Vec3::new(-0.6, 0.9, 5.0),
+                Vec3::new(1.2, 1.0, 4.0),
+                1,
+            ),
+            Quad::rect(0.2, -0.3, 1.5, 0.6, 3.5, 2),
+            // Facing away: culled by Sides 1.
+            Quad::new(
+                Vec3::new(-1.5, 0.2, 3.0),
+                Vec3::new(-1.5, 1.0, 3.0),
+                Vec3::new(-0.2, 0.2, 3.0),
+                Vec3::new(-0.2, 1.0, 3.0),
+                2,
+            ),
+        ];
+        (s, quads)
+    }
+
+    #[test]
+    fn output_is_identical_for_any_thread_count_and_bucket_size() {
+        let (s, quads) = busy_scene();
+        let run = |threads, size| {
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                ..Default::default()
+            };
+            render(&s, &quads, &DefaultShader, &opts).0
+        };
+        let a = run(1, [16, 16]);
+        let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+        let covered = (0..36)
+            .flat_map(|y| (0..48).map(move |x| (x, y)))
+            .filter(|&(x, y)| a.pixel(x, y)[3] > 0.0)
+            .count();
+        assert!(
+            covered > 200,
+            "the scene covers part of the frame ({covered} pixels)"
+        );
+        for (threads, size) in [(2, [32, 32]), (2, [16, 16]), (1, [7, 5]), (2, [64, 64])] {
+            let b = run(threads, size);
+            assert!(
+                bits(&a) == bits(&b),
+                "threads {threads}, bucket {size:?} differ"
+            );
+        }
+    }
+
+    #[test]
+    fn crop_window_renders_only_its_region() {
+        let (mut s, quads) = busy_scene();
+        let full = render(&s, &quads, &DefaultShader, &RenderOptions::default()).0;
+        s.options.crop_window = [0.25, 0.75, 0.5, 1.0];
+        let region = crop_region(48, 36, s.options.crop_window);
+        assert_eq!(
+            region,
+            PixelRect {
+                x0: 12,
+                y0: 18,
+                x1: 36,
+                y1: 36
+            }
+        );
+        let cropped = render(&s, &quads, &DefaultShader, &RenderOptions::default()).0;
+        let mut inside_hit = 0;
+        for y in 0..36 {
+            for x in 0..48 {
+                let (p, q) = (full.pixel(x, y), cropped.pixel(x, y));
+                if region.contains(x as i32, y as i32) {
+                    assert_eq!(p, q, "pixel {x},{y}");
+                    inside_hit += (q[3] > 0.0) as usize;
+                } else {
+                    assert_eq!(q[3], 0.0);
+                    assert_eq!(q[4], f32::INFINITY);
+                }
+            }
+        }
+        assert!(inside_hit > 50);
+        // The --crop override does the same.
+        s.options.crop_window = [0.0, 1.0, 0.0, 1.0];
+        let opts = RenderOptions {
+            crop: Some([0.25, 0.75, 0.5, 1.0]),
+            ..Default::default()
+        };
+        let over = render(&s, &quads, &DefaultShader, &opts).0;
+        assert_eq!(
+            over.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            cropped.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn a_point_lands_on_its_projected_pixel() {
+        // Perspective fov 90 on 32×24: screen window [-4/3, 4/3] × [-1, 1], x_s = x/z.
+        // Pixel (10, 5) spans x_s ∈ [-4/3 + 10/12, -4/3 + 11/12], y_s ∈ [1 − 6/12, 1 − 5/12].
+        let z = 3.0;
+        let (xs0, xs1) = (-4.0 / 3.0 + 10.0 / 12.0, -4.0 / 3.0 + 11.0 / 12.0);
+        let (ys0, ys1) = (1.0 - 6.0 / 12.0, 1.0 - 5.0 / 12.0);
+        let s = scene(
+            32,
+            24,
+            Projection::Perspective { fov: 90.0 },
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        let q = Quad::rect(xs0 * z, ys0 * z, xs1 * z, ys1 * z, z, 0);
+        let (film, _) = render(&s, &[q], &Constant, &RenderOptions::default());
+        for y in 0..24 {
+            for x in 0..32 {
+                let a = film.pixel(x, y)[3];
+                if (x, y) == (10, 5) {
+                    assert!((a - 1.0).abs() < 1e-6, "{a}");
+                    assert!((film.pixel(x, y)[4] - z).abs() < 1e-5);
+                } else {
+                    assert_eq!(a, 0.0, "pixel {x},{y}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn one_sided_back_faces_and_mattes() {
+        let mut one = attrs(Vec3::ONE, Vec3::ONE);
+        one.sides = 1;
+        let mut matte = attrs(Vec3::ONE, Vec3::ONE);
+        matte.matte = true;
+        let s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![one, matte, attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        // A rectangle facing the camera, the same one flipped (u along −x: facing away).
+        let front = Quad::rect(-2.0, -2.0, 0.0, 2.0, 2.0, 0);
+        let back = Quad::new(
+            Vec3::new(2.0, -2.0, 2.0),
+            Vec3::new(0.0, -2.0, 2.0),
+            Vec3::new(2.0, 2.0, 2.0),
+            Vec3::new(0.0, 2.0, 2.0),
+            0,
+        );
+        let (film, _) = render(&s, &[front, back], &Constant, &RenderOptions::default());
+        assert_eq!(film.pixel(1, 4)[3], 1.0);
+        assert_eq!(film.pixel(6, 4)[3], 0.0);
+        // A matte in front of a white surface: a hole with the matte's depth.
+        let quads = [
+            Quad::rect(-2.0, -2.0, 0.0, 2.0, 1.0, 1),
+            Quad::rect(-2.0, -2.0, 2.0, 2.0, 4.0, 2),
+        ];
+        let (film, _) = render(&s, &quads, &Constant, &RenderOptions::default());
+        let (hole, lit) = (film.pixel(1, 4), film.pixel(6, 4));
+        assert_eq!(&hole[..4], &[0.0; 4]);
+        assert_eq!(hole[4], 1.0);
+        assert_eq!(&lit[..5], &[1.0, 1.0, 1.0, 1.0, 4.0]);
+    }
+
+    #[test]
+    fn stats_and_progress_are_reported() {
+        let (s, quads) = busy_scene();
+        let stats = Stats::new();
+        let calls = Mutex::new(Vec::new());
+        let progress = |d: usize, t: usize| calls.lock().unwrap().push((d, t));
+        let opts = RenderOptions {
+            stats: Some(&stats),
+            progress: Some(&progress),
+            bucket_size: Some([16, 16]),
+            ..Default::default()
+        };
+        render(&s, &quads, &DefaultShader, &opts);
+        let calls = calls.into_inner().unwrap();
+        // 48×36 in 16-pixel buckets: 3 × 3.
+        assert_eq!(calls.len(), 9);
+        assert_eq!(*calls.last().unwrap(), (9, 9));
+        assert_eq!(Stats::get(&stats.surfaces), 4);
+        assert!(Stats::get(&stats.grids) >= 4);
+        assert!(Stats::get(&stats.micropolygons) > 100);
+        assert!(Stats::get(&stats.shaded_points) > Stats::get(&stats.micropolygons));
+        assert!(Stats::get(&stats.samples_hit) > 0);
+        assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
+        assert!(Stats::get(&stats.peak_bytes) > 0);
+    }
+
+    fn string_param(name: &str, value: &str) -> crate::scene::Param {
+        crate::scene::Param {
+            name: name.into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::String,
+                array_len: 1,
+            },
+            data: crate::scene::ParamData::Strings(vec![value.into()]),
+            span: Default::default(),
+        }
+    }
+
+    #[test]
+    fn midpoint_depth_is_halfway_to_the_second_surface() {
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE); 2],
+        );
+        s.options
+            .hider
+            .params
+            .0
+            .push(string_param("depthfilter", "midpoint"));
+        let quads = [
+            Quad::rect(-2.0, -2.0, 0.0, 2.0, 2.0, 0),
+            Quad::rect(-2.0, -2.0, 2.0, 2.0, 6.0, 1),
+        ];
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert!(diags.snapshot().is_empty());
+        assert_eq!(film.pixel(1, 3)[4], 4.0);
+        assert_eq!(film.pixel(6, 3)[4], 6.0);
+        // An unknown filter warns and keeps the nearest depth.
+        s.options.hider.params.0[0] = string_param("depthfilter", "median");
+        let (film, diags) = render(&s, &quads, &Constant, &RenderOptions::default());
+        assert_eq!(film.pixel(1, 3)[4], 2.0);
+        assert!(diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.code == "render::hider"));
+    }
+
+    #[test]
+    fn clipping_planes_cut_away_their_positive_side() {
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        s.options.clipping_planes.push((Vec3::ZERO, Vec3::X));
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 2.0, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        for y in 0..8 {
+            for x in 0..8 {
+                assert_eq!(
+                    film.pixel(x, y)[3],
+                    if x < 4 { 1.0 } else { 0.0 },
+                    "pixel {x},{y}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn unjittered_samples_sit_at_stratum_centres() {
+        // A vertical edge at raster x = 4.5 (screen x = 0.125 on 8 pixels over [-1, 1]):
+        // with "jitter" 0 and 2×2 samples, exactly the left two strata of pixel 4 are covered.
+        let mut s = scene(
+            8,
+            8,
+            Projection::Orthographic,
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        s.options.hider.params.0.push(crate::scene::Param {
+            name: "jitter".into(),
+            decl: crate::scene::Decl {
+                class: crate::scene::Class::Uniform,
+                ty: crate::scene::ParamType::Float,
+                array_len: 1,
+            },
+            data: crate::scene::ParamData::Floats(vec![0.0]),
+            span: Default::default(),
+        });
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 0.125, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        assert_eq!(film.pixel(4, 2)[3], 0.5);
+        assert_eq!(film.pixel(3, 2)[3], 1.0);
+        assert_eq!(film.pixel(5, 2)[3], 0.0);
+        // The null hider sees nothing.
+        s.options.hider.name = "null".into();
+        let (film, _) = render(
+            &s,
+            &[Quad::rect(-2.0, -2.0, 2.0, 2.0, 3.0, 0)],
+            &Constant,
+            &RenderOptions::default(),
+        );
+        assert!(film
+            .data
+            .chunks(5)
+            .all(|p| p[3] == 0.0 && p[4] == f32::INFINITY));
+    }
+}

@@ -1,0 +1,437 @@
+//! Hiders: visibility from shaded micropolygons to per-sample colour, opacity and depth.
+//!
+//! Input: the [`ShadedGrid`]s that overlap a bucket (plus its filter margin). Output: a
+//! [`SampleBuffer`] for that region, channels r g b a z then the arbitrary output variables.
+//! Invariants: everything before hiding (bound, split, dice, shade, projection to a
+//! `ShadedGrid`) is shared by all hiders; a hider's output for a sample depends only on the
+//! grids covering it and on (pixel, sample, seed), never on the bucket or thread.
+
+pub mod zbuffer;
+
+use glam::{Mat4, Vec3, Vec4};
+
+use crate::diag::{Diag, Diagnostics};
+use crate::film::SampleBuffer;
+use crate::scene::{Options, ParamType};
+use crate::shade::Grid;
+
+use super::camera::{Camera, PixelRect};
+use super::dice::View;
+use super::stats::Stats;
+
+/// A named arbitrary output variable (e.g. `Display "+n.exr" "exr" "N"`) and its type.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Aov {
+    pub name: String,
+    pub ty: ParamType,
+}
+
+impl Aov {
+    pub fn new(name: impl Into<String>, ty: ParamType) -> Aov {
+        Aov {
+            name: name.into(),
+            ty,
+        }
+    }
+    /// Floats per sample.
+    pub fn width(&self) -> usize {
+        self.ty.components()
+    }
+    /// Film channel names: `name` for a float, `name.r/g/b` for a colour, `name.x/y/z` for a
+    /// point, vector or normal, `name.0…` otherwise.
+    pub fn channel_names(&self) -> Vec<String> {
+        match (self.ty, self.width()) {
+            (_, 1) => vec![self.name.clone()],
+            (ParamType::Color, 3) => ["r", "g", "b"]
+                .iter()
+                .map(|c| format!("{}.{c}", self.name))
+                .collect(),
+            (_, 3) => ["x", "y", "z"]
+                .iter()
+                .map(|c| format!("{}.{c}", self.name))
+                .collect(),
+            (_, w) => (0..w).map(|c| format!("{}.{c}", self.name)).collect(),
+        }
+    }
+}
+
+/// A shaded grid projected to raster space: what every hider consumes.
+///
+/// Point `(i, j)` is at index `j * nu + i`; micropolygon `(i, j)` (i < nu − 1, j < nv − 1) has
+/// corners `k`, `k + 1`, `k + nu`, `k + nu + 1` with `k = j * nu + i`.
+#[derive(Clone, Debug, Default)]
+pub struct ShadedGrid {
+    /// Deterministic identity (primitive and split path): breaks depth ties.
+    pub key: u64,
+    pub nu: usize,
+    pub nv: usize,
+    /// Raster x, y per point.
+    pub xy: Vec<[f32; 2]>,
+    /// 1/z for perspective views, z for orthographic ones: affine in raster space on a
+    /// planar micropolygon, so it interpolates linearly.
+    pub depth: Vec<f32>,
+    /// Ci (premultiplied by Oi, as shaders leave it) and Oi per point.
+    pub ci: Vec<[f32; 3]>,
+    pub oi: Vec<[f32; 3]>,
+    /// `aov_width` floats per point.
+    pub aov: Vec<f32>,
+    pub aov_width: usize,
+    /// Per micropolygon: false when culled (back-facing `Sides 1`, or behind the eye).
+    pub live: Vec<bool>,
+    pub matte: bool,
+    /// ShadingInterpolation "smooth": Gouraud-interpolate colours over micropolygons;
+    /// otherwise each micropolygon has one colour, the mean of its corners.
+    pub smooth: bool,
+    /// Raster rectangle (x0, y0, x1, y1) outside which this grid is never sampled: its live
+    /// micropolygons' bound clipped to the bound of the surface it was diced from.
+    pub bound: [f32; 4],
+}
+
+/// How a grid came to be, for [`ShadedGrid::new`].
+#[derive(Clone, Copy, Debug)]
+pub struct GridInfo {
+    pub key: u64,
+    pub matte: bool,
+    pub smooth: bool,
+    /// Sides 1: cull micropolygons facing away from the eye.
+    pub one_sided: bool,
+    /// +1 when Ng points along (P10 − P00) × (P01 − P00) on this grid, −1 when against
+    /// (measured before displacement, see [`orientation`]).
+    pub orientation: f32,
+    /// Raster bound of the surface (widened by the displacement bound).
+    pub clip: [f32; 4],
+}
+
+/// The sign relating a grid's parametric orientation to its Ng: +1 when Ng agrees with the
+/// cross product of the micropolygon diagonals, −1 otherwise (majority over the grid).
+pub fn orientation(grid: &Grid) -> f32 {
+    let (nu, nv) = (grid.nu, grid.nv);
+    let mut sum = 0f32;
+    for j in 0..nv.saturating_sub(1) {
+        for i in 0..nu.saturating_sub(1) {
+            let k = j * nu + i;
+            let m = micro_normal(&grid.p, k, nu);
+            let ng = grid.ng.get(k).copied().unwrap_or(Vec3::ZERO);
+            sum += m.dot(ng).signum() * (m.length_squared() > 0.0) as i32 as f32;
+        }
+    }
+    if sum < 0.0 {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
+/// Cross product of a micropolygon's diagonals: robust where one edge collapses (poles).
+#[inline]
+fn micro_normal(p: &[Vec3], k: usize, nu: usize) -> Vec3 {
+    (p[k + nu + 1] - p[k]).cross(p[k + nu] - p[k + 1])
+}
+
+impl ShadedGrid {
+    /// Projects a shaded grid. `aovs` names the output variables to carry (zeros where the
+    /// grid has no such variable).
+    pub fn new(grid: &Grid, view: &View, info: &GridInfo, aovs: &[Aov]) -> ShadedGrid {
+        let (nu, nv) = (grid.nu, grid.nv);
+        let n = nu * nv;
+        let mut xy = Vec::with_capacity(n);
+        let mut depth = Vec::with_capacity(n);
+        let mut ok = Vec::with_capacity(n);
+        for p in &grid.p {
+            let front = !view.perspective || p.z >= view.eye_epsilon;
+            ok.push(front && p.is_finite());
+            if front {
+                xy.push(view.to_raster(*p));
+                depth.push(if view.perspective { 1.0 / p.z } else { p.z });
+            } else {
+                xy.push([0.0, 0.0]);
+                depth.push(0.0);
+            }
+        }
+        let c3 = |v: &Vec3| [v.x, v.y, v.z];
+        let ci: Vec<[f32; 3]> = grid.ci.iter().map(c3).collect();
+        let oi: Vec<[f32; 3]> = grid.oi.iter().map(c3).collect();
+        let aov_width: usize = aovs.iter().map(|a| a.width()).sum();
+        let mut aov = vec![0f32; aov_width * n];
+        let mut off = 0;
+        for a in aovs {
+            fill_aov(grid, a, off, aov_width, &mut aov);
+            off += a.width();
+        }
+        let mut live = Vec::with_capacity((nu.max(1) - 1) * (nv.max(1) - 1));
+        let mut b = [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        for j in 0..nv.saturating_sub(1) {
+            for i in 0..nu.saturating_sub(1) {
+                let k = j * nu + i;
+                let corners = [k, k + 1, k + nu, k + nu + 1];
+                let mut alive = corners.iter().all(|&c| ok[c]);
+                if alive && info.one_sided {
+                    let m = micro_normal(&grid.p, k, nu) * info.orientation;
+                    let view_dir = if view.perspective { grid.p[k] } else { Vec3::Z };
+                    // Facing the eye when Ng points against the viewing direction.
+                    alive = m.dot(view_dir) < 0.0;
+                }
+                if alive {
+                    for &c in &corners {
+                        b[0] = b[0].min(xy[c][0]);
+                        b[1] = b[1].min(xy[c][1]);
+                        b[2] = b[2].max(xy[c][0]);
+                        b[3] = b[3].max(xy[c][1]);
+                    }
+                }
+                live.push(alive);
+            }
+        }
+        let bound = [
+            b[0].max(info.clip[0]),
+            b[1].max(info.clip[1]),
+            b[2].min(info.clip[2]),
+            b[3].min(info.clip[3]),
+        ];
+        ShadedGrid {
+            key: info.key,
+            nu,
+            nv,
+            xy,
+            depth,
+            ci,
+            oi,
+            aov,
+            aov_width,
+            live,
+            matte: info.matte,
+            smooth: info.smooth,
+            bound,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        !(self.bound[0] <= self.bound[2] && self.bound[1] <= self.bound[3])
+    }
+
+    /// Approximate heap size, for the peak-memory statistic.
+    pub fn bytes(&self) -> usize {
+        self.xy.len() * (8 + 4 + 24) + self.aov.len() * 4 + self.live.len()
+    }
+}
+
+/// Copies output variable `a` of every grid point into `out` at float offset `off`.
+fn fill_aov(grid: &Grid, a: &Aov, off: usize, stride: usize, out: &mut [f32]) {
+    let n = grid.len();
+    let vec3 = |v: &[Vec3], out: &mut [f32]| {
+        for (k, x) in v.iter().enumerate().take(n) {
+            for c in 0..a.width().min(3) {
+                out[k * stride + off + c] = x[c];
+            }
+        }
+    };
+    let float = |v: &[f32], out: &mut [f32]| {
+        for (k, x) in v.iter().enumerate().take(n) {
+            out[k * stride + off] = *x;
+        }
+    };
+    let var = grid
+        .output(&a.name)
+        .or_else(|| grid.primvar(&a.name))
+        .filter(|v| v.ty != ParamType::String);
+    if let Some(v) = var {
+        let w = v.width().min(a.width());
+        for k in 0..n {
+            let src = if v.uniform { 0 } else { k * v.width() };
+            for c in 0..w {
+                if let Some(x) = v.floats.get(src + c) {
+                    out[k * stride + off + c] = *x;
+                }
+            }
+        }
+        return;
+    }
+    match a.name.as_str() {
+        "Ci" => vec3(&grid.ci, out),
+        "Oi" => vec3(&grid.oi, out),
+        "Cs" => vec3(&grid.cs, out),
+        "Os" => vec3(&grid.os, out),
+        "P" => vec3(&grid.p, out),
+        "N" => vec3(&grid.n, out),
+        "Ng" => vec3(&grid.ng, out),
+        "I" => vec3(&grid.i, out),
+        "dPdu" => vec3(&grid.dpdu, out),
+        "dPdv" => vec3(&grid.dpdv, out),
+        "s" => float(&grid.s, out),
+        "t" => float(&grid.t, out),
+        "u" => float(&grid.u, out),
+        "v" => float(&grid.v, out),
+        _ => {}
+    }
+}
+
+/// How a pixel's depth is combined from its samples' depths (`Hider "hidden" "depthfilter"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DepthFilter {
+    Min,
+    Max,
+    Average,
+    /// Per sample, halfway between the nearest and the second-nearest opaque surfaces; the
+    /// pixel then takes the minimum.
+    Midpoint,
+}
+
+/// Everything a hider needs from the options and camera.
+#[derive(Clone, Debug)]
+pub struct HiderConfig {
+    /// PixelSamples, rounded, at least 1.
+    pub spp: [usize; 2],
+    pub jitter: bool,
+    pub seed: u64,
+    /// Accumulated opacity at which compositing stops (`Option "limits" "othreshold"`).
+    pub othreshold: f32,
+    /// Opacity at which a surface counts as opaque for depth (`Option "limits" "zthreshold"`).
+    pub zthreshold: f32,
+    pub depth_filter: DepthFilter,
+    pub aovs: Vec<Aov>,
+    pub perspective: bool,
+    pub near: f32,
+    pub far: f32,
+    /// ClippingPlanes in camera space as (n, d): points with n·p + d > 0 are clipped.
+    pub clip_planes: Vec<Vec4>,
+    pub camera_from_raster: Mat4,
+}
+
+impl HiderConfig {
+    /// Floats per sample: r g b a z then the output variables.
+    pub fn channels(&self) -> usize {
+        5 + self.aovs.iter().map(|a| a.width()).sum::<usize>()
+    }
+
+    pub fn from_options(
+        options: &Options,
+        camera: &Camera,
+        aovs: &[Aov],
+        seed: u64,
+        diags: &Diagnostics,
+    ) -> HiderConfig {
+        let ps = options.pixel_samples;
+        let spp = [
+            ps[0].round().clamp(1.0, 64.0) as usize,
+            ps[1].round().clamp(1.0, 64.0) as usize,
+        ];
+        let params = &options.hider.params;
+        let jitter = params.float("jitter") != Some(0.0);
+        let depth_filter = match params.string("depthfilter") {
+            None | Some("min") => DepthFilter::Min,
+            Some("max") => DepthFilter::Max,
+            Some("average") => DepthFilter::Average,
+            Some("midpoint") => DepthFilter::Midpoint,
+            Some(other) => {
+                let mut d = Diag::warning(
+                    "render::hider",
+                    format!("unknown depthfilter \"{other}\"; using \"min\""),
+                )
+                .help("depthfilter is one of \"min\", \"max\", \"average\", \"midpoint\"");
+                if let Some(p) = params.get("depthfilter") {
+                    d = d.label(p.span, "this depth filter");
+                }
+                diags.report(d);
+                DepthFilter::Min
+            }
+        };
+        let threshold = |key: &str| {
+            options
+                .user_floats(key)
+                .filter(|f| !f.is_empty())
+                .map(|f| {
+                    f.iter()
+                        .take(3)
+                        .fold(f32::INFINITY, |a, &b| a.min(b))
+                        .clamp(0.0, 1.0)
+                })
+                .unwrap_or(0.996)
+        };
+        let normal_from_world = camera.camera_from_world.inverse().transpose();
+        let clip_planes = options
+            .clipping_planes
+            .iter()
+            .map(|&(p, n)| {
+                let pc = camera.camera_from_world.transform_point3(p);
+                let nc = normal_from_world.transform_vector3(n).normalize_or_zero();
+                nc.extend(-nc.dot(pc))
+            })
+            .collect();
+        HiderConfig {
+            spp,
+            jitter,
+            seed,
+            othreshold: threshold("limits:othreshold"),
+            zthreshold: threshold("limits:zthreshold"),
+            depth_filter,
+            aovs: aovs.to_vec(),
+            perspective: camera.perspective,
+            near: camera.near,
+            far: camera.far,
+            clip_planes,
+            camera_from_raster: camera.raster_from_camera().inverse(),
+        }
+    }
+
+    /// A camera-space point from a raster position and its camera depth.
+    #[inline]
+    pub fn camera_point(&self, x: f32, y: f32, z: f32) -> Vec3 {
+        if self.perspective {
+            // The raster → camera map sends (x, y, z_s) on the ray; rescale to depth z.
+            let p = self.camera_from_raster.project_point3(Vec3::new(x, y, 0.5));
+            if p.z != 0.0 {
+                p * (z / p.z)
+            } else {
+                p
+            }
+        } else {
+            let p = self
+                .camera_from_raster
+                .transform_point3(Vec3::new(x, y, 0.0));
+            Vec3::new(p.x, p.y, z)
+        }
+    }
+}
+
+/// A visibility algorithm: from the shaded grids overlapping `rect` to its samples.
+pub trait Hider: Sync {
+    /// Samples `grids` in the pixels of `rect` (a bucket plus its filter margin).
+    fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer;
+    fn config(&self) -> &HiderConfig;
+}
+
+/// `Hider "null"`: no samples are ever covered.
+pub struct NullHider(pub HiderConfig);
+
+impl Hider for NullHider {
+    fn hide(&self, rect: PixelRect, _grids: &[&ShadedGrid], _stats: &Stats) -> SampleBuffer {
+        zbuffer::empty_buffer(&self.0, rect)
+    }
+    fn config(&self) -> &HiderConfig {
+        &self.0
+    }
+}
+
+/// The hider named by `Hider` (hidden by default). Unknown or unimplemented hiders warn and
+/// fall back to "hidden".
+pub fn make_hider(options: &Options, config: HiderConfig, diags: &Diagnostics) -> Box<dyn Hider> {
+    match options.hider.name.as_str() {
+        "hidden" | "" => Box::new(zbuffer::ZBuffer::new(config)),
+        "null" => Box::new(NullHider(config)),
+        other => {
+            diags.report(
+                Diag::warning(
+                    "render::hider",
+                    format!("Hider \"{other}\" is not implemented; using \"hidden\""),
+                )
+                .help("the implemented hiders are \"hidden\" (stochastic Z-buffer) and \"null\""),
+            );
+            Box::new(zbuffer::ZBuffer::new(config))
+        }
+    }
+}
