@@ -5,10 +5,18 @@ use std::{env, fs, path::Path};
 fn main() {
     let out = Path::new(&env::var("OUT_DIR").unwrap()).join("stdlib.rs");
     let mut code = String::new();
-    for (dir, var) in [("stdlib/shaders", "SHADERS"), ("stdlib/include", "INCLUDES")] {
+    for (dir, var) in [
+        ("stdlib/shaders", "SHADERS"),
+        ("stdlib/include", "INCLUDES"),
+    ] {
         println!("cargo:rerun-if-changed={dir}");
         let mut files: Vec<_> = fs::read_dir(dir)
-            .map(|r| r.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_file()).collect())
+            .map(|r| {
+                r.filter_map(|e| e.ok())
+                    .map(|e| e.path())
+                    .filter(|p| p.is_file())
+                    .collect()
+            })
             .unwrap_or_default();
         files.sort();
         code.push_str(&format!("pub static {var}: &[(&str, &str)] = &[\n"));
@@ -16,7 +24,11 @@ fn main() {
             let name = f.file_name().unwrap().to_string_lossy().to_string();
             let abs = fs::canonicalize(&f).unwrap();
             println!("cargo:rerun-if-changed={}", f.display());
-            code.push_str(&format!("    ({:?}, include_str!({:?})),\n", name, abs.display().to_string()));
+            code.push_str(&format!(
+                "    ({:?}, include_str!({:?})),\n",
+                name,
+                abs.display().to_string()
+            ));
         }
         code.push_str("];\n");
     }

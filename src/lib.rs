@@ -8,6 +8,7 @@ pub mod diag;
 pub mod film;
 pub mod geom;
 pub mod pattern;
+pub mod pipeline;
 pub mod render;
 pub mod rib;
 pub mod scene;

@@ -1,1 +1,370 @@
-fn main() {}
+//! The `arbor` command: argument parsing, progress and reporting; the work is in the library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+use arbor::diag::{Diag, Diagnostics, Severity, SourceMap};
+use arbor::pipeline::{self, Settings};
+use arbor::sl::{compile_source, CompileOptions};
+
+#[derive(Parser)]
+#[command(
+    name = "arbor",
+    version,
+    about = "RenderMan-style scene and shading language compiler (REYES renderer)"
+)]
+struct Cli {
+    /// Only errors (no warnings, no progress).
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    /// More detail (every repeated warning's count, timings).
+    #[arg(short, long, global = true)]
+    verbose: bool,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Render RIB files (stdin when none or "-") to the images their Display requests name.
+    Render(RenderArgs),
+    /// Validate RIB files (parse and build) and compile shading-language files; render nothing.
+    Check(CheckArgs),
+    /// Print a shader's type and parameters (like sloinfo): a .sl path or a shader name.
+    Info(InfoArgs),
+    /// Pretty-print a RIB file in canonical form on stdout.
+    Format { file: PathBuf },
+}
+
+#[derive(Args)]
+struct PathArgs {
+    /// Shader search path (colon-separated), searched before the scene's own.
+    #[arg(long, value_name = "PATH")]
+    shaders: Option<String>,
+    /// Texture search path (colon-separated).
+    #[arg(long, value_name = "PATH")]
+    textures: Option<String>,
+    /// Archive search path (colon-separated).
+    #[arg(long, value_name = "PATH")]
+    archives: Option<String>,
+    /// Include folder for shader #include (repeatable).
+    #[arg(short = 'I', value_name = "DIR")]
+    include: Vec<PathBuf>,
+    /// Preprocessor define NAME or NAME=VALUE (repeatable).
+    #[arg(short = 'D', value_name = "NAME[=VALUE]")]
+    define: Vec<String>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// RIB files ("-" or none: standard input).
+    files: Vec<PathBuf>,
+    #[command(flatten)]
+    paths: PathArgs,
+    /// Image resolution replacing Format.
+    #[arg(long, num_args = 2, value_names = ["W", "H"])]
+    res: Option<Vec<u32>>,
+    /// Crop window in NDC replacing CropWindow.
+    #[arg(long, num_args = 4, value_names = ["X0", "X1", "Y0", "Y1"], allow_negative_numbers = true)]
+    crop: Option<Vec<f32>>,
+    /// Frames to render: N or A-B.
+    #[arg(long, value_name = "A-B")]
+    frames: Option<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Bucket size in pixels.
+    #[arg(long)]
+    bucket: Option<u32>,
+    /// Output file replacing the first Display's (format from the extension: .png .tif .exr).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Print time per stage and counts (grids, micropolygons, samples…).
+    #[arg(long)]
+    stats: bool,
+}
+
+#[derive(Args)]
+struct CheckArgs {
+    /// .rib and .sl files.
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    #[command(flatten)]
+    paths: PathArgs,
+}
+
+#[derive(Args)]
+struct InfoArgs {
+    /// A .sl file or a shader name on the search path / in the standard library.
+    shader: String,
+    #[command(flatten)]
+    paths: PathArgs,
+}
+
+fn split_paths(p: &Option<String>) -> Vec<String> {
+    p.as_deref()
+        .map(|s| {
+            s.split(':')
+                .filter(|x| !x.is_empty())
+                .map(String::from)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn defines(d: &[String]) -> Vec<(String, Option<String>)> {
+    d.iter()
+        .map(|s| match s.split_once('=') {
+            Some((n, v)) => (n.to_string(), Some(v.to_string())),
+            None => (s.clone(), None),
+        })
+        .collect()
+}
+
+fn settings_from(paths: &PathArgs) -> Settings {
+    Settings {
+        shader_paths: split_paths(&paths.shaders),
+        texture_paths: split_paths(&paths.textures),
+        archive_paths: split_paths(&paths.archives),
+        include_dirs: paths.include.clone(),
+        defines: defines(&paths.define),
+        ..Settings::default()
+    }
+}
+
+fn parse_frames(s: &str) -> Option<(i32, i32)> {
+    match s.split_once('-') {
+        Some((a, b)) => Some((a.trim().parse().ok()?, b.trim().parse().ok()?)),
+        None => {
+            let n = s.trim().parse().ok()?;
+            Some((n, n))
+        }
+    }
+}
+
+/// Prints every diagnostic (warnings only unless quiet) and returns whether errors occurred.
+fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool) -> bool {
+    let all = diags.snapshot();
+    let mut errors = 0;
+    let mut warnings = 0;
+    for (d, count) in &all {
+        if d.severity == Severity::Error {
+            errors += 1;
+        } else {
+            warnings += 1;
+            if quiet {
+                continue;
+            }
+        }
+        eprintln!("{:?}", d.to_report(sources, *count));
+    }
+    if !quiet && (errors > 0 || warnings > 0) {
+        eprintln!("{errors} error(s), {warnings} warning(s)");
+    }
+    errors > 0
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    match cli.cmd {
+        Cmd::Render(a) => {
+            let mut s = settings_from(&a.paths);
+            s.resolution = a.res.as_ref().and_then(|v| Some((*v.first()?, *v.get(1)?)));
+            s.crop = a
+                .crop
+                .as_ref()
+                .and_then(|v| (v.len() == 4).then(|| [v[0], v[1], v[2], v[3]]));
+            s.frames = match a.frames.as_deref() {
+                Some(f) => match parse_frames(f) {
+                    Some(r) => Some(r),
+                    None => {
+                        eprintln!("error: --frames takes N or A-B, found `{f}`");
+                        return ExitCode::from(2);
+                    }
+                },
+                None => None,
+            };
+            s.threads = a.threads;
+            s.bucket_size = a.bucket.map(|b| [b.max(1), b.max(1)]);
+            s.output = a.output.clone();
+            s.stats = a.stats;
+            s.progress = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
+            if s.threads > 0 {
+                let _ = rayon::ThreadPoolBuilder::new()
+                    .num_threads(s.threads)
+                    .build_global();
+            }
+            let files = if a.files.is_empty() {
+                vec![PathBuf::from("-")]
+            } else {
+                a.files.clone()
+            };
+            let written = pipeline::render_paths(&files, &s, &sources, &diags);
+            let failed = report(&diags, &sources, cli.quiet);
+            if !cli.quiet {
+                for w in &written {
+                    eprintln!("wrote {}", w.display());
+                }
+            }
+            if failed {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Cmd::Check(a) => {
+            let s = settings_from(&a.paths);
+            for f in &a.files {
+                let is_sl = f
+                    .extension()
+                    .map(|e| e == "sl" || e == "h")
+                    .unwrap_or(false);
+                if is_sl {
+                    match std::fs::read_to_string(f) {
+                        Ok(text) => {
+                            let opts = CompileOptions {
+                                include_dirs: s.include_dirs.clone(),
+                                defines: s.defines.clone(),
+                                search_paths: s.shader_paths.iter().map(PathBuf::from).collect(),
+                            };
+                            let progs = compile_source(
+                                &f.display().to_string(),
+                                &text,
+                                Some(f),
+                                &sources,
+                                &diags,
+                                &opts,
+                            );
+                            if !cli.quiet {
+                                for p in &progs {
+                                    eprintln!(
+                                        "{}: {} shader `{}` compiled ({} instructions)",
+                                        f.display(),
+                                        p.kind.name(),
+                                        p.name,
+                                        p.instr_count()
+                                    );
+                                }
+                            }
+                        }
+                        Err(e) => diags.report(Diag::error(
+                            "sl::io",
+                            format!("cannot read `{}`: {e}", f.display()),
+                        )),
+                    }
+                } else {
+                    let scenes = pipeline::load_scenes(f, &s, &sources, &diags);
+                    // Compile every shader the scenes name, as a render would.
+                    for scene in &scenes {
+                        let lib = pipeline::library_for(scene, &s);
+                        let mut names: Vec<String> = Vec::new();
+                        for p in &scene.primitives {
+                            for sh in [
+                                &p.attributes.surface,
+                                &p.attributes.displacement,
+                                &p.attributes.atmosphere,
+                            ]
+                            .into_iter()
+                            .flatten()
+                            {
+                                names.push(sh.name.clone());
+                            }
+                        }
+                        for l in &scene.lights {
+                            names.push(l.shader.name.clone());
+                        }
+                        names.sort();
+                        names.dedup();
+                        for n in names {
+                            lib.get(&n, &sources, &diags);
+                        }
+                    }
+                    if !cli.quiet {
+                        eprintln!("{}: {} frame(s)", f.display(), scenes.len());
+                    }
+                }
+            }
+            if report(&diags, &sources, cli.quiet) {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Cmd::Info(a) => {
+            let s = settings_from(&a.paths);
+            let opts = CompileOptions {
+                include_dirs: s.include_dirs.clone(),
+                defines: s.defines.clone(),
+                search_paths: s.shader_paths.iter().map(PathBuf::from).collect(),
+            };
+            let prog = if a.shader.ends_with(".sl") {
+                match std::fs::read_to_string(&a.shader) {
+                    Ok(text) => compile_source(
+                        &a.shader,
+                        &text,
+                        Some(a.shader.as_ref()),
+                        &sources,
+                        &diags,
+                        &opts,
+                    )
+                    .into_iter()
+                    .next(),
+                    Err(e) => {
+                        diags.report(Diag::error(
+                            "sl::io",
+                            format!("cannot read `{}`: {e}", a.shader),
+                        ));
+                        None
+                    }
+                }
+            } else {
+                arbor::sl::ShaderLibrary::new(opts)
+                    .get(&a.shader, &sources, &diags)
+                    .map(|p| (*p).clone())
+            };
+            let failed = report(&diags, &sources, cli.quiet);
+            match prog {
+                Some(p) => {
+                    println!("{} \"{}\"", p.kind.name(), p.name);
+                    for par in &p.params {
+                        let arr = par.array.map(|n| format!("[{n}]")).unwrap_or_default();
+                        println!(
+                            "    \"{}\" \"{}{} {}{}\"",
+                            par.name,
+                            if par.output { "output " } else { "" },
+                            if par.varying { "varying" } else { "uniform" },
+                            par.ty.name(),
+                            arr
+                        );
+                        println!("\t\tDefault value: {}", par.default_text);
+                    }
+                    if failed {
+                        ExitCode::from(1)
+                    } else {
+                        ExitCode::SUCCESS
+                    }
+                }
+                None => ExitCode::from(1),
+            }
+        }
+        Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {
+            Ok(reqs) => {
+                print!("{}", arbor::rib::format::format_requests(&reqs));
+                if report(&diags, &sources, cli.quiet) {
+                    ExitCode::from(1)
+                } else {
+                    ExitCode::SUCCESS
+                }
+            }
+            Err(d) => {
+                diags.report(d);
+                report(&diags, &sources, cli.quiet);
+                ExitCode::from(1)
+            }
+        },
+    }
+}

@@ -24,13 +24,13 @@ use crate::scene::{Options, Primitive, Scene};
 
 use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
-use super::film_stub::{filter_into, DepthFilter as FilmDepthFilter, Film};
 use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
+use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
 pub const DEFAULT_BUCKET: u32 = 16;
@@ -77,22 +77,14 @@ pub fn render_frame(
     render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
 }
 
-/// The geometry entry point. TEMPORARY until the `geom` branch is merged: replace the body by
-/// `crate::geom::surfaces_for(index, prim, camera_from_world, diags)`.
+/// The geometry entry point: a primitive's surfaces in camera space.
 fn surfaces_for(
-    _index: usize,
+    index: usize,
     prim: &Primitive,
-    _camera_from_world: Mat4,
+    camera_from_world: Mat4,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
-    diags.report(
-        Diag::warning(
-            "render::geometry",
-            "geometry is not wired into the renderer in this build; primitive skipped",
-        )
-        .label(prim.span, "this primitive"),
-    );
-    Vec::new()
+    crate::geom::surfaces_for(index, prim, camera_from_world, diags)
 }
 
 /// The scene's options with the command-line overrides applied.

@@ -18,7 +18,11 @@ pub fn to_rgb(space: &str, c: Vec3) -> Vec3 {
             if c.y == 0.0 {
                 Vec3::ZERO
             } else {
-                xyz_to_rgb(Vec3::new(c.x * c.z / c.y, c.z, (1.0 - c.x - c.y) * c.z / c.y))
+                xyz_to_rgb(Vec3::new(
+                    c.x * c.z / c.y,
+                    c.z,
+                    (1.0 - c.x - c.y) * c.z / c.y,
+                ))
             }
         }
         "YIQ" => Vec3::new(
@@ -115,7 +119,11 @@ fn hsl_to_rgb(c: Vec3) -> Vec3 {
     if s == 0.0 {
         return Vec3::splat(l);
     }
-    let q = if l <= 0.5 { l * (1.0 + s) } else { l + s - l * s };
+    let q = if l <= 0.5 {
+        l * (1.0 + s)
+    } else {
+        l + s - l * s
+    };
     let p = 2.0 * l - q;
     let f = |t: f32| {
         let t = t.rem_euclid(1.0);

@@ -25,10 +25,16 @@ pub struct Mask {
 
 impl Mask {
     pub fn all(n: usize) -> Mask {
-        Mask { bits: vec![true; n], count: n }
+        Mask {
+            bits: vec![true; n],
+            count: n,
+        }
     }
     pub fn none(n: usize) -> Mask {
-        Mask { bits: vec![false; n], count: 0 }
+        Mask {
+            bits: vec![false; n],
+            count: 0,
+        }
     }
     pub fn from_bits(bits: Vec<bool>) -> Mask {
         let count = bits.iter().filter(|&&b| b).count();
@@ -182,13 +188,25 @@ impl<'a> Exec<'a> {
                 Const::S(x) => Slot::S(x.clone()),
             };
         }
-        Exec { prog, regs, n, env, frames: Vec::new(), light: None, current_light: None, iterations: 0 }
+        Exec {
+            prog,
+            regs,
+            n,
+            env,
+            frames: Vec::new(),
+            light: None,
+            current_light: None,
+            iterations: 0,
+        }
     }
 
     pub fn warn(&self, span: Span, msg: impl Into<String>) {
         self.env.diags.report(
-            Diag::warning("shade::runtime", format!("shader `{}`: {}", self.env.shader_name, msg.into()))
-                .label(span, "here"),
+            Diag::warning(
+                "shade::runtime",
+                format!("shader `{}`: {}", self.env.shader_name, msg.into()),
+            )
+            .label(span, "here"),
         );
     }
 
@@ -202,7 +220,11 @@ impl<'a> Exec<'a> {
     /// Runs the body over every point.
     pub fn run_body(&mut self) {
         let mut mask = Mask::all(self.n);
-        self.frames.push(Frame { kind: FrameKind::Function, broken: vec![false; self.n], outward: vec![false; self.n] });
+        self.frames.push(Frame {
+            kind: FrameKind::Function,
+            broken: vec![false; self.n],
+            outward: vec![false; self.n],
+        });
         let body = &self.prog.body;
         self.block(body, &mut mask);
         self.frames.pop();
@@ -260,14 +282,28 @@ impl<'a> Exec<'a> {
             Instr::Copy { dst, src } => {
                 let v = self.regs[*src as usize].clone();
                 let info = self.prog.regs[*dst as usize];
-                self.regs[*dst as usize] = if info.varying && !v.is_varying() { broadcast(&v, n) } else { v };
+                self.regs[*dst as usize] = if info.varying && !v.is_varying() {
+                    broadcast(&v, n)
+                } else {
+                    v
+                };
             }
-            Instr::If { cond, then, otherwise } => match self.cond_bits(*cond) {
+            Instr::If {
+                cond,
+                then,
+                otherwise,
+            } => match self.cond_bits(*cond) {
                 Ok(true) => self.block(then, mask),
                 Ok(false) => self.block(otherwise, mask),
                 Err(bits) => {
-                    let mut tm: Vec<bool> = mask.bits.iter().zip(&bits).map(|(&m, &c)| m && c).collect();
-                    let mut em: Vec<bool> = mask.bits.iter().zip(&bits).map(|(&m, &c)| m && !c).collect();
+                    let mut tm: Vec<bool> =
+                        mask.bits.iter().zip(&bits).map(|(&m, &c)| m && c).collect();
+                    let mut em: Vec<bool> = mask
+                        .bits
+                        .iter()
+                        .zip(&bits)
+                        .map(|(&m, &c)| m && !c)
+                        .collect();
                     let mut t = Mask::from_bits(std::mem::take(&mut tm));
                     let mut e = Mask::from_bits(std::mem::take(&mut em));
                     if !t.is_none() {
@@ -282,8 +318,17 @@ impl<'a> Exec<'a> {
                     mask.recount();
                 }
             },
-            Instr::Loop { cond_code, cond, body, step } => {
-                self.frames.push(Frame { kind: FrameKind::Loop, broken: vec![false; n], outward: vec![false; n] });
+            Instr::Loop {
+                cond_code,
+                cond,
+                body,
+                step,
+            } => {
+                self.frames.push(Frame {
+                    kind: FrameKind::Loop,
+                    broken: vec![false; n],
+                    outward: vec![false; n],
+                });
                 let mut loop_mask = mask.clone();
                 loop {
                     self.iterations += 1;
@@ -308,7 +353,11 @@ impl<'a> Exec<'a> {
                     }
                     let mut bm = loop_mask.clone();
                     self.block(body, &mut bm);
-                    let broken = self.frames.last().map(|f| f.broken.clone()).unwrap_or_default();
+                    let broken = self
+                        .frames
+                        .last()
+                        .map(|f| f.broken.clone())
+                        .unwrap_or_default();
                     loop_mask.and_not(&broken);
                     if loop_mask.is_none() {
                         break;
@@ -332,20 +381,45 @@ impl<'a> Exec<'a> {
                 mask.count = 0;
             }
             Instr::Return => {
-                let levels = self.frames.iter().rev().position(|f| f.kind == FrameKind::Function).map(|p| p + 1);
-                self.exit_to(levels.unwrap_or(self.frames.len()), Some(FrameKind::Function), mask);
+                let levels = self
+                    .frames
+                    .iter()
+                    .rev()
+                    .position(|f| f.kind == FrameKind::Function)
+                    .map(|p| p + 1);
+                self.exit_to(
+                    levels.unwrap_or(self.frames.len()),
+                    Some(FrameKind::Function),
+                    mask,
+                );
             }
             Instr::Function { body } => {
-                self.frames.push(Frame { kind: FrameKind::Function, broken: vec![false; n], outward: vec![false; n] });
+                self.frames.push(Frame {
+                    kind: FrameKind::Function,
+                    broken: vec![false; n],
+                    outward: vec![false; n],
+                });
                 let mut m = mask.clone();
                 self.block(body, &mut m);
                 self.frames.pop();
             }
-            Instr::Illuminance { category, pos: _, axis, body } => self.illuminance(*category, *axis, body, mask),
+            Instr::Illuminance {
+                category,
+                pos: _,
+                axis,
+                body,
+            } => self.illuminance(*category, *axis, body, mask),
             Instr::Illuminate { pos, axis, body } => self.illuminate(Some(*pos), *axis, body, mask),
             Instr::Solar { axis, body } => self.illuminate(None, *axis, body, mask),
             Instr::Gather { otherwise } => self.block(otherwise, mask),
-            Instr::SetIndex { kind: _, base, len, index, src, span } => {
+            Instr::SetIndex {
+                kind: _,
+                base,
+                len,
+                index,
+                src,
+                span,
+            } => {
                 let idx_slot = self.regs[*index as usize].clone();
                 let idx = idx_slot.f();
                 let mut warned = false;
@@ -470,13 +544,23 @@ impl<'a> Exec<'a> {
         self.prog.global(name).map(|g| g.reg)
     }
 
-    fn illuminance(&mut self, category: Option<Reg>, axis: Option<(Reg, Reg)>, body: &'a [Instr], mask: &mut Mask) {
+    fn illuminance(
+        &mut self,
+        category: Option<Reg>,
+        axis: Option<(Reg, Reg)>,
+        body: &'a [Instr],
+        mask: &mut Mask,
+    ) {
         let n = self.n;
         let cat = category.map(|r| self.regs[r as usize].s());
         let (lr, clr, olr) = (self.reg_of("L"), self.reg_of("Cl"), self.reg_of("Ol"));
-        let axis_vals = axis.map(|(a, ang)| (self.regs[a as usize].t(), self.regs[ang as usize].f()));
+        let axis_vals =
+            axis.map(|(a, ang)| (self.regs[a as usize].t(), self.regs[ang as usize].f()));
         let axis_vals: Option<(Vec<Vec3>, Vec<f32>)> = axis_vals.map(|(a, ang)| {
-            ((0..n).map(|i| a.at(i)).collect(), (0..n).map(|i| ang.at(i)).collect())
+            (
+                (0..n).map(|i| a.at(i)).collect(),
+                (0..n).map(|i| ang.at(i)).collect(),
+            )
         });
         let lights = self.env.lights;
         for (li, light) in lights.iter().enumerate() {
@@ -531,7 +615,13 @@ impl<'a> Exec<'a> {
         }
     }
 
-    fn illuminate(&mut self, pos: Option<Reg>, axis: Option<(Reg, Reg)>, body: &'a [Instr], mask: &mut Mask) {
+    fn illuminate(
+        &mut self,
+        pos: Option<Reg>,
+        axis: Option<(Reg, Reg)>,
+        body: &'a [Instr],
+        mask: &mut Mask,
+    ) {
         let n = self.n;
         let Some(state) = self.light.take() else {
             return;
@@ -566,7 +656,11 @@ impl<'a> Exec<'a> {
                 let an = self.regs[ang as usize].f();
                 for i in 0..n {
                     let (axl, ll) = (ax.at(i).length(), l[i].length());
-                    let c = if axl == 0.0 || ll == 0.0 { 1.0 } else { ax.at(i).dot(l[i]) / (axl * ll) };
+                    let c = if axl == 0.0 || ll == 0.0 {
+                        1.0
+                    } else {
+                        ax.at(i).dot(l[i]) / (axl * ll)
+                    };
                     bits[i] = mask.bits[i] && c >= an.at(i).min(std::f32::consts::PI).cos() - 1e-6;
                 }
             }
@@ -589,7 +683,12 @@ impl<'a> Exec<'a> {
 }
 
 fn first_active<X: Copy + Default>(v: &[X], mask: &Mask) -> X {
-    v.iter().zip(&mask.bits).find(|(_, &b)| b).map(|(x, _)| *x).or_else(|| v.first().copied()).unwrap_or_default()
+    v.iter()
+        .zip(&mask.bits)
+        .find(|(_, &b)| b)
+        .map(|(x, _)| *x)
+        .or_else(|| v.first().copied())
+        .unwrap_or_default()
 }
 
 /// A uniform slot repeated to `n` points.

@@ -53,7 +53,13 @@ fn normalize(v: Vec3) -> Vec3 {
 pub fn compute(ex: &mut Exec, ins: &Instr) {
     let n = ex.n;
     match ins {
-        Instr::Arith { op, kind, dst, a, b } => {
+        Instr::Arith {
+            op,
+            kind,
+            dst,
+            a,
+            b,
+        } => {
             let mut out = take(ex, *dst);
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
             match kind {
@@ -142,7 +148,13 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             zip_tt(&mut out, n, x, y, |a, b| a.cross(b));
             put(ex, *dst, out);
         }
-        Instr::Compare { op, kind, dst, a, b } => {
+        Instr::Compare {
+            op,
+            kind,
+            dst,
+            a,
+            b,
+        } => {
             let mut out = take(ex, *dst);
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
             let c = *op;
@@ -151,12 +163,16 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
                 Kind::Triple => {
                     let (x, y) = (ra.t(), rb.t());
                     let eq = c == Cmp::Eq;
-                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| b2f((x.at(i) == y.at(i)) == eq))
+                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| {
+                        b2f((x.at(i) == y.at(i)) == eq)
+                    })
                 }
                 Kind::Matrix => {
                     let (x, y) = (ra.m(), rb.m());
                     let eq = c == Cmp::Eq;
-                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| b2f((x.at(i) == y.at(i)) == eq))
+                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| {
+                        b2f((x.at(i) == y.at(i)) == eq)
+                    })
                 }
                 Kind::Str => {
                     let eq = ra.s() == rb.s();
@@ -167,12 +183,24 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
         }
         Instr::And { dst, a, b } => {
             let mut out = take(ex, *dst);
-            zip_ff(&mut out, n, ex.regs[*a as usize].f(), ex.regs[*b as usize].f(), |x, y| b2f(x != 0.0 && y != 0.0));
+            zip_ff(
+                &mut out,
+                n,
+                ex.regs[*a as usize].f(),
+                ex.regs[*b as usize].f(),
+                |x, y| b2f(x != 0.0 && y != 0.0),
+            );
             put(ex, *dst, out);
         }
         Instr::Or { dst, a, b } => {
             let mut out = take(ex, *dst);
-            zip_ff(&mut out, n, ex.regs[*a as usize].f(), ex.regs[*b as usize].f(), |x, y| b2f(x != 0.0 || y != 0.0));
+            zip_ff(
+                &mut out,
+                n,
+                ex.regs[*a as usize].f(),
+                ex.regs[*b as usize].f(),
+                |x, y| b2f(x != 0.0 || y != 0.0),
+            );
             put(ex, *dst, out);
         }
         Instr::Not { dst, a } => {
@@ -181,7 +209,13 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             write_f(&mut out, n, x.is_varying(), |i| b2f(x.at(i) == 0.0));
             put(ex, *dst, out);
         }
-        Instr::Select { kind, dst, cond, a, b } => {
+        Instr::Select {
+            kind,
+            dst,
+            cond,
+            a,
+            b,
+        } => {
             let mut out = take(ex, *dst);
             let c = ex.regs[*cond as usize].f();
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
@@ -189,23 +223,51 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             match kind {
                 Kind::Float => {
                     let (x, y) = (ra.f(), rb.f());
-                    write_f(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                    write_f(&mut out, n, v, |i| {
+                        if c.at(i) != 0.0 {
+                            x.at(i)
+                        } else {
+                            y.at(i)
+                        }
+                    })
                 }
                 Kind::Triple => {
                     let (x, y) = (ra.t(), rb.t());
-                    write_t(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                    write_t(&mut out, n, v, |i| {
+                        if c.at(i) != 0.0 {
+                            x.at(i)
+                        } else {
+                            y.at(i)
+                        }
+                    })
                 }
                 Kind::Matrix => {
                     let (x, y) = (ra.m(), rb.m());
-                    write_m(&mut out, n, v, |i| if c.at(i) != 0.0 { x.at(i) } else { y.at(i) })
+                    write_m(&mut out, n, v, |i| {
+                        if c.at(i) != 0.0 {
+                            x.at(i)
+                        } else {
+                            y.at(i)
+                        }
+                    })
                 }
-                Kind::Str => out = if c.first() != 0.0 { ra.clone() } else { rb.clone() },
+                Kind::Str => {
+                    out = if c.first() != 0.0 {
+                        ra.clone()
+                    } else {
+                        rb.clone()
+                    }
+                }
             }
             put(ex, *dst, out);
         }
         Instr::MakeTriple { dst, x, y, z } => {
             let mut out = take(ex, *dst);
-            let (a, b, c) = (ex.regs[*x as usize].f(), ex.regs[*y as usize].f(), ex.regs[*z as usize].f());
+            let (a, b, c) = (
+                ex.regs[*x as usize].f(),
+                ex.regs[*y as usize].f(),
+                ex.regs[*z as usize].f(),
+            );
             let v = a.is_varying() || b.is_varying() || c.is_varying();
             write_t(&mut out, n, v, |i| Vec3::new(a.at(i), b.at(i), c.at(i)));
             put(ex, *dst, out);
@@ -231,7 +293,10 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             write_t(&mut out, n, x.is_varying(), |i| color::to_rgb(&sp, x.at(i)));
             put(ex, *dst, out);
             if !ok {
-                ex.warn(ex.prog.span, format!("unknown colour space \"{sp}\" (treated as rgb)"));
+                ex.warn(
+                    ex.prog.span,
+                    format!("unknown colour space \"{sp}\" (treated as rgb)"),
+                );
             }
         }
         Instr::SpaceMatrix { dst, space } => {
@@ -239,7 +304,13 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             let m = space_matrix(ex, &sp);
             put(ex, *dst, Slot::M(m));
         }
-        Instr::Transform { kind, dst, from, to, a } => {
+        Instr::Transform {
+            kind,
+            dst,
+            from,
+            to,
+            a,
+        } => {
             let mut out = take(ex, *dst);
             let fm = space_operand(ex, *from, true);
             let tm = space_operand(ex, *to, false);
@@ -252,7 +323,14 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
             });
             put(ex, *dst, out);
         }
-        Instr::GetIndex { kind, dst, base, len, index, span } => {
+        Instr::GetIndex {
+            kind,
+            dst,
+            base,
+            len,
+            index,
+            span,
+        } => {
             let mut out = take(ex, *dst);
             let idx = ex.regs[*index as usize].f();
             let len = *len as i64;
@@ -275,7 +353,11 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
                     out = if v { Slot::VF(o) } else { Slot::F(o[0]) };
                 }
                 Kind::Triple => {
-                    let mut o = if v { take_vt(&mut out, n) } else { vec![Vec3::ZERO] };
+                    let mut o = if v {
+                        take_vt(&mut out, n)
+                    } else {
+                        vec![Vec3::ZERO]
+                    };
                     for (i, oi) in o.iter_mut().enumerate() {
                         let r = pick(i, &mut bad);
                         *oi = ex.regs[r].t().at(i);
@@ -360,7 +442,10 @@ fn space_matrix(ex: &Exec, name: &str) -> Mat4 {
     match (ex.env.spaces)(name) {
         Some(m) => m,
         None => {
-            ex.warn(ex.prog.span, format!("unknown coordinate system \"{name}\" (identity used)"));
+            ex.warn(
+                ex.prog.span,
+                format!("unknown coordinate system \"{name}\" (identity used)"),
+            );
             Mat4::IDENTITY
         }
     }
@@ -431,12 +516,19 @@ pub fn deriv_t(x: &[Vec3], nu: usize, nv: usize, dir: usize, step: f32) -> Vec<V
     let xs: Vec<f32> = x.iter().map(|p| p.x).collect();
     let ys: Vec<f32> = x.iter().map(|p| p.y).collect();
     let zs: Vec<f32> = x.iter().map(|p| p.z).collect();
-    let (a, b, c) = (deriv_f(&xs, nu, nv, dir, step), deriv_f(&ys, nu, nv, dir, step), deriv_f(&zs, nu, nv, dir, step));
+    let (a, b, c) = (
+        deriv_f(&xs, nu, nv, dir, step),
+        deriv_f(&ys, nu, nv, dir, step),
+        deriv_f(&zs, nu, nv, dir, step),
+    );
     (0..x.len()).map(|i| Vec3::new(a[i], b[i], c[i])).collect()
 }
 
 fn global_f(ex: &Exec, name: &str) -> f32 {
-    ex.prog.global(name).map(|g| ex.regs[g.reg as usize].f().first()).unwrap_or(0.0)
+    ex.prog
+        .global(name)
+        .map(|g| ex.regs[g.reg as usize].f().first())
+        .unwrap_or(0.0)
 }
 
 fn du_dv(ex: &Exec) -> (f32, f32) {
@@ -459,7 +551,15 @@ where
     V: Copy + std::ops::Mul<f32, Output = V> + std::ops::Add<Output = V>,
 {
     let (m, step): ([[f32; 4]; 4], usize) = match basis {
-        "bezier" => ([[-1., 3., -3., 1.], [3., -6., 3., 0.], [-3., 3., 0., 0.], [1., 0., 0., 0.]], 3),
+        "bezier" => (
+            [
+                [-1., 3., -3., 1.],
+                [3., -6., 3., 0.],
+                [-3., 3., 0., 0.],
+                [1., 0., 0., 0.],
+            ],
+            3,
+        ),
         "b-spline" | "bspline" => (
             [
                 [-1. / 6., 3. / 6., -3. / 6., 1. / 6.],
@@ -469,10 +569,42 @@ where
             ],
             1,
         ),
-        "hermite" => ([[2., 1., -2., 1.], [-3., -2., 3., -1.], [0., 1., 0., 0.], [1., 0., 0., 0.]], 2),
-        "power" => ([[1., 0., 0., 0.], [0., 1., 0., 0.], [0., 0., 1., 0.], [0., 0., 0., 1.]], 4),
-        "linear" => ([[0., 0., 0., 0.], [0., 0., 0., 0.], [0., -1., 1., 0.], [0., 1., 0., 0.]], 1),
-        _ => ([[-0.5, 1.5, -1.5, 0.5], [1., -2.5, 2., -0.5], [-0.5, 0., 0.5, 0.], [0., 1., 0., 0.]], 1),
+        "hermite" => (
+            [
+                [2., 1., -2., 1.],
+                [-3., -2., 3., -1.],
+                [0., 1., 0., 0.],
+                [1., 0., 0., 0.],
+            ],
+            2,
+        ),
+        "power" => (
+            [
+                [1., 0., 0., 0.],
+                [0., 1., 0., 0.],
+                [0., 0., 1., 0.],
+                [0., 0., 0., 1.],
+            ],
+            4,
+        ),
+        "linear" => (
+            [
+                [0., 0., 0., 0.],
+                [0., 0., 0., 0.],
+                [0., -1., 1., 0.],
+                [0., 1., 0., 0.],
+            ],
+            1,
+        ),
+        _ => (
+            [
+                [-0.5, 1.5, -1.5, 0.5],
+                [1., -2.5, 2., -0.5],
+                [-0.5, 0., 0.5, 0.],
+                [0., 1., 0., 0.],
+            ],
+            1,
+        ),
     };
     let nk = knots.len();
     if nk < 4 {
@@ -500,7 +632,11 @@ where
 
 fn set_out(ex: &mut Exec, r: Reg, s: Slot) {
     let varying = ex.prog.regs[r as usize].varying;
-    ex.regs[r as usize] = if varying && !s.is_varying() { crate::shade::exec::broadcast(&s, ex.n) } else { s };
+    ex.regs[r as usize] = if varying && !s.is_varying() {
+        crate::shade::exec::broadcast(&s, ex.n)
+    } else {
+        s
+    };
 }
 
 fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span) {
@@ -521,9 +657,18 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
     }
     macro_rules! f3 {
         ($e:expr) => {{
-            let (a, b, c) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            let (a, b, c) = (
+                arg(ex, args, 0).f(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+            );
             let g = $e;
-            write_f(&mut out, n, a.is_varying() || b.is_varying() || c.is_varying(), |i| g(a.at(i), b.at(i), c.at(i)));
+            write_f(
+                &mut out,
+                n,
+                a.is_varying() || b.is_varying() || c.is_varying(),
+                |i| g(a.at(i), b.at(i), c.at(i)),
+            );
         }};
     }
     macro_rules! t1f {
@@ -567,8 +712,16 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         Sqrt => f1!(|x: f32| x.max(0.0).sqrt()),
         InvSqrt => f1!(|x: f32| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 }),
         Log => f1!(|x: f32| if x > 0.0 { x.ln() } else { -f32::MAX }),
-        LogBase => f2!(|x: f32, b: f32| if x > 0.0 && b > 0.0 && b != 1.0 { x.ln() / b.ln() } else { 0.0 }),
-        Mod => f2!(|a: f32, b: f32| if b == 0.0 { 0.0 } else { a - b * (a / b).floor() }),
+        LogBase => f2!(|x: f32, b: f32| if x > 0.0 && b > 0.0 && b != 1.0 {
+            x.ln() / b.ln()
+        } else {
+            0.0
+        }),
+        Mod => f2!(|a: f32, b: f32| if b == 0.0 {
+            0.0
+        } else {
+            a - b * (a / b).floor()
+        }),
         Abs => f1!(|x: f32| x.abs()),
         Sign => f1!(|x: f32| if x > 0.0 {
             1.0
@@ -605,17 +758,35 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         ClampF => f3!(|x: f32, a: f32, b: f32| x.max(a).min(b)),
         ClampT => {
-            let (x, a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
-            write_t(&mut out, n, varying_any!(), |i| x.at(i).max(a.at(i)).min(b.at(i)));
+            let (x, a, b) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).t(),
+            );
+            write_t(&mut out, n, varying_any!(), |i| {
+                x.at(i).max(a.at(i)).min(b.at(i))
+            });
         }
         MixF => f3!(|a: f32, b: f32, t: f32| a * (1.0 - t) + b * t),
         MixT => {
-            let (a, b, t) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
-            write_t(&mut out, n, varying_any!(), |i| a.at(i) * (1.0 - t.at(i)) + b.at(i) * t.at(i));
+            let (a, b, t) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).f(),
+            );
+            write_t(&mut out, n, varying_any!(), |i| {
+                a.at(i) * (1.0 - t.at(i)) + b.at(i) * t.at(i)
+            });
         }
         MixTT => {
-            let (a, b, t) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
-            write_t(&mut out, n, varying_any!(), |i| a.at(i) * (Vec3::ONE - t.at(i)) + b.at(i) * t.at(i));
+            let (a, b, t) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).t(),
+            );
+            write_t(&mut out, n, varying_any!(), |i| {
+                a.at(i) * (Vec3::ONE - t.at(i)) + b.at(i) * t.at(i)
+            });
         }
         Step => f2!(|e: f32, x: f32| b2f(x >= e)),
         SmoothStep => f3!(smoothstep),
@@ -624,7 +795,11 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let npos = arg(ex, args, 0).f().first() as usize;
             let edge = arg(ex, args, 1).f();
             let s1 = arg(ex, args, 2).f();
-            let s2 = if npos >= 3 { Some(arg(ex, args, 3).f()) } else { None };
+            let s2 = if npos >= 3 {
+                Some(arg(ex, args, 3).f())
+            } else {
+                None
+            };
             let mut width = 1.0;
             let mut filter: Arc<str> = Arc::from("catmull-rom");
             let mut k = 1 + npos;
@@ -659,10 +834,17 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 filtered_step(edge.at(i), x, w, box_filter)
             });
         }
-        SplineF | SplineT | SplineBasisF | SplineBasisT | SplineArrayF | SplineArrayT | SplineBasisArrayF
-        | SplineBasisArrayT => {
-            let has_basis = matches!(f, SplineBasisF | SplineBasisT | SplineBasisArrayF | SplineBasisArrayT);
-            let basis: Arc<str> = if has_basis { arg(ex, args, 0).s() } else { Arc::from("catmull-rom") };
+        SplineF | SplineT | SplineBasisF | SplineBasisT | SplineArrayF | SplineArrayT
+        | SplineBasisArrayF | SplineBasisArrayT => {
+            let has_basis = matches!(
+                f,
+                SplineBasisF | SplineBasisT | SplineBasisArrayF | SplineBasisArrayT
+            );
+            let basis: Arc<str> = if has_basis {
+                arg(ex, args, 0).s()
+            } else {
+                Arc::from("catmull-rom")
+            };
             let o = usize::from(has_basis);
             let x = arg(ex, args, o).f();
             let knots = &args[o + 1..];
@@ -695,13 +877,21 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         DuF | DvF => {
             let (du, dv) = du_dv(ex);
             let x = vec_f(arg(ex, args, 0), n);
-            let d = if f == DuF { deriv_f(&x, ex.env.nu, ex.env.nv, 0, du) } else { deriv_f(&x, ex.env.nu, ex.env.nv, 1, dv) };
+            let d = if f == DuF {
+                deriv_f(&x, ex.env.nu, ex.env.nv, 0, du)
+            } else {
+                deriv_f(&x, ex.env.nu, ex.env.nv, 1, dv)
+            };
             out = Slot::VF(d);
         }
         DuT | DvT => {
             let (du, dv) = du_dv(ex);
             let x = vec_t(arg(ex, args, 0), n);
-            let d = if f == DuT { deriv_t(&x, ex.env.nu, ex.env.nv, 0, du) } else { deriv_t(&x, ex.env.nu, ex.env.nv, 1, dv) };
+            let d = if f == DuT {
+                deriv_t(&x, ex.env.nu, ex.env.nv, 0, du)
+            } else {
+                deriv_t(&x, ex.env.nu, ex.env.nv, 1, dv)
+            };
             out = Slot::VT(d);
         }
         DerivF => {
@@ -711,7 +901,11 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let den = vec_f(arg(ex, args, 1), n);
             let (a, b) = (deriv_f(&num, nu, nv, 0, du), deriv_f(&num, nu, nv, 1, dv));
             let (c, d) = (deriv_f(&den, nu, nv, 0, du), deriv_f(&den, nu, nv, 1, dv));
-            out = Slot::VF((0..n).map(|i| safe_div(a[i], c[i]) + safe_div(b[i], d[i])).collect());
+            out = Slot::VF(
+                (0..n)
+                    .map(|i| safe_div(a[i], c[i]) + safe_div(b[i], d[i]))
+                    .collect(),
+            );
         }
         DerivT => {
             let (du, dv) = du_dv(ex);
@@ -765,7 +959,9 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         NoiseF4 => {
             let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
-            write_f(&mut out, n, varying_any!(), |i| pn::noise4(a.at(i), b.at(i)));
+            write_f(&mut out, n, varying_any!(), |i| {
+                pn::noise4(a.at(i), b.at(i))
+            });
         }
         NoiseT1 => {
             let a = arg(ex, args, 0).f();
@@ -773,48 +969,98 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         NoiseT2 => {
             let (a, b) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
-            write_t(&mut out, n, varying_any!(), |i| pn::vnoise2(a.at(i), b.at(i)));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vnoise2(a.at(i), b.at(i))
+            });
         }
         NoiseT3 => t1t!(pn::vnoise3),
         NoiseT4 => {
             let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
-            write_t(&mut out, n, varying_any!(), |i| pn::vnoise4(a.at(i), b.at(i)));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vnoise4(a.at(i), b.at(i))
+            });
         }
         PNoiseF1 => f2!(|x, p| pn::pnoise1(x, pn::period_from_float(p))),
         PNoiseF2 => {
-            let (x, y, px, py) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            let (x, y, px, py) = (
+                arg(ex, args, 0).f(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+                arg(ex, args, 3).f(),
+            );
             write_f(&mut out, n, varying_any!(), |i| {
-                pn::pnoise2(x.at(i), y.at(i), pn::period_from_float(px.at(i)), pn::period_from_float(py.at(i)))
+                pn::pnoise2(
+                    x.at(i),
+                    y.at(i),
+                    pn::period_from_float(px.at(i)),
+                    pn::period_from_float(py.at(i)),
+                )
             });
         }
         PNoiseF3 => {
             let (p, per) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            write_f(&mut out, n, varying_any!(), |i| pn::pnoise3(p.at(i), iper(per.at(i))));
+            write_f(&mut out, n, varying_any!(), |i| {
+                pn::pnoise3(p.at(i), iper(per.at(i)))
+            });
         }
         PNoiseF4 => {
-            let (p, t, per, tp) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+            let (p, t, per, tp) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).t(),
+                arg(ex, args, 3).f(),
+            );
             write_f(&mut out, n, varying_any!(), |i| {
-                pn::pnoise4(p.at(i), t.at(i), iper(per.at(i)), pn::period_from_float(tp.at(i)))
+                pn::pnoise4(
+                    p.at(i),
+                    t.at(i),
+                    iper(per.at(i)),
+                    pn::period_from_float(tp.at(i)),
+                )
             });
         }
         PNoiseT1 => {
             let (x, p) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
-            write_t(&mut out, n, varying_any!(), |i| pn::vpnoise1(x.at(i), pn::period_from_float(p.at(i))));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vpnoise1(x.at(i), pn::period_from_float(p.at(i)))
+            });
         }
         PNoiseT2 => {
-            let (x, y, px, py) = (arg(ex, args, 0).f(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            let (x, y, px, py) = (
+                arg(ex, args, 0).f(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+                arg(ex, args, 3).f(),
+            );
             write_t(&mut out, n, varying_any!(), |i| {
-                pn::vpnoise2(x.at(i), y.at(i), pn::period_from_float(px.at(i)), pn::period_from_float(py.at(i)))
+                pn::vpnoise2(
+                    x.at(i),
+                    y.at(i),
+                    pn::period_from_float(px.at(i)),
+                    pn::period_from_float(py.at(i)),
+                )
             });
         }
         PNoiseT3 => {
             let (p, per) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            write_t(&mut out, n, varying_any!(), |i| pn::vpnoise3(p.at(i), iper(per.at(i))));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vpnoise3(p.at(i), iper(per.at(i)))
+            });
         }
         PNoiseT4 => {
-            let (p, t, per, tp) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+            let (p, t, per, tp) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).t(),
+                arg(ex, args, 3).f(),
+            );
             write_t(&mut out, n, varying_any!(), |i| {
-                pn::vpnoise4(p.at(i), t.at(i), iper(per.at(i)), pn::period_from_float(tp.at(i)))
+                pn::vpnoise4(
+                    p.at(i),
+                    t.at(i),
+                    iper(per.at(i)),
+                    pn::period_from_float(tp.at(i)),
+                )
             });
         }
         CellF1 => f1!(pn::cellnoise1),
@@ -822,7 +1068,9 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         CellF3 => t1f!(pn::cellnoise3),
         CellF4 => {
             let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
-            write_f(&mut out, n, varying_any!(), |i| pn::cellnoise4(a.at(i), b.at(i)));
+            write_f(&mut out, n, varying_any!(), |i| {
+                pn::cellnoise4(a.at(i), b.at(i))
+            });
         }
         CellT1 => {
             let a = arg(ex, args, 0).f();
@@ -830,12 +1078,16 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         CellT2 => {
             let (a, b) = (arg(ex, args, 0).f(), arg(ex, args, 1).f());
-            write_t(&mut out, n, varying_any!(), |i| pn::vcellnoise2(a.at(i), b.at(i)));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vcellnoise2(a.at(i), b.at(i))
+            });
         }
         CellT3 => t1t!(pn::vcellnoise3),
         CellT4 => {
             let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
-            write_t(&mut out, n, varying_any!(), |i| pn::vcellnoise4(a.at(i), b.at(i)));
+            write_t(&mut out, n, varying_any!(), |i| {
+                pn::vcellnoise4(a.at(i), b.at(i))
+            });
         }
         XComp => t1f!(|v: Vec3| v.x),
         YComp => t1f!(|v: Vec3| v.y),
@@ -863,11 +1115,22 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             zip_tt_f(&mut out, n, a, b, |a, b| a.distance(b));
         }
         PtLineD => {
-            let (q, p1, p2) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t());
-            write_f(&mut out, n, varying_any!(), |i| ptlined(q.at(i), p1.at(i), p2.at(i)));
+            let (q, p1, p2) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).t(),
+            );
+            write_f(&mut out, n, varying_any!(), |i| {
+                ptlined(q.at(i), p1.at(i), p2.at(i))
+            });
         }
         RotatePoint => {
-            let (q, ang, p1, p2) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).t(), arg(ex, args, 3).t());
+            let (q, ang, p1, p2) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).t(),
+                arg(ex, args, 3).t(),
+            );
             write_t(&mut out, n, varying_any!(), |i| {
                 let axis = normalize(p2.at(i) - p1.at(i));
                 if axis == Vec3::ZERO {
@@ -887,7 +1150,11 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         FaceForward2 | FaceForward3 => {
             let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            let nref = if f == FaceForward3 { arg(ex, args, 2).t() } else { nn };
+            let nref = if f == FaceForward3 {
+                arg(ex, args, 2).t()
+            } else {
+                nn
+            };
             write_t(&mut out, n, varying_any!(), |i| {
                 let nv = nn.at(i);
                 if i_.at(i).dot(nref.at(i)) < 0.0 {
@@ -902,14 +1169,25 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             zip_tt(&mut out, n, i_, nn, |i, n| i - 2.0 * i.dot(n) * n);
         }
         Refract => {
-            let (i_, nn, eta) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
-            write_t(&mut out, n, varying_any!(), |i| refract(i_.at(i), nn.at(i), eta.at(i)));
+            let (i_, nn, eta) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).f(),
+            );
+            write_t(&mut out, n, varying_any!(), |i| {
+                refract(i_.at(i), nn.at(i), eta.at(i))
+            });
         }
         Fresnel | FresnelRT => {
-            let (i_, nn, eta) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
+            let (i_, nn, eta) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).f(),
+            );
             let v = varying_any!();
-            let res: Vec<(f32, f32, Vec3, Vec3)> =
-                (0..if v { n } else { 1 }).map(|i| fresnel(i_.at(i), nn.at(i), eta.at(i))).collect();
+            let res: Vec<(f32, f32, Vec3, Vec3)> = (0..if v { n } else { 1 })
+                .map(|i| fresnel(i_.at(i), nn.at(i), eta.at(i)))
+                .collect();
             let pick = |k: usize| -> Slot {
                 if v {
                     match k {
@@ -965,10 +1243,16 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         Comp => {
             let (c, k) = (arg(ex, args, 0).t(), arg(ex, args, 1).f());
-            write_f(&mut out, n, varying_any!(), |i| c.at(i)[(k.at(i).max(0.0) as usize).min(2)]);
+            write_f(&mut out, n, varying_any!(), |i| {
+                c.at(i)[(k.at(i).max(0.0) as usize).min(2)]
+            });
         }
         SetComp => {
-            let (c, k, x) = (arg(ex, args, 0).t(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            let (c, k, x) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+            );
             let mut r = Slot::default();
             write_t(&mut r, n, varying_any!(), |i| {
                 let mut v = c.at(i);
@@ -981,22 +1265,43 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let (from, to, c): (Arc<str>, Arc<str>, T) = if f == CTransform1 {
                 (Arc::from("rgb"), arg(ex, args, 0).s(), arg(ex, args, 1).t())
             } else {
-                (arg(ex, args, 0).s(), arg(ex, args, 1).s(), arg(ex, args, 2).t())
+                (
+                    arg(ex, args, 0).s(),
+                    arg(ex, args, 1).s(),
+                    arg(ex, args, 2).t(),
+                )
             };
-            write_t(&mut out, n, c.is_varying(), |i| color::from_rgb(&to, color::to_rgb(&from, c.at(i))));
+            write_t(&mut out, n, c.is_varying(), |i| {
+                color::from_rgb(&to, color::to_rgb(&from, c.at(i)))
+            });
         }
         MComp => {
-            let (m, r, c) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).f());
+            let (m, r, c) = (
+                arg(ex, args, 0).m(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+            );
             write_f(&mut out, n, varying_any!(), |i| {
-                let (r, c) = ((r.at(i).max(0.0) as usize).min(3), (c.at(i).max(0.0) as usize).min(3));
+                let (r, c) = (
+                    (r.at(i).max(0.0) as usize).min(3),
+                    (c.at(i).max(0.0) as usize).min(3),
+                );
                 m.at(i).col(r)[c]
             });
         }
         MSetComp => {
-            let (m, r, c, x) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).f(), arg(ex, args, 3).f());
+            let (m, r, c, x) = (
+                arg(ex, args, 0).m(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).f(),
+                arg(ex, args, 3).f(),
+            );
             let mut res = Slot::default();
             write_m(&mut res, n, varying_any!(), |i| {
-                let (r, c) = ((r.at(i).max(0.0) as usize).min(3), (c.at(i).max(0.0) as usize).min(3));
+                let (r, c) = (
+                    (r.at(i).max(0.0) as usize).min(3),
+                    (c.at(i).max(0.0) as usize).min(3),
+                );
                 let mut a = m.at(i).to_cols_array();
                 a[r * 4 + c] = x.at(i);
                 Mat4::from_cols_array(&a)
@@ -1010,10 +1315,16 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         MTranslate => {
             let (m, v) = (arg(ex, args, 0).m(), arg(ex, args, 1).t());
             // RSL: translate(m, t) = translate(t) applied before m  (row vectors: T * m).
-            write_m(&mut out, n, varying_any!(), |i| m.at(i) * Mat4::from_translation(v.at(i)));
+            write_m(&mut out, n, varying_any!(), |i| {
+                m.at(i) * Mat4::from_translation(v.at(i))
+            });
         }
         MRotate => {
-            let (m, a, v) = (arg(ex, args, 0).m(), arg(ex, args, 1).f(), arg(ex, args, 2).t());
+            let (m, a, v) = (
+                arg(ex, args, 0).m(),
+                arg(ex, args, 1).f(),
+                arg(ex, args, 2).t(),
+            );
             write_m(&mut out, n, varying_any!(), |i| {
                 let ax = normalize(v.at(i));
                 if ax == Vec3::ZERO {
@@ -1025,10 +1336,15 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         MScale => {
             let (m, s) = (arg(ex, args, 0).m(), arg(ex, args, 1).t());
-            write_m(&mut out, n, varying_any!(), |i| m.at(i) * Mat4::from_scale(s.at(i)));
+            write_m(&mut out, n, varying_any!(), |i| {
+                m.at(i) * Mat4::from_scale(s.at(i))
+            });
         }
         Concat => {
-            let s: String = args.iter().map(|r| ex.regs[*r as usize].s().to_string()).collect();
+            let s: String = args
+                .iter()
+                .map(|r| ex.regs[*r as usize].s().to_string())
+                .collect();
             out = Slot::S(Arc::from(s));
         }
         Format | Printf => {
@@ -1073,15 +1389,34 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let mut c = vec![Vec3::ZERO; n];
             if f == SpecularBrdf {
                 // specularbrdf(L, N, V, roughness) for one light direction.
-                let (l, nn, vv, r) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).t(), arg(ex, args, 3).f());
+                let (l, nn, vv, r) = (
+                    arg(ex, args, 0).t(),
+                    arg(ex, args, 1).t(),
+                    arg(ex, args, 2).t(),
+                    arg(ex, args, 3).f(),
+                );
                 write_t(&mut out, n, varying_any!(), |i| {
-                    Vec3::splat(spec_brdf(normalize(l.at(i)), normalize(nn.at(i)), normalize(vv.at(i)), r.at(i)))
+                    Vec3::splat(spec_brdf(
+                        normalize(l.at(i)),
+                        normalize(nn.at(i)),
+                        normalize(vv.at(i)),
+                        r.at(i),
+                    ))
                 });
                 put(ex, dst, out);
                 return;
             }
-            let (nn, vv, r) = (arg(ex, args, 0).t(), arg(ex, args, 1).t(), arg(ex, args, 2).f());
-            for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nonspecular) {
+            let (nn, vv, r) = (
+                arg(ex, args, 0).t(),
+                arg(ex, args, 1).t(),
+                arg(ex, args, 2).f(),
+            );
+            for l in ex
+                .env
+                .lights
+                .iter()
+                .filter(|l| !l.ambient && !l.nonspecular)
+            {
                 for i in 0..n {
                     if !l.lit[i] {
                         continue;
@@ -1103,7 +1438,11 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             out = Slot::VT(c);
         }
         Trace => {
-            out = if ex.prog.regs[dst as usize].kind == Kind::Float { Slot::F(0.0) } else { Slot::T(Vec3::ZERO) };
+            out = if ex.prog.regs[dst as usize].kind == Kind::Float {
+                Slot::F(0.0)
+            } else {
+                Slot::T(Vec3::ZERO)
+            };
             ex.warn(span, "trace() returns black: arbor does not ray trace");
         }
         TextureF | TextureC | EnvironmentF | EnvironmentC | Shadow | Bump => {
@@ -1128,7 +1467,11 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
 }
 
 fn iper(p: Vec3) -> IVec3 {
-    IVec3::new(pn::period_from_float(p.x), pn::period_from_float(p.y), pn::period_from_float(p.z))
+    IVec3::new(
+        pn::period_from_float(p.x),
+        pn::period_from_float(p.y),
+        pn::period_from_float(p.z),
+    )
 }
 
 fn pn_hash(seed: u32, site: u32, i: u32, k: u32) -> f32 {
@@ -1344,7 +1687,13 @@ pub fn simple_match(pat: &str, s: &str) -> bool {
     (0..=s.len()).any(|k| m(&p, &s[k..]))
 }
 
-fn texture_call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span) -> Slot {
+fn texture_call(
+    ex: &mut Exec,
+    f: Builtin,
+    dst: Reg,
+    args: &[Reg],
+    span: crate::diag::Span,
+) -> Slot {
     use Builtin::*;
     let n = ex.n;
     let name = arg(ex, args, 0).s();
@@ -1355,7 +1704,12 @@ fn texture_call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::
         (TextureF | TextureC | Bump, k) => k,
         (_, k) => k,
     };
-    let mut params = TextureParams { fill: 0.0, filter: "box".into(), samples: 16.0, ..Default::default() };
+    let mut params = TextureParams {
+        fill: 0.0,
+        filter: "box".into(),
+        samples: 16.0,
+        ..Default::default()
+    };
     let mut k = 3 + ncoord_regs;
     while k + 1 < args.len() {
         let pname = arg(ex, args, k).s();
@@ -1385,30 +1739,53 @@ fn texture_call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::
     if let (Some(tex), TextureF | TextureC) = (ex.env.textures, f) {
         // Build per-point (s,t) footprints: 4 corners from derivatives when only (s,t) given.
         let (nu, nv) = (ex.env.nu, ex.env.nv);
-        let coords: Vec<Vec<f32>> = (0..ncoord_regs).map(|c| vec_f(arg(ex, args, 3 + c), n)).collect();
+        let coords: Vec<Vec<f32>> = (0..ncoord_regs)
+            .map(|c| vec_f(arg(ex, args, 3 + c), n))
+            .collect();
         let st: Vec<[f32; 8]> = if ncoord_regs == 8 {
-            (0..n).map(|i| std::array::from_fn(|c| coords[c][i])).collect()
+            (0..n)
+                .map(|i| std::array::from_fn(|c| coords[c][i]))
+                .collect()
         } else {
             let (s, t) = (&coords[0], &coords[1]);
             let (dsu, dsv) = (deriv_f(s, nu, nv, 0, 1.0), deriv_f(s, nu, nv, 1, 1.0));
             let (dtu, dtv) = (deriv_f(t, nu, nv, 0, 1.0), deriv_f(t, nu, nv, 1, 1.0));
             (0..n)
                 .map(|i| {
-                    let (s0, t0) = (s[i] - 0.5 * (dsu[i] + dsv[i]), t[i] - 0.5 * (dtu[i] + dtv[i]));
-                    [s0, t0, s0 + dsu[i], t0 + dtu[i], s0 + dsv[i], t0 + dtv[i], s0 + dsu[i] + dsv[i], t0 + dtu[i] + dtv[i]]
+                    let (s0, t0) = (
+                        s[i] - 0.5 * (dsu[i] + dsv[i]),
+                        t[i] - 0.5 * (dtu[i] + dtv[i]),
+                    );
+                    [
+                        s0,
+                        t0,
+                        s0 + dsu[i],
+                        t0 + dtu[i],
+                        s0 + dsv[i],
+                        t0 + dtv[i],
+                        s0 + dsu[i] + dsv[i],
+                        t0 + dtu[i] + dtv[i],
+                    ]
                 })
                 .collect()
         };
         let mut buf = vec![0f32; n * nchan];
         if tex.texture(&name, chan, nchan, &st, &params, &mut buf) {
             return if is_color {
-                Slot::VT((0..n).map(|i| Vec3::new(buf[i * 3], buf[i * 3 + 1], buf[i * 3 + 2])).collect())
+                Slot::VT(
+                    (0..n)
+                        .map(|i| Vec3::new(buf[i * 3], buf[i * 3 + 1], buf[i * 3 + 2]))
+                        .collect(),
+                )
             } else {
                 Slot::VF(buf)
             };
         }
     }
-    ex.warn(span, format!("texture \"{name}\" is not available; using the fill value {fill}"));
+    ex.warn(
+        span,
+        format!("texture \"{name}\" is not available; using the fill value {fill}"),
+    );
     default_texture(f, n, fill, dst, ex)
 }
 
@@ -1432,7 +1809,10 @@ fn default_texture(f: Builtin, n: usize, fill: f32, dst: Reg, ex: &Exec) -> Slot
 fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
     let which = arg(ex, args, 0).s();
     let (name, ty_idx) = if f == Builtin::TextureInfo {
-        (format!("{}\u{0}{}", arg(ex, args, 1).s(), arg(ex, args, 2).s()), 3)
+        (
+            format!("{}\u{0}{}", arg(ex, args, 1).s(), arg(ex, args, 2).s()),
+            3,
+        )
     } else {
         (arg(ex, args, 1).s().to_string(), 2)
     };
@@ -1440,7 +1820,9 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
     let outs: Vec<Reg> = args[ty_idx + 1..].to_vec();
     let value: Option<InfoValue> = match &*which {
         "lightsource" => {
-            let Some(li) = ex.current_light else { return false };
+            let Some(li) = ex.current_light else {
+                return false;
+            };
             let light = &ex.env.lights[li];
             match light.outputs.iter().find(|(n, _)| *n == name) {
                 Some((_, s)) => {
@@ -1455,7 +1837,10 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
         }
         "attribute" | "option" | "rendererinfo" | "textureinfo" => (ex.env.info)(&which, &name),
         other => {
-            ex.warn(ex.prog.span, format!("message passing `{other}()` is not supported; it reports \"not found\""));
+            ex.warn(
+                ex.prog.span,
+                format!("message passing `{other}()` is not supported; it reports \"not found\""),
+            );
             None
         }
     };
@@ -1485,7 +1870,11 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
                         return false;
                     }
                     for (k, &r) in outs.iter().enumerate() {
-                        set_out(ex, r, Slot::T(Vec3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2])));
+                        set_out(
+                            ex,
+                            r,
+                            Slot::T(Vec3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2])),
+                        );
                     }
                 }
                 "matrix" => {
@@ -1516,7 +1905,11 @@ mod tests {
 
     #[test]
     fn fresnel_at_normal_incidence_is_004_for_glass() {
-        let (kr, kt, _, _) = fresnel(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0), 1.0 / 1.5);
+        let (kr, kt, _, _) = fresnel(
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            1.0 / 1.5,
+        );
         assert!((kr - 0.04).abs() < 1e-4, "Kr = {kr}");
         assert!((kr + kt - 1.0).abs() < 1e-6);
     }

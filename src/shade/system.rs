@@ -35,9 +35,18 @@ fn uses_lights(instrs: &[Instr]) -> bool {
     instrs.iter().any(|i| match i {
         Instr::Illuminance { .. } => true,
         Instr::Call { f, .. } => matches!(f, Ambient | Diffuse | Specular | Phong),
-        Instr::If { then, otherwise, .. } => uses_lights(then) || uses_lights(otherwise),
-        Instr::Loop { cond_code, body, step, .. } => uses_lights(cond_code) || uses_lights(body) || uses_lights(step),
-        Instr::Function { body } | Instr::Illuminate { body, .. } | Instr::Solar { body, .. } => uses_lights(body),
+        Instr::If {
+            then, otherwise, ..
+        } => uses_lights(then) || uses_lights(otherwise),
+        Instr::Loop {
+            cond_code,
+            body,
+            step,
+            ..
+        } => uses_lights(cond_code) || uses_lights(body) || uses_lights(step),
+        Instr::Function { body } | Instr::Illuminate { body, .. } | Instr::Solar { body, .. } => {
+            uses_lights(body)
+        }
         Instr::Gather { otherwise } => uses_lights(otherwise),
         _ => false,
     })
@@ -63,7 +72,12 @@ impl<'a> ShadeSystem<'a> {
             self.diags.report(
                 Diag::error(
                     "shade::kind",
-                    format!("`{}` is a {} shader, used as a {} shader", sref.name, p.kind.name(), kind.name()),
+                    format!(
+                        "`{}` is a {} shader, used as a {} shader",
+                        sref.name,
+                        p.kind.name(),
+                        kind.name()
+                    ),
                 )
                 .label(sref.span, "named here"),
             );
@@ -78,9 +92,15 @@ impl<'a> ShadeSystem<'a> {
 
     /// Runs the displacement shader, if any: moves P, updates N and Ng.
     pub fn displace(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
-        let Some(p) = scene.primitives.get(prim) else { return };
-        let Some(sref) = p.attributes.displacement.clone() else { return };
-        let Some(prog) = self.program(&sref, ShaderKind::Displacement) else { return };
+        let Some(p) = scene.primitives.get(prim) else {
+            return;
+        };
+        let Some(sref) = p.attributes.displacement.clone() else {
+            return;
+        };
+        let Some(prog) = self.program(&sref, ShaderKind::Displacement) else {
+            return;
+        };
         let ctx = self.ctx(scene, camera, prim);
         let n0 = grid.n.clone();
         let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None);
@@ -92,7 +112,10 @@ impl<'a> ShadeSystem<'a> {
                 let nn = slot_vt(&regs[g.reg as usize], grid.len());
                 grid.n = nn;
             }
-            for (name, slot) in ["s", "t"].iter().filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize]))) {
+            for (name, slot) in ["s", "t"]
+                .iter()
+                .filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize])))
+            {
                 let v = slot_vf(slot, grid.len());
                 if name == "s" {
                     grid.s = v;
@@ -128,10 +151,14 @@ impl<'a> ShadeSystem<'a> {
 
     /// Runs surface (with lights) and atmosphere shaders; fills ci/oi.
     pub fn shade(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
-        let Some(p) = scene.primitives.get(prim) else { return };
+        let Some(p) = scene.primitives.get(prim) else {
+            return;
+        };
         let ctx = self.ctx(scene, camera, prim);
         let surface = match &p.attributes.surface {
-            Some(s) => self.program(s, ShaderKind::Surface).map(|prog| (prog, s.clone())),
+            Some(s) => self
+                .program(s, ShaderKind::Surface)
+                .map(|prog| (prog, s.clone())),
             None => None,
         };
         let (prog, sref) = match surface {
@@ -149,7 +176,11 @@ impl<'a> ShadeSystem<'a> {
                 None => return,
             },
         };
-        let lights = if uses_lights(&prog.body) { self.eval_lights(grid, &ctx) } else { Vec::new() };
+        let lights = if uses_lights(&prog.body) {
+            self.eval_lights(grid, &ctx)
+        } else {
+            Vec::new()
+        };
         if let Some(regs) = self.run(&prog, &sref, grid, &ctx, &lights, None, None) {
             let n = grid.len();
             if let Some(g) = prog.global("Ci") {
@@ -161,7 +192,12 @@ impl<'a> ShadeSystem<'a> {
             // Output parameters become arbitrary output variables.
             grid.outputs.clear();
             for par in prog.params.iter().filter(|p| p.output) {
-                grid.outputs.push(slot_to_gridvar(&par.name, par.ty, &regs[par.reg as usize], n));
+                grid.outputs.push(slot_to_gridvar(
+                    &par.name,
+                    par.ty,
+                    &regs[par.reg as usize],
+                    n,
+                ));
             }
             for gname in ["N", "P", "s", "t", "Cs", "Os"] {
                 if let Some(g) = prog.global(gname) {
@@ -171,7 +207,8 @@ impl<'a> ShadeSystem<'a> {
                         "Cs" | "Os" => BaseType::Color,
                         _ => BaseType::Float,
                     };
-                    grid.outputs.push(slot_to_gridvar(gname, ty, &regs[g.reg as usize], n));
+                    grid.outputs
+                        .push(slot_to_gridvar(gname, ty, &regs[g.reg as usize], n));
                 }
             }
         } else {
@@ -182,7 +219,9 @@ impl<'a> ShadeSystem<'a> {
             if let Some(aprog) = self.program(&aref, ShaderKind::Volume) {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
-                if let Some(regs) = self.run(&aprog, &aref, grid, &ctx, &lights, Some((&ci, &oi)), None) {
+                if let Some(regs) =
+                    self.run(&aprog, &aref, grid, &ctx, &lights, Some((&ci, &oi)), None)
+                {
                     let n = grid.len();
                     if let Some(g) = aprog.global("Ci") {
                         grid.ci = slot_vt(&regs[g.reg as usize], n);
@@ -204,7 +243,10 @@ impl<'a> ShadeSystem<'a> {
         if bad {
             self.diags.report(Diag::warning(
                 "shade::nan",
-                format!("shader `{}` produced NaN or infinite colours (rendered black)", sref.name),
+                format!(
+                    "shader `{}` produced NaN or infinite colours (rendered black)",
+                    sref.name
+                ),
             ));
         }
     }
@@ -213,16 +255,30 @@ impl<'a> ShadeSystem<'a> {
         let n = grid.len();
         let mut out = Vec::new();
         for &li in &ctx.attrs.lights_on {
-            let Some(light) = ctx.scene.lights.get(li) else { continue };
-            let Some(prog) = self.program(&light.shader, ShaderKind::Light) else { continue };
+            let Some(light) = ctx.scene.lights.get(li) else {
+                continue;
+            };
+            let Some(prog) = self.program(&light.shader, ShaderKind::Light) else {
+                continue;
+            };
             let ns: Vec<Vec3> = grid.n.iter().map(|v| v.normalize_or_zero()).collect();
-            let state = LightState { ran: false, lit: vec![false; n], ps: grid.p.clone(), ns };
+            let state = LightState {
+                ran: false,
+                lit: vec![false; n],
+                ps: grid.p.clone(),
+                ns,
+            };
             let mut st = Some(state);
-            let Some(regs) = self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st)) else { continue };
+            let Some(regs) = self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st))
+            else {
+                continue;
+            };
             let state = st.unwrap_or_default();
             let ambient = !state.ran;
             let get = |name: &str, def: Vec3| -> Vec<Vec3> {
-                prog.global(name).map(|g| slot_vt(&regs[g.reg as usize], n)).unwrap_or_else(|| vec![def; n])
+                prog.global(name)
+                    .map(|g| slot_vt(&regs[g.reg as usize], n))
+                    .unwrap_or_else(|| vec![def; n])
             };
             let l: Vec<Vec3> = get("L", Vec3::ZERO).into_iter().map(|v| -v).collect();
             let mut cl = get("Cl", Vec3::ZERO);
@@ -247,7 +303,17 @@ impl<'a> ShadeSystem<'a> {
                 }
                 outputs.push((par.name.clone(), slot));
             }
-            out.push(LightResult { ambient, lit, l, cl, ol, category, nondiffuse, nonspecular, outputs });
+            out.push(LightResult {
+                ambient,
+                lit,
+                l,
+                cl,
+                ol,
+                category,
+                nondiffuse,
+                nonspecular,
+                outputs,
+            });
         }
         out
     }
@@ -277,7 +343,9 @@ impl<'a> ShadeSystem<'a> {
         };
         let attrs = ctx.attrs;
         let scene = ctx.scene;
-        let info = move |which: &str, name: &str| -> Option<InfoValue> { info_query(scene, attrs, camera, which, name) };
+        let info = move |which: &str, name: &str| -> Option<InfoValue> {
+            info_query(scene, attrs, camera, which, name)
+        };
         let flip = match (grid.ng.first(), grid.dpdu.first(), grid.dpdv.first()) {
             (Some(ng), Some(a), Some(b)) => ng.dot(a.cross(*b)) < 0.0,
             _ => false,
@@ -374,7 +442,14 @@ fn fit(v: Slot, varying: bool, n: usize) -> Slot {
 
 /// Instance values (from the Surface/LightSource request), then primitive variables of the same
 /// name, override the defaults.
-fn bind_params(ex: &mut Exec, prog: &Program, sref: &ShaderRef, grid: &Grid, camera_from_shader: Mat4, diags: &Diagnostics) {
+fn bind_params(
+    ex: &mut Exec,
+    prog: &Program,
+    sref: &ShaderRef,
+    grid: &Grid,
+    camera_from_shader: Mat4,
+    diags: &Diagnostics,
+) {
     let n = grid.len();
     for par in &prog.params {
         let count = par.array.unwrap_or(1);
@@ -401,11 +476,19 @@ fn bind_params(ex: &mut Exec, prog: &Program, sref: &ShaderRef, grid: &Grid, cam
                                 a.copy_from_slice(x);
                                 Slot::M(Mat4::from_cols_array(&a))
                             }
-                            BaseType::Point => Slot::T(camera_from_shader.transform_point3(Vec3::new(x[0], x[1], x[2]))),
-                            BaseType::Vector => Slot::T(camera_from_shader.transform_vector3(Vec3::new(x[0], x[1], x[2]))),
+                            BaseType::Point => Slot::T(
+                                camera_from_shader.transform_point3(Vec3::new(x[0], x[1], x[2])),
+                            ),
+                            BaseType::Vector => Slot::T(
+                                camera_from_shader.transform_vector3(Vec3::new(x[0], x[1], x[2])),
+                            ),
                             BaseType::Normal => {
                                 let m = glam::Mat3::from_mat4(camera_from_shader);
-                                let m = if m.determinant() != 0.0 { m.inverse().transpose() } else { m };
+                                let m = if m.determinant() != 0.0 {
+                                    m.inverse().transpose()
+                                } else {
+                                    m
+                                };
                                 Slot::T(m * Vec3::new(x[0], x[1], x[2]))
                             }
                             _ => Slot::T(Vec3::new(x[0], x[1], x[2])),
@@ -416,7 +499,12 @@ fn bind_params(ex: &mut Exec, prog: &Program, sref: &ShaderRef, grid: &Grid, cam
                 _ => diags.report(
                     Diag::warning(
                         "shade::param",
-                        format!("value of `{}` does not fit the {} parameter of `{}` (ignored)", par.name, par.ty.name(), sref.name),
+                        format!(
+                            "value of `{}` does not fit the {} parameter of `{}` (ignored)",
+                            par.name,
+                            par.ty.name(),
+                            sref.name
+                        ),
                     )
                     .label(p.span, "value"),
                 ),
@@ -428,7 +516,15 @@ fn bind_params(ex: &mut Exec, prog: &Program, sref: &ShaderRef, grid: &Grid, cam
     }
 }
 
-fn bind_gridvar(ex: &mut Exec, reg: u32, ty: BaseType, count: usize, varying: bool, gv: &GridVar, n: usize) {
+fn bind_gridvar(
+    ex: &mut Exec,
+    reg: u32,
+    ty: BaseType,
+    count: usize,
+    varying: bool,
+    gv: &GridVar,
+    n: usize,
+) {
     let w = gv.width();
     let comps = match ty {
         BaseType::Float => 1,
@@ -461,7 +557,15 @@ fn bind_gridvar(ex: &mut Exec, reg: u32, ty: BaseType, count: usize, varying: bo
             match comps {
                 1 => Slot::VF((0..n).map(|i| gv.floats[i * w + off]).collect()),
                 3 => Slot::VT(
-                    (0..n).map(|i| Vec3::new(gv.floats[i * w + off], gv.floats[i * w + off + 1], gv.floats[i * w + off + 2])).collect(),
+                    (0..n)
+                        .map(|i| {
+                            Vec3::new(
+                                gv.floats[i * w + off],
+                                gv.floats[i * w + off + 1],
+                                gv.floats[i * w + off + 2],
+                            )
+                        })
+                        .collect(),
                 ),
                 _ => continue,
             }
@@ -483,17 +587,42 @@ fn slot_vf(s: &Slot, n: usize) -> Vec<f32> {
 fn slot_to_gridvar(name: &str, ty: BaseType, s: &Slot, n: usize) -> GridVar {
     let (pty, floats) = match ty {
         BaseType::Float => (ParamType::Float, slot_vf(s, n)),
-        BaseType::Color => (ParamType::Color, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
-        BaseType::Normal => (ParamType::Normal, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
-        BaseType::Vector => (ParamType::Vector, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
-        BaseType::Point => (ParamType::Point, slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect()),
+        BaseType::Color => (
+            ParamType::Color,
+            slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect(),
+        ),
+        BaseType::Normal => (
+            ParamType::Normal,
+            slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect(),
+        ),
+        BaseType::Vector => (
+            ParamType::Vector,
+            slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect(),
+        ),
+        BaseType::Point => (
+            ParamType::Point,
+            slot_vt(s, n).iter().flat_map(|v| v.to_array()).collect(),
+        ),
         _ => (ParamType::Float, vec![0.0; n]),
     };
-    GridVar { name: name.to_string(), ty: pty, array_len: 1, uniform: false, floats, strings: Vec::new() }
+    GridVar {
+        name: name.to_string(),
+        ty: pty,
+        array_len: 1,
+        uniform: false,
+        floats,
+        strings: Vec::new(),
+    }
 }
 
 /// attribute(), option(), rendererinfo() and textureinfo() answers (RISpec Tables 15.4–15.6).
-fn info_query(scene: &Scene, attrs: &Attributes, camera: &Camera, which: &str, name: &str) -> Option<InfoValue> {
+fn info_query(
+    scene: &Scene,
+    attrs: &Attributes,
+    camera: &Camera,
+    which: &str,
+    name: &str,
+) -> Option<InfoValue> {
     let o = &scene.options;
     let f = |v: &[f32]| Some(InfoValue::Floats(v.to_vec()));
     match which {
@@ -502,10 +631,15 @@ fn info_query(scene: &Scene, attrs: &Attributes, camera: &Camera, which: &str, n
             "Sides" => f(&[attrs.sides as f32]),
             "Matte" => f(&[if attrs.matte { 1.0 } else { 0.0 }]),
             "displacementbound:sphere" => f(&[attrs.displacement_bound]),
-            "displacementbound:coordinatesystem" => Some(InfoValue::Str(attrs.displacement_bound_space.clone())),
+            "displacementbound:coordinatesystem" => {
+                Some(InfoValue::Str(attrs.displacement_bound_space.clone()))
+            }
             "identifier:name" => attrs.identifier.clone().map(InfoValue::Str),
             other => {
-                let key = other.strip_prefix("user:").map(|k| format!("user:{k}")).unwrap_or_else(|| other.to_string());
+                let key = other
+                    .strip_prefix("user:")
+                    .map(|k| format!("user:{k}"))
+                    .unwrap_or_else(|| other.to_string());
                 attrs.user.get(&key).map(|p| match &p.data {
                     ParamData::Floats(v) => InfoValue::Floats(v.clone()),
                     ParamData::Strings(s) => InfoValue::Str(s.first().cloned().unwrap_or_default()),
@@ -535,5 +669,14 @@ fn info_query(scene: &Scene, attrs: &Attributes, camera: &Camera, which: &str, n
             _ => None,
         },
         _ => None,
+    }
+}
+
+impl crate::render::GridShader for ShadeSystem<'_> {
+    fn displace(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
+        ShadeSystem::displace(self, scene, camera, prim, grid)
+    }
+    fn shade(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
+        ShadeSystem::shade(self, scene, camera, prim, grid)
     }
 }

@@ -91,54 +91,170 @@ pub enum Space {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Instr {
     /// dst = src under the running mask (broadcasting a uniform source).
-    Mov { dst: Reg, src: Reg },
+    Mov {
+        dst: Reg,
+        src: Reg,
+    },
     /// Unmasked copy into a temporary.
-    Copy { dst: Reg, src: Reg },
-    Arith { op: Arith, kind: Kind, dst: Reg, a: Reg, b: Reg },
+    Copy {
+        dst: Reg,
+        src: Reg,
+    },
+    Arith {
+        op: Arith,
+        kind: Kind,
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
     /// triple · float / float · triple scaling is lowered as Promote + Arith.
-    Neg { kind: Kind, dst: Reg, a: Reg },
+    Neg {
+        kind: Kind,
+        dst: Reg,
+        a: Reg,
+    },
     /// float → triple (x,x,x) or float → matrix (x·I).
-    Promote { to: Kind, dst: Reg, a: Reg },
-    Dot { dst: Reg, a: Reg, b: Reg },
-    Cross { dst: Reg, a: Reg, b: Reg },
-    Compare { op: Cmp, kind: Kind, dst: Reg, a: Reg, b: Reg },
-    And { dst: Reg, a: Reg, b: Reg },
-    Or { dst: Reg, a: Reg, b: Reg },
-    Not { dst: Reg, a: Reg },
+    Promote {
+        to: Kind,
+        dst: Reg,
+        a: Reg,
+    },
+    Dot {
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
+    Cross {
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
+    Compare {
+        op: Cmp,
+        kind: Kind,
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
+    And {
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
+    Or {
+        dst: Reg,
+        a: Reg,
+        b: Reg,
+    },
+    Not {
+        dst: Reg,
+        a: Reg,
+    },
     /// dst = cond ? a : b (both evaluated).
-    Select { kind: Kind, dst: Reg, cond: Reg, a: Reg, b: Reg },
+    Select {
+        kind: Kind,
+        dst: Reg,
+        cond: Reg,
+        a: Reg,
+        b: Reg,
+    },
     /// (x, y, z) → triple
-    MakeTriple { dst: Reg, x: Reg, y: Reg, z: Reg },
+    MakeTriple {
+        dst: Reg,
+        x: Reg,
+        y: Reg,
+        z: Reg,
+    },
     /// 16 floats → matrix (row-major as written).
-    MakeMatrix { dst: Reg, elems: Box<[Reg; 16]> },
+    MakeMatrix {
+        dst: Reg,
+        elems: Box<[Reg; 16]>,
+    },
     /// Converts a triple from a colour space to rgb.
-    ColorFrom { dst: Reg, space: Reg, a: Reg },
+    ColorFrom {
+        dst: Reg,
+        space: Reg,
+        a: Reg,
+    },
     /// Transforms from `from` to `to` space.
-    Transform { kind: XformKind, dst: Reg, from: Space, to: Space, a: Reg },
+    Transform {
+        kind: XformKind,
+        dst: Reg,
+        from: Space,
+        to: Space,
+        a: Reg,
+    },
     /// matrix "space" x: the matrix that maps `space` to current, times x.
-    SpaceMatrix { dst: Reg, space: Reg },
+    SpaceMatrix {
+        dst: Reg,
+        space: Reg,
+    },
     /// Array element read with a (possibly varying) index; `base..base+len` hold the elements.
-    GetIndex { kind: Kind, dst: Reg, base: Reg, len: u32, index: Reg, span: Span },
+    GetIndex {
+        kind: Kind,
+        dst: Reg,
+        base: Reg,
+        len: u32,
+        index: Reg,
+        span: Span,
+    },
     /// Array element store under the mask.
-    SetIndex { kind: Kind, base: Reg, len: u32, index: Reg, src: Reg, span: Span },
+    SetIndex {
+        kind: Kind,
+        base: Reg,
+        len: u32,
+        index: Reg,
+        src: Reg,
+        span: Span,
+    },
     /// A built-in function.
-    Call { f: Builtin, dst: Reg, args: Vec<Reg>, span: Span },
-    If { cond: Reg, then: Vec<Instr>, otherwise: Vec<Instr> },
+    Call {
+        f: Builtin,
+        dst: Reg,
+        args: Vec<Reg>,
+        span: Span,
+    },
+    If {
+        cond: Reg,
+        then: Vec<Instr>,
+        otherwise: Vec<Instr>,
+    },
     /// `cond_code` computes `cond`; body; step.
-    Loop { cond_code: Vec<Instr>, cond: Reg, body: Vec<Instr>, step: Vec<Instr> },
+    Loop {
+        cond_code: Vec<Instr>,
+        cond: Reg,
+        body: Vec<Instr>,
+        step: Vec<Instr>,
+    },
     Break(u32),
     Continue(u32),
     /// An inlined function body: `return` leaves it.
-    Function { body: Vec<Instr> },
+    Function {
+        body: Vec<Instr>,
+    },
     Return,
     /// illuminance: for every non-ambient light, with L (surface→light), Cl, Ol bound.
-    Illuminance { category: Option<Reg>, pos: Reg, axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    Illuminance {
+        category: Option<Reg>,
+        pos: Reg,
+        axis: Option<(Reg, Reg)>,
+        body: Vec<Instr>,
+    },
     /// illuminate(from [, axis, angle]) in light shaders.
-    Illuminate { pos: Reg, axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    Illuminate {
+        pos: Reg,
+        axis: Option<(Reg, Reg)>,
+        body: Vec<Instr>,
+    },
     /// solar([axis, angle]) in light shaders.
-    Solar { axis: Option<(Reg, Reg)>, body: Vec<Instr> },
+    Solar {
+        axis: Option<(Reg, Reg)>,
+        body: Vec<Instr>,
+    },
     /// gather: no ray tracing; runs the `otherwise` branch (all rays miss).
-    Gather { otherwise: Vec<Instr> },
+    Gather {
+        otherwise: Vec<Instr>,
+    },
 }
 
 /// A shader parameter as the program exposes it.
@@ -193,8 +309,15 @@ impl Program {
             v.iter()
                 .map(|i| {
                     1 + match i {
-                        Instr::If { then, otherwise, .. } => count(then) + count(otherwise),
-                        Instr::Loop { cond_code, body, step, .. } => count(cond_code) + count(body) + count(step),
+                        Instr::If {
+                            then, otherwise, ..
+                        } => count(then) + count(otherwise),
+                        Instr::Loop {
+                            cond_code,
+                            body,
+                            step,
+                            ..
+                        } => count(cond_code) + count(body) + count(step),
                         Instr::Function { body }
                         | Instr::Illuminance { body, .. }
                         | Instr::Illuminate { body, .. }
@@ -217,7 +340,11 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
     for i in instrs {
         let pad = "  ".repeat(depth);
         match i {
-            Instr::If { cond, then, otherwise } => {
+            Instr::If {
+                cond,
+                then,
+                otherwise,
+            } => {
                 writeln!(f, "{pad}if {}", r(*cond))?;
                 list(f, then, depth + 1)?;
                 if !otherwise.is_empty() {
@@ -225,7 +352,12 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                     list(f, otherwise, depth + 1)?;
                 }
             }
-            Instr::Loop { cond_code, cond, body, step } => {
+            Instr::Loop {
+                cond_code,
+                cond,
+                body,
+                step,
+            } => {
                 writeln!(f, "{pad}loop")?;
                 list(f, cond_code, depth + 1)?;
                 writeln!(f, "{pad}  while {}", r(*cond))?;
@@ -239,8 +371,19 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 writeln!(f, "{pad}function")?;
                 list(f, body, depth + 1)?;
             }
-            Instr::Illuminance { category, pos, axis, body } => {
-                writeln!(f, "{pad}illuminance cat={:?} P={} axis={:?}", category, r(*pos), axis)?;
+            Instr::Illuminance {
+                category,
+                pos,
+                axis,
+                body,
+            } => {
+                writeln!(
+                    f,
+                    "{pad}illuminance cat={:?} P={} axis={:?}",
+                    category,
+                    r(*pos),
+                    axis
+                )?;
                 list(f, body, depth + 1)?;
             }
             Instr::Illuminate { pos, axis, body } => {
@@ -255,15 +398,29 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 writeln!(f, "{pad}gather (no rays) else")?;
                 list(f, otherwise, depth + 1)?;
             }
-            Instr::Call { f: func, dst, args, .. } => {
+            Instr::Call {
+                f: func, dst, args, ..
+            } => {
                 let a: Vec<String> = args.iter().map(|&x| r(x)).collect();
                 writeln!(f, "{pad}{} = {:?}({})", r(*dst), func, a.join(", "))?;
             }
             Instr::Mov { dst, src } => writeln!(f, "{pad}{} <- {}", r(*dst), r(*src))?,
             Instr::Copy { dst, src } => writeln!(f, "{pad}{} = {}", r(*dst), r(*src))?,
-            Instr::Arith { op, kind, dst, a, b } => {
-                writeln!(f, "{pad}{} = {:?}.{:?} {} {}", r(*dst), op, kind, r(*a), r(*b))?
-            }
+            Instr::Arith {
+                op,
+                kind,
+                dst,
+                a,
+                b,
+            } => writeln!(
+                f,
+                "{pad}{} = {:?}.{:?} {} {}",
+                r(*dst),
+                op,
+                kind,
+                r(*a),
+                r(*b)
+            )?,
             other => writeln!(f, "{pad}{:?}", other)?,
         }
     }
@@ -272,7 +429,13 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
 
 impl fmt::Display for Program {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{} {} ({} registers)", self.kind.name(), self.name, self.regs.len())?;
+        writeln!(
+            f,
+            "{} {} ({} registers)",
+            self.kind.name(),
+            self.name,
+            self.regs.len()
+        )?;
         for p in &self.params {
             writeln!(
                 f,

@@ -111,7 +111,10 @@ pub fn compile_source(
         }
     }
     if !any_shader {
-        diags.report(Diag::warning("sl::empty", format!("`{name}` defines no shader")));
+        diags.report(Diag::warning(
+            "sl::empty",
+            format!("`{name}` defines no shader"),
+        ));
     }
     out
 }
@@ -124,17 +127,33 @@ pub struct ShaderLibrary {
 
 impl ShaderLibrary {
     pub fn new(opts: CompileOptions) -> ShaderLibrary {
-        ShaderLibrary { opts, cache: Mutex::new(HashMap::new()) }
+        ShaderLibrary {
+            opts,
+            cache: Mutex::new(HashMap::new()),
+        }
     }
 
     /// The program for a shader name ("plastic", "myshaders/wood", "wood.sl"); None (with an
     /// error reported once) when it cannot be found or does not compile.
-    pub fn get(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
-        if let Some(p) = self.cache.lock().unwrap_or_else(|e| e.into_inner()).get(name) {
+    pub fn get(
+        &self,
+        name: &str,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Arc<Program>> {
+        if let Some(p) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(name)
+        {
             return p.clone();
         }
         let result = self.load(name, sources, diags);
-        self.cache.lock().unwrap_or_else(|e| e.into_inner()).insert(name.to_string(), result.clone());
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(name.to_string(), result.clone());
         result
     }
 
@@ -146,17 +165,43 @@ impl ShaderLibrary {
             .or_else(|| name.strip_suffix(".sdr"))
             .unwrap_or(name);
         let file_name = format!("{stem}.sl");
-        let base = Path::new(stem).file_name().and_then(|s| s.to_str()).unwrap_or(stem).to_string();
-        let mut candidates: Vec<PathBuf> = self.opts.search_paths.iter().map(|d| d.join(&file_name)).collect();
+        let base = Path::new(stem)
+            .file_name()
+            .and_then(|s| s.to_str())
+            .unwrap_or(stem)
+            .to_string();
+        let mut candidates: Vec<PathBuf> = self
+            .opts
+            .search_paths
+            .iter()
+            .map(|d| d.join(&file_name))
+            .collect();
         candidates.push(PathBuf::from(&file_name));
         for c in candidates {
             if let Ok(text) = std::fs::read_to_string(&c) {
-                let progs = compile_source(&c.display().to_string(), &text, Some(&c), sources, diags, &self.opts);
+                let progs = compile_source(
+                    &c.display().to_string(),
+                    &text,
+                    Some(&c),
+                    sources,
+                    diags,
+                    &self.opts,
+                );
                 return pick(progs, &base, name, diags);
             }
         }
-        if let Some((n, text)) = stdlib_shaders().iter().find(|(n, _)| n.strip_suffix(".sl") == Some(&base)) {
-            let progs = compile_source(&format!("<stdlib>/shaders/{n}"), text, None, sources, diags, &self.opts);
+        if let Some((n, text)) = stdlib_shaders()
+            .iter()
+            .find(|(n, _)| n.strip_suffix(".sl") == Some(&base))
+        {
+            let progs = compile_source(
+                &format!("<stdlib>/shaders/{n}"),
+                text,
+                None,
+                sources,
+                diags,
+                &self.opts,
+            );
             return pick(progs, &base, name, diags);
         }
         diags.report(
@@ -169,7 +214,10 @@ impl ShaderLibrary {
 
 fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Option<Arc<Program>> {
     if progs.is_empty() {
-        diags.report(Diag::error("shade::compile", format!("shader `{name}` did not compile")));
+        diags.report(Diag::error(
+            "shade::compile",
+            format!("shader `{name}` did not compile"),
+        ));
         return None;
     }
     let idx = progs.iter().position(|p| p.name == base).unwrap_or(0);

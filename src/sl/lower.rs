@@ -162,7 +162,10 @@ fn ty_name(ty: BaseType, array: Option<usize>) -> String {
 }
 
 /// Compiles one shader definition. `functions` are the file's top-level functions.
-pub fn lower_shader(def: &ShaderDef, functions: &[FuncDef]) -> Result<(Program, Vec<Diag>), Vec<Diag>> {
+pub fn lower_shader(
+    def: &ShaderDef,
+    functions: &[FuncDef],
+) -> Result<(Program, Vec<Diag>), Vec<Diag>> {
     let mut forced: HashSet<Span> = HashSet::new();
     // Each restart marks at least one more declaration varying; bounded.
     for _ in 0..256 {
@@ -179,7 +182,8 @@ pub fn lower_shader(def: &ShaderDef, functions: &[FuncDef]) -> Result<(Program, 
                 continue;
             }
         }
-        let (errors, warnings): (Vec<Diag>, Vec<Diag>) = diags.into_iter().partition(|d| d.is_error());
+        let (errors, warnings): (Vec<Diag>, Vec<Diag>) =
+            diags.into_iter().partition(|d| d.is_error());
         if !errors.is_empty() {
             let mut all = errors;
             all.extend(warnings);
@@ -187,7 +191,11 @@ pub fn lower_shader(def: &ShaderDef, functions: &[FuncDef]) -> Result<(Program, 
         }
         return Ok((prog, warnings));
     }
-    Err(vec![Diag::error("sl::internal", "detail inference did not converge").label(def.span, "in this shader")])
+    Err(vec![Diag::error(
+        "sl::internal",
+        "detail inference did not converge",
+    )
+    .label(def.span, "in this shader")])
 }
 
 impl<'a> Lowerer<'a> {
@@ -227,7 +235,12 @@ impl<'a> Lowerer<'a> {
 
     fn temp(&mut self, ty: BaseType, varying: bool) -> Val {
         let reg = self.new_reg(Kind::of(ty), varying);
-        Val { reg, ty, varying, array: None }
+        Val {
+            reg,
+            ty,
+            varying,
+            array: None,
+        }
     }
 
     fn const_float(&mut self, x: f32) -> Reg {
@@ -268,7 +281,12 @@ impl<'a> Lowerer<'a> {
                 r
             }
         };
-        Val { reg, ty, varying: false, array: None }
+        Val {
+            reg,
+            ty,
+            varying: false,
+            array: None,
+        }
     }
 
     fn const_of(&self, v: &Val) -> Option<&Const> {
@@ -295,7 +313,12 @@ impl<'a> Lowerer<'a> {
     }
 
     fn error_val(&self) -> Val {
-        Val { reg: self.error_reg, ty: BaseType::Float, varying: false, array: None }
+        Val {
+            reg: self.error_reg,
+            ty: BaseType::Float,
+            varying: false,
+            array: None,
+        }
     }
 
     // ---- scopes ----
@@ -326,7 +349,10 @@ impl<'a> Lowerer<'a> {
 
     fn define_function(&mut self, f: &FuncDef) {
         let depth = self.scopes.len();
-        let entry = FuncEntry { def: Rc::new(f.clone()), depth };
+        let entry = FuncEntry {
+            def: Rc::new(f.clone()),
+            depth,
+        };
         if let Some(s) = self.funcs.last_mut() {
             s.entry(f.name.clone()).or_default().push(entry);
         }
@@ -342,10 +368,22 @@ impl<'a> Lowerer<'a> {
                 continue;
             }
             let reg = self.new_reg(Kind::of(ty), varying);
-            self.globals.push(GlobalInfo { name, reg, written: false });
+            self.globals.push(GlobalInfo {
+                name,
+                reg,
+                written: false,
+            });
             self.declare(
                 name,
-                Var { ty, array: None, varying, reg, writable, candidate: None, decl_span: def.span },
+                Var {
+                    ty,
+                    array: None,
+                    varying,
+                    reg,
+                    writable,
+                    candidate: None,
+                    decl_span: def.span,
+                },
             );
         }
         for f in functions {
@@ -362,12 +400,18 @@ impl<'a> Lowerer<'a> {
                     Some(ArraySpec::Unsized) => {
                         // The length comes from the default.
                         match &p.default {
-                            Some(Expr { kind: ExprKind::ArrayLit(items), .. }) => Some(items.len()),
+                            Some(Expr {
+                                kind: ExprKind::ArrayLit(items),
+                                ..
+                            }) => Some(items.len()),
                             _ => {
                                 lw.diags.push(
-                                    Diag::error("sl::array", format!("parameter `{}` has no array length", p.name))
-                                        .label(p.span, "declared here")
-                                        .help("give the array a size or an initialiser like {1, 2, 3}"),
+                                    Diag::error(
+                                        "sl::array",
+                                        format!("parameter `{}` has no array length", p.name),
+                                    )
+                                    .label(p.span, "declared here")
+                                    .help("give the array a size or an initialiser like {1, 2, 3}"),
                                 );
                                 Some(1)
                             }
@@ -396,9 +440,15 @@ impl<'a> Lowerer<'a> {
                         }
                     }
                     None => lw.diags.push(
-                        Diag::error("sl::param", format!("shader parameter `{}` has no default value", p.name))
-                            .label(p.span, "parameter")
-                            .help(format!("every shader parameter needs a default: `{} = …`", p.name)),
+                        Diag::error(
+                            "sl::param",
+                            format!("shader parameter `{}` has no default value", p.name),
+                        )
+                        .label(p.span, "parameter")
+                        .help(format!(
+                            "every shader parameter needs a default: `{} = …`",
+                            p.name
+                        )),
                     ),
                 }
                 params.push(ParamInfo {
@@ -459,19 +509,28 @@ impl<'a> Lowerer<'a> {
                 let v = self.expr(e, Some(var.ty));
                 if let Some(n) = v.array {
                     for i in 0..n.min(var.array.unwrap_or(0)) {
-                        let ev = Val { reg: v.reg + i as Reg, ty: v.ty, varying: v.varying, array: None };
+                        let ev = Val {
+                            reg: v.reg + i as Reg,
+                            ty: v.ty,
+                            varying: v.varying,
+                            array: None,
+                        };
                         self.store_reg(var, var.reg + i as Reg, ev, e.span);
                     }
                 } else {
                     self.diags.push(
-                        Diag::error("sl::array", "an array must be initialised with {…} or another array")
-                            .label(e.span, "not an array"),
+                        Diag::error(
+                            "sl::array",
+                            "an array must be initialised with {…} or another array",
+                        )
+                        .label(e.span, "not an array"),
                     );
                 }
             }
             (ExprKind::ArrayLit(_), None) => {
                 self.diags.push(
-                    Diag::error("sl::array", "{…} initialises arrays only").label(e.span, "not an array variable"),
+                    Diag::error("sl::array", "{…} initialises arrays only")
+                        .label(e.span, "not an array variable"),
                 );
             }
             _ => {
@@ -502,7 +561,12 @@ impl<'a> Lowerer<'a> {
                 self.pop_scope();
             }
             StmtKind::Function(f) => self.define_function(f),
-            StmtKind::VarDecl { is_extern, output: _, ty, vars } => {
+            StmtKind::VarDecl {
+                is_extern,
+                output: _,
+                ty,
+                vars,
+            } => {
                 for v in vars {
                     if *is_extern {
                         match self.lookup(&v.name) {
@@ -524,8 +588,11 @@ impl<'a> Lowerer<'a> {
                                 self.declare(&v.name, var);
                             }
                             None => self.diags.push(
-                                Diag::error("sl::name", format!("extern `{}` names no outer variable", v.name))
-                                    .label(v.span, "not found in an enclosing scope"),
+                                Diag::error(
+                                    "sl::name",
+                                    format!("extern `{}` names no outer variable", v.name),
+                                )
+                                .label(v.span, "not found in an enclosing scope"),
                             ),
                         }
                         continue;
@@ -533,11 +600,17 @@ impl<'a> Lowerer<'a> {
                     let array = match v.array {
                         Some(ArraySpec::Sized(n)) => Some(n),
                         Some(ArraySpec::Unsized) => match &v.init {
-                            Some(Expr { kind: ExprKind::ArrayLit(items), .. }) => Some(items.len()),
+                            Some(Expr {
+                                kind: ExprKind::ArrayLit(items),
+                                ..
+                            }) => Some(items.len()),
                             _ => {
                                 self.diags.push(
-                                    Diag::error("sl::array", format!("local array `{}` needs a size", v.name))
-                                        .label(v.span, "declared here"),
+                                    Diag::error(
+                                        "sl::array",
+                                        format!("local array `{}` needs a size", v.name),
+                                    )
+                                    .label(v.span, "declared here"),
                                 );
                                 Some(1)
                             }
@@ -550,8 +623,15 @@ impl<'a> Lowerer<'a> {
                         None => (self.forced.contains(&v.span), Some(v.span)),
                     };
                     let reg = self.alloc_var_regs(ty.base, array, varying);
-                    let var =
-                        Var { ty: ty.base, array, varying, reg, writable: true, candidate, decl_span: v.span };
+                    let var = Var {
+                        ty: ty.base,
+                        array,
+                        varying,
+                        reg,
+                        writable: true,
+                        candidate,
+                        decl_span: v.span,
+                    };
                     // Declared inside varying control flow: the variable is set under a mask.
                     if let Some(init) = &v.init {
                         self.init_var(&var, init);
@@ -559,7 +639,11 @@ impl<'a> Lowerer<'a> {
                     self.declare(&v.name, var);
                 }
             }
-            StmtKind::If { cond, then, otherwise } => {
+            StmtKind::If {
+                cond,
+                then,
+                otherwise,
+            } => {
                 let c = self.cond(cond);
                 if c.varying {
                     self.varying_ctx += 1;
@@ -573,18 +657,28 @@ impl<'a> Lowerer<'a> {
                 if c.varying {
                     self.varying_ctx -= 1;
                 }
-                self.emit(Instr::If { cond: c.reg, then: tb, otherwise: eb });
+                self.emit(Instr::If {
+                    cond: c.reg,
+                    then: tb,
+                    otherwise: eb,
+                });
             }
             StmtKind::While { cond, body } => self.lower_loop(s.span, None, Some(cond), None, body),
-            StmtKind::For { init, cond, step, body } => {
-                self.lower_loop(s.span, init.as_ref(), cond.as_ref(), step.as_ref(), body)
-            }
+            StmtKind::For {
+                init,
+                cond,
+                step,
+                body,
+            } => self.lower_loop(s.span, init.as_ref(), cond.as_ref(), step.as_ref(), body),
             StmtKind::Break(n) | StmtKind::Continue(n) => {
                 let n = (*n).max(1);
                 if n as usize > self.loops.len() {
                     self.diags.push(
-                        Diag::error("sl::control", format!("`break`/`continue` {n} is outside {n} loops"))
-                            .label(s.span, "here"),
+                        Diag::error(
+                            "sl::control",
+                            format!("`break`/`continue` {n} is outside {n} loops"),
+                        )
+                        .label(s.span, "here"),
                     );
                     return;
                 }
@@ -592,7 +686,11 @@ impl<'a> Lowerer<'a> {
                 if self.varying_ctx > frame.varying_ctx && !self.forced.contains(&frame.span) {
                     self.newly_forced.insert(frame.span);
                 }
-                self.emit(if matches!(s.kind, StmtKind::Break(_)) { Instr::Break(n) } else { Instr::Continue(n) });
+                self.emit(if matches!(s.kind, StmtKind::Break(_)) {
+                    Instr::Break(n)
+                } else {
+                    Instr::Continue(n)
+                });
             }
             StmtKind::Return(e) => {
                 let Some(frame) = self.fn_frames.last() else {
@@ -613,12 +711,14 @@ impl<'a> Lowerer<'a> {
                     }
                     (Some(e), None) => {
                         self.diags.push(
-                            Diag::error("sl::type", "a void function returns no value").label(e.span, "value"),
+                            Diag::error("sl::type", "a void function returns no value")
+                                .label(e.span, "value"),
                         );
                     }
                     (None, Some(_)) => {
                         self.diags.push(
-                            Diag::error("sl::type", "this function must return a value").label(s.span, "bare return"),
+                            Diag::error("sl::type", "this function must return a value")
+                                .label(s.span, "bare return"),
                         );
                     }
                     (None, None) => {}
@@ -629,8 +729,11 @@ impl<'a> Lowerer<'a> {
             StmtKind::Illuminate { args, body } => {
                 if self.kind != ShaderKind::Light {
                     self.diags.push(
-                        Diag::error("sl::context", "`illuminate` is only allowed in light shaders")
-                            .label(s.span, "here"),
+                        Diag::error(
+                            "sl::context",
+                            "`illuminate` is only allowed in light shaders",
+                        )
+                        .label(s.span, "here"),
                     );
                 }
                 let pos = match args.first() {
@@ -640,7 +743,8 @@ impl<'a> Lowerer<'a> {
                     }
                     None => {
                         self.diags.push(
-                            Diag::error("sl::call", "`illuminate` needs a position").label(s.span, "here"),
+                            Diag::error("sl::call", "`illuminate` needs a position")
+                                .label(s.span, "here"),
                         );
                         self.error_val()
                     }
@@ -651,12 +755,17 @@ impl<'a> Lowerer<'a> {
                 let (b, ()) = self.with_block(|lw| lw.scoped_stmt(body));
                 self.varying_ctx -= 1;
                 self.in_light_construct -= 1;
-                self.emit(Instr::Illuminate { pos: pos.reg, axis, body: b });
+                self.emit(Instr::Illuminate {
+                    pos: pos.reg,
+                    axis,
+                    body: b,
+                });
             }
             StmtKind::Solar { args, body } => {
                 if self.kind != ShaderKind::Light {
                     self.diags.push(
-                        Diag::error("sl::context", "`solar` is only allowed in light shaders").label(s.span, "here"),
+                        Diag::error("sl::context", "`solar` is only allowed in light shaders")
+                            .label(s.span, "here"),
                     );
                 }
                 let axis = self.axis_angle(args, s.span);
@@ -667,7 +776,11 @@ impl<'a> Lowerer<'a> {
                 self.in_light_construct -= 1;
                 self.emit(Instr::Solar { axis, body: b });
             }
-            StmtKind::Gather { args, body, otherwise } => {
+            StmtKind::Gather {
+                args,
+                body,
+                otherwise,
+            } => {
                 // Type-check everything; without ray tracing every ray misses.
                 for a in args {
                     self.expr(a, None);
@@ -681,8 +794,11 @@ impl<'a> Lowerer<'a> {
                 });
                 self.varying_ctx -= 1;
                 self.diags.push(
-                    Diag::warning("sl::unsupported", "`gather` traces no rays in arbor: its else branch runs")
-                        .label(s.span, "gather"),
+                    Diag::warning(
+                        "sl::unsupported",
+                        "`gather` traces no rays in arbor: its else branch runs",
+                    )
+                    .label(s.span, "gather"),
                 );
                 self.emit(Instr::Gather { otherwise: eb });
             }
@@ -707,8 +823,11 @@ impl<'a> Lowerer<'a> {
             }
             n => {
                 self.diags.push(
-                    Diag::error("sl::call", format!("expected an axis and an angle, found {n} arguments"))
-                        .label(span, "here"),
+                    Diag::error(
+                        "sl::call",
+                        format!("expected an axis and an angle, found {n} arguments"),
+                    )
+                    .label(span, "here"),
                 );
                 None
             }
@@ -718,7 +837,11 @@ impl<'a> Lowerer<'a> {
     fn illuminance(&mut self, span: Span, args: &[Expr], body: &Stmt) {
         if self.kind == ShaderKind::Light {
             self.diags.push(
-                Diag::error("sl::context", "`illuminance` is not allowed in light shaders").label(span, "here"),
+                Diag::error(
+                    "sl::context",
+                    "`illuminance` is not allowed in light shaders",
+                )
+                .label(span, "here"),
             );
         }
         let mut rest = args;
@@ -730,7 +853,8 @@ impl<'a> Lowerer<'a> {
                 rest = &rest[1..];
             } else if !v.ty.is_triple() {
                 self.diags.push(
-                    Diag::error("sl::call", "`illuminance` needs a position").label(first.span, "not a point"),
+                    Diag::error("sl::call", "`illuminance` needs a position")
+                        .label(first.span, "not a point"),
                 );
             }
         }
@@ -740,7 +864,9 @@ impl<'a> Lowerer<'a> {
                 self.coerce(v, BaseType::Point, e.span)
             }
             None => {
-                self.diags.push(Diag::error("sl::call", "`illuminance` needs a position").label(span, "here"));
+                self.diags.push(
+                    Diag::error("sl::call", "`illuminance` needs a position").label(span, "here"),
+                );
                 self.error_val()
             }
         };
@@ -750,7 +876,12 @@ impl<'a> Lowerer<'a> {
         let (b, ()) = self.with_block(|lw| lw.scoped_stmt(body));
         self.varying_ctx -= 1;
         self.in_illuminance -= 1;
-        self.emit(Instr::Illuminance { category, pos: pos.reg, axis, body: b });
+        self.emit(Instr::Illuminance {
+            category,
+            pos: pos.reg,
+            axis,
+            body: b,
+        });
     }
 
     fn lower_loop(
@@ -774,7 +905,10 @@ impl<'a> Lowerer<'a> {
         if varying {
             self.varying_ctx += 1;
         }
-        self.loops.push(LoopFrame { varying_ctx: self.varying_ctx, span });
+        self.loops.push(LoopFrame {
+            varying_ctx: self.varying_ctx,
+            span,
+        });
         let (b, ()) = self.with_block(|lw| lw.scoped_stmt(body));
         let (st, ()) = self.with_block(|lw| {
             if let Some(s) = step {
@@ -786,7 +920,12 @@ impl<'a> Lowerer<'a> {
             self.varying_ctx -= 1;
         }
         self.pop_scope();
-        self.emit(Instr::Loop { cond_code, cond: c.reg, body: b, step: st });
+        self.emit(Instr::Loop {
+            cond_code,
+            cond: c.reg,
+            body: b,
+            step: st,
+        });
     }
 
     /// A condition: relations and logical operators (a float is accepted, as most compilers do).
@@ -794,8 +933,14 @@ impl<'a> Lowerer<'a> {
         let v = self.expr(e, Some(BaseType::Float));
         if v.ty != BaseType::Float || v.array.is_some() {
             return self.error(
-                Diag::error("sl::type", format!("a condition must be a relation, found {}", ty_name(v.ty, v.array)))
-                    .label(e.span, "condition"),
+                Diag::error(
+                    "sl::type",
+                    format!(
+                        "a condition must be a relation, found {}",
+                        ty_name(v.ty, v.array)
+                    ),
+                )
+                .label(e.span, "condition"),
             );
         }
         v
@@ -813,16 +958,26 @@ impl<'a> Lowerer<'a> {
                 self.newly_forced.insert(c);
                 return;
             }
-            let why = if v.varying { "a varying value" } else { "a value under varying control flow" };
+            let why = if v.varying {
+                "a varying value"
+            } else {
+                "a value under varying control flow"
+            };
             self.diags.push(
-                Diag::error("sl::detail", format!("cannot assign {why} to a uniform variable"))
-                    .label(span, "assignment")
-                    .label(var.decl_span, "declared uniform here")
-                    .help("declare the variable `varying`"),
+                Diag::error(
+                    "sl::detail",
+                    format!("cannot assign {why} to a uniform variable"),
+                )
+                .label(span, "assignment")
+                .label(var.decl_span, "declared uniform here")
+                .help("declare the variable `varying`"),
             );
             return;
         }
-        self.emit(Instr::Mov { dst: reg, src: v.reg });
+        self.emit(Instr::Mov {
+            dst: reg,
+            src: v.reg,
+        });
     }
 
     fn mark_written(&mut self, reg: Reg) {
@@ -838,14 +993,18 @@ impl<'a> Lowerer<'a> {
     /// Converts a value to a type (float → triple/matrix promotion, triple ↔ triple retyping).
     fn coerce(&mut self, v: Val, to: BaseType, span: Span) -> Val {
         if v.reg == self.error_reg && v.ty == BaseType::Float && to != BaseType::Float {
-            return Val { ty: to, ..self.error_val_of(to) };
+            return Val {
+                ty: to,
+                ..self.error_val_of(to)
+            };
         }
         if v.ty == to {
             return v;
         }
         if v.array.is_some() {
             return self.error(
-                Diag::error("sl::type", format!("cannot use an array as {}", to.name())).label(span, "array"),
+                Diag::error("sl::type", format!("cannot use an array as {}", to.name()))
+                    .label(span, "array"),
             );
         }
         match (v.ty, to) {
@@ -855,7 +1014,11 @@ impl<'a> Lowerer<'a> {
                     return self.const_val(Const::T(Vec3::splat(x)), b);
                 }
                 let t = self.temp(b, v.varying);
-                self.emit(Instr::Promote { to: Kind::Triple, dst: t.reg, a: v.reg });
+                self.emit(Instr::Promote {
+                    to: Kind::Triple,
+                    dst: t.reg,
+                    a: v.reg,
+                });
                 t
             }
             (BaseType::Float, BaseType::Matrix) => {
@@ -863,15 +1026,23 @@ impl<'a> Lowerer<'a> {
                     return self.const_val(Const::M(Mat4::IDENTITY * x), BaseType::Matrix);
                 }
                 let t = self.temp(BaseType::Matrix, v.varying);
-                self.emit(Instr::Promote { to: Kind::Matrix, dst: t.reg, a: v.reg });
+                self.emit(Instr::Promote {
+                    to: Kind::Matrix,
+                    dst: t.reg,
+                    a: v.reg,
+                });
                 t
             }
             (BaseType::Void, _) => self.error(
-                Diag::error("sl::type", "a void function has no value").label(span, "used as a value"),
+                Diag::error("sl::type", "a void function has no value")
+                    .label(span, "used as a value"),
             ),
             (a, b) => self.error(
-                Diag::error("sl::type", format!("cannot convert {} to {}", a.name(), b.name()))
-                    .label(span, format!("this is {}", a.name())),
+                Diag::error(
+                    "sl::type",
+                    format!("cannot convert {} to {}", a.name(), b.name()),
+                )
+                .label(span, format!("this is {}", a.name())),
             ),
         }
     }
@@ -893,7 +1064,8 @@ impl<'a> Lowerer<'a> {
             ExprKind::Index { base, index } => {
                 let Some((var, _)) = self.array_var(base) else {
                     return self.error(
-                        Diag::error("sl::type", "only arrays can be indexed").label(base.span, "not an array"),
+                        Diag::error("sl::type", "only arrays can be indexed")
+                            .label(base.span, "not an array"),
                     );
                 };
                 let n = var.array.unwrap_or(1);
@@ -903,11 +1075,19 @@ impl<'a> Lowerer<'a> {
                     let i = *i as i64;
                     if i < 0 || i >= n as i64 {
                         return self.error(
-                            Diag::error("sl::array", format!("index {i} is outside the array of {n}"))
-                                .label(index.span, "index"),
+                            Diag::error(
+                                "sl::array",
+                                format!("index {i} is outside the array of {n}"),
+                            )
+                            .label(index.span, "index"),
                         );
                     }
-                    return Val { reg: var.reg + i as Reg, ty: var.ty, varying: var.varying, array: None };
+                    return Val {
+                        reg: var.reg + i as Reg,
+                        ty: var.ty,
+                        varying: var.varying,
+                        array: None,
+                    };
                 }
                 let t = self.temp(var.ty, var.varying || idx.varying);
                 self.emit(Instr::GetIndex {
@@ -920,10 +1100,15 @@ impl<'a> Lowerer<'a> {
                 });
                 t
             }
-            ExprKind::Call { name, name_span, args } => self.call(name, *name_span, args, e.span, hint),
+            ExprKind::Call {
+                name,
+                name_span,
+                args,
+            } => self.call(name, *name_span, args, e.span, hint),
             ExprKind::Tuple(items) => self.tuple(items, e.span, hint),
             ExprKind::ArrayLit(_) => self.error(
-                Diag::error("sl::array", "{…} initialises arrays only").label(e.span, "not in an array declaration"),
+                Diag::error("sl::array", "{…} initialises arrays only")
+                    .label(e.span, "not in an array declaration"),
             ),
             ExprKind::Cast { ty, space, expr } => self.cast(*ty, space.as_deref(), expr, e.span),
             ExprKind::Unary { op, expr } => {
@@ -933,8 +1118,11 @@ impl<'a> Lowerer<'a> {
                     UnOp::Neg => {
                         if v.ty == BaseType::String || v.array.is_some() {
                             return self.error(
-                                Diag::error("sl::type", format!("cannot negate {}", ty_name(v.ty, v.array)))
-                                    .label(e.span, "here"),
+                                Diag::error(
+                                    "sl::type",
+                                    format!("cannot negate {}", ty_name(v.ty, v.array)),
+                                )
+                                .label(e.span, "here"),
                             );
                         }
                         match self.const_of(&v).cloned() {
@@ -943,19 +1131,30 @@ impl<'a> Lowerer<'a> {
                             _ => {}
                         }
                         let t = self.temp(v.ty, v.varying);
-                        self.emit(Instr::Neg { kind: Kind::of(v.ty), dst: t.reg, a: v.reg });
+                        self.emit(Instr::Neg {
+                            kind: Kind::of(v.ty),
+                            dst: t.reg,
+                            a: v.reg,
+                        });
                         t
                     }
                     UnOp::Not => {
                         let v = self.coerce(v, BaseType::Float, expr.span);
                         let t = self.temp(BaseType::Float, v.varying);
-                        self.emit(Instr::Not { dst: t.reg, a: v.reg });
+                        self.emit(Instr::Not {
+                            dst: t.reg,
+                            a: v.reg,
+                        });
                         t
                     }
                 }
             }
             ExprKind::Binary { op, lhs, rhs } => self.binary(*op, lhs, rhs, e.span, hint),
-            ExprKind::Ternary { cond, then, otherwise } => {
+            ExprKind::Ternary {
+                cond,
+                then,
+                otherwise,
+            } => {
                 let c = self.cond(cond);
                 let a = self.expr(then, hint);
                 let b = self.expr(otherwise, hint.or(Some(a.ty)));
@@ -963,7 +1162,13 @@ impl<'a> Lowerer<'a> {
                 let a = self.coerce(a, ty, then.span);
                 let b = self.coerce(b, ty, otherwise.span);
                 let t = self.temp(ty, c.varying || a.varying || b.varying);
-                self.emit(Instr::Select { kind: Kind::of(ty), dst: t.reg, cond: c.reg, a: a.reg, b: b.reg });
+                self.emit(Instr::Select {
+                    kind: Kind::of(ty),
+                    dst: t.reg,
+                    cond: c.reg,
+                    a: a.reg,
+                    b: b.reg,
+                });
                 t
             }
             ExprKind::Assign { op, target, value } => self.assign(*op, target, value, e.span),
@@ -973,18 +1178,28 @@ impl<'a> Lowerer<'a> {
     fn ident(&mut self, name: &str, span: Span) -> Val {
         match self.lookup(name) {
             Some(var) => {
-                if GLOBALS.iter().any(|g| g.0 == name) && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg) {
+                if GLOBALS.iter().any(|g| g.0 == name)
+                    && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg)
+                {
                     if matches!(name, "L" | "Cl" | "Ol")
                         && self.kind == ShaderKind::Surface
                         && self.in_illuminance == 0
                     {
                         self.diags.push(
-                            Diag::error("sl::context", format!("`{name}` is only defined inside `illuminance`"))
-                                .label(span, "used here"),
+                            Diag::error(
+                                "sl::context",
+                                format!("`{name}` is only defined inside `illuminance`"),
+                            )
+                            .label(span, "used here"),
                         );
                     }
                 }
-                Val { reg: var.reg, ty: var.ty, varying: var.varying, array: var.array }
+                Val {
+                    reg: var.reg,
+                    ty: var.ty,
+                    varying: var.varying,
+                    array: var.array,
+                }
             }
             None if name == "PI" => self.const_val(Const::F(std::f32::consts::PI), BaseType::Float),
             None => {
@@ -996,9 +1211,11 @@ impl<'a> Lowerer<'a> {
                     )
                     .label(span, "not available here")
                 } else {
-                    Diag::error("sl::name", format!("unknown variable `{name}`")).label(span, "not declared")
+                    Diag::error("sl::name", format!("unknown variable `{name}`"))
+                        .label(span, "not declared")
                 };
-                let names: Vec<String> = self.scopes.iter().flat_map(|s| s.keys().cloned()).collect();
+                let names: Vec<String> =
+                    self.scopes.iter().flat_map(|s| s.keys().cloned()).collect();
                 if let Some(m) = did_you_mean(name, names.iter().map(String::as_str)) {
                     d = d.help(format!("did you mean `{m}`?"));
                 }
@@ -1022,7 +1239,11 @@ impl<'a> Lowerer<'a> {
             return a;
         }
         match (a, b) {
-            (BaseType::Float, t) | (t, BaseType::Float) if t.is_triple() || t == BaseType::Matrix => t,
+            (BaseType::Float, t) | (t, BaseType::Float)
+                if t.is_triple() || t == BaseType::Matrix =>
+            {
+                t
+            }
             (x, y) if x.is_triple() && y.is_triple() => {
                 if x == BaseType::Point || y == BaseType::Point {
                     BaseType::Point
@@ -1034,7 +1255,11 @@ impl<'a> Lowerer<'a> {
             }
             _ => {
                 self.diags.push(
-                    Diag::error("sl::type", format!("{} and {} do not mix", a.name(), b.name())).label(span, "here"),
+                    Diag::error(
+                        "sl::type",
+                        format!("{} and {} do not mix", a.name(), b.name()),
+                    )
+                    .label(span, "here"),
                 );
                 a
             }
@@ -1066,7 +1291,12 @@ impl<'a> Lowerer<'a> {
                     return self.const_val(Const::T(Vec3::new(c[0], c[1], c[2])), ty);
                 }
                 let t = self.temp(ty, vals.iter().any(|v| v.varying));
-                self.emit(Instr::MakeTriple { dst: t.reg, x: vals[0].reg, y: vals[1].reg, z: vals[2].reg });
+                self.emit(Instr::MakeTriple {
+                    dst: t.reg,
+                    x: vals[0].reg,
+                    y: vals[1].reg,
+                    z: vals[2].reg,
+                });
                 t
             }
             16 => {
@@ -1094,14 +1324,20 @@ impl<'a> Lowerer<'a> {
                     regs[i] = v.reg;
                 }
                 let t = self.temp(BaseType::Matrix, vals.iter().any(|v| v.varying));
-                self.emit(Instr::MakeMatrix { dst: t.reg, elems: Box::new(regs) });
+                self.emit(Instr::MakeMatrix {
+                    dst: t.reg,
+                    elems: Box::new(regs),
+                });
                 t
             }
             1 => self.expr(&items[0], hint),
             n => self.error(
-                Diag::error("sl::type", format!("a tuple of {n} values is neither a triple nor a matrix"))
-                    .label(span, "tuple")
-                    .help("write 3 values for a point/vector/normal/color, 16 for a matrix"),
+                Diag::error(
+                    "sl::type",
+                    format!("a tuple of {n} values is neither a triple nor a matrix"),
+                )
+                .label(span, "tuple")
+                .help("write 3 values for a point/vector/normal/color, 16 for a matrix"),
             ),
         }
     }
@@ -1111,7 +1347,8 @@ impl<'a> Lowerer<'a> {
         if ty == BaseType::Float || ty == BaseType::String {
             if space.is_some() {
                 self.diags.push(
-                    Diag::error("sl::type", format!("{} takes no space name", ty.name())).label(span, "here"),
+                    Diag::error("sl::type", format!("{} takes no space name", ty.name()))
+                        .label(span, "here"),
                 );
             }
             return self.coerce(v, ty, expr.span);
@@ -1132,15 +1369,28 @@ impl<'a> Lowerer<'a> {
                     );
                 }
                 let t = self.temp(ty, v.varying);
-                self.emit(Instr::ColorFrom { dst: t.reg, space: sp.reg, a: v.reg });
+                self.emit(Instr::ColorFrom {
+                    dst: t.reg,
+                    space: sp.reg,
+                    a: v.reg,
+                });
                 t
             }
             BaseType::Matrix => {
                 let m = self.temp(BaseType::Matrix, false);
-                self.emit(Instr::SpaceMatrix { dst: m.reg, space: sp.reg });
+                self.emit(Instr::SpaceMatrix {
+                    dst: m.reg,
+                    space: sp.reg,
+                });
                 let t = self.temp(ty, v.varying);
                 // RSL row-vector product v * m  ==  glam m * v
-                self.emit(Instr::Arith { op: Arith::Mul, kind: Kind::Matrix, dst: t.reg, a: v.reg, b: m.reg });
+                self.emit(Instr::Arith {
+                    op: Arith::Mul,
+                    kind: Kind::Matrix,
+                    dst: t.reg,
+                    a: v.reg,
+                    b: m.reg,
+                });
                 t
             }
             _ => {
@@ -1165,7 +1415,14 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    fn binary(&mut self, op: BinOp, lhs: &Expr, rhs: &Expr, span: Span, hint: Option<BaseType>) -> Val {
+    fn binary(
+        &mut self,
+        op: BinOp,
+        lhs: &Expr,
+        rhs: &Expr,
+        span: Span,
+        hint: Option<BaseType>,
+    ) -> Val {
         let sub_hint = match op {
             BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div => hint,
             BinOp::Dot | BinOp::Cross => Some(BaseType::Vector),
@@ -1175,8 +1432,11 @@ impl<'a> Lowerer<'a> {
         let b = self.expr(rhs, sub_hint.or(Some(a.ty)));
         if a.array.is_some() || b.array.is_some() {
             return self.error(
-                Diag::error("sl::type", format!("operator `{}` does not work on arrays", op.symbol()))
-                    .label(span, "here"),
+                Diag::error(
+                    "sl::type",
+                    format!("operator `{}` does not work on arrays", op.symbol()),
+                )
+                .label(span, "here"),
             );
         }
         let varying = a.varying || b.varying;
@@ -1186,9 +1446,17 @@ impl<'a> Lowerer<'a> {
                 let b = self.coerce(b, BaseType::Float, rhs.span);
                 let t = self.temp(BaseType::Float, varying);
                 self.emit(if op == BinOp::And {
-                    Instr::And { dst: t.reg, a: a.reg, b: b.reg }
+                    Instr::And {
+                        dst: t.reg,
+                        a: a.reg,
+                        b: b.reg,
+                    }
                 } else {
-                    Instr::Or { dst: t.reg, a: a.reg, b: b.reg }
+                    Instr::Or {
+                        dst: t.reg,
+                        a: a.reg,
+                        b: b.reg,
+                    }
                 });
                 t
             }
@@ -1214,14 +1482,23 @@ impl<'a> Lowerer<'a> {
                 };
                 if !matches!(cmp, Cmp::Eq | Cmp::Ne) && ty != BaseType::Float {
                     return self.error(
-                        Diag::error("sl::type", format!("`{}` compares floats only, not {}", op.symbol(), ty.name()))
-                            .label(span, "comparison"),
+                        Diag::error(
+                            "sl::type",
+                            format!("`{}` compares floats only, not {}", op.symbol(), ty.name()),
+                        )
+                        .label(span, "comparison"),
                     );
                 }
                 let a = self.coerce(a, ty, lhs.span);
                 let b = self.coerce(b, ty, rhs.span);
                 let t = self.temp(BaseType::Float, varying);
-                self.emit(Instr::Compare { op: cmp, kind: Kind::of(ty), dst: t.reg, a: a.reg, b: b.reg });
+                self.emit(Instr::Compare {
+                    op: cmp,
+                    kind: Kind::of(ty),
+                    dst: t.reg,
+                    a: a.reg,
+                    b: b.reg,
+                });
                 t
             }
             BinOp::Dot => {
@@ -1229,13 +1506,21 @@ impl<'a> Lowerer<'a> {
                     return self.error(
                         Diag::error(
                             "sl::type",
-                            format!("`.` (dot product) needs two triples, found {} and {}", a.ty.name(), b.ty.name()),
+                            format!(
+                                "`.` (dot product) needs two triples, found {} and {}",
+                                a.ty.name(),
+                                b.ty.name()
+                            ),
                         )
                         .label(span, "here"),
                     );
                 }
                 let t = self.temp(BaseType::Float, varying);
-                self.emit(Instr::Dot { dst: t.reg, a: a.reg, b: b.reg });
+                self.emit(Instr::Dot {
+                    dst: t.reg,
+                    a: a.reg,
+                    b: b.reg,
+                });
                 t
             }
             BinOp::Cross => {
@@ -1243,21 +1528,36 @@ impl<'a> Lowerer<'a> {
                     return self.error(
                         Diag::error(
                             "sl::type",
-                            format!("`^` (cross product) needs two triples, found {} and {}", a.ty.name(), b.ty.name()),
+                            format!(
+                                "`^` (cross product) needs two triples, found {} and {}",
+                                a.ty.name(),
+                                b.ty.name()
+                            ),
                         )
                         .label(span, "here"),
                     );
                 }
-                let ty = if a.ty == BaseType::Color { BaseType::Color } else { BaseType::Vector };
+                let ty = if a.ty == BaseType::Color {
+                    BaseType::Color
+                } else {
+                    BaseType::Vector
+                };
                 let t = self.temp(ty, varying);
-                self.emit(Instr::Cross { dst: t.reg, a: a.reg, b: b.reg });
+                self.emit(Instr::Cross {
+                    dst: t.reg,
+                    a: a.reg,
+                    b: b.reg,
+                });
                 t
             }
             BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div => {
                 if a.ty == BaseType::String || b.ty == BaseType::String {
                     return self.error(
-                        Diag::error("sl::type", format!("operator `{}` does not work on strings", op.symbol()))
-                            .label(span, "here"),
+                        Diag::error(
+                            "sl::type",
+                            format!("operator `{}` does not work on strings", op.symbol()),
+                        )
+                        .label(span, "here"),
                     );
                 }
                 let arith = match op {
@@ -1272,9 +1572,17 @@ impl<'a> Lowerer<'a> {
                     && b.ty != BaseType::Float
                 {
                     return self.error(
-                        Diag::error("sl::type", format!("cannot {} a {} and a {}", op.symbol(), a.ty.name(), b.ty.name()))
-                            .label(span, "here")
-                            .help("use transform(m, p) to transform a point by a matrix"),
+                        Diag::error(
+                            "sl::type",
+                            format!(
+                                "cannot {} a {} and a {}",
+                                op.symbol(),
+                                a.ty.name(),
+                                b.ty.name()
+                            ),
+                        )
+                        .label(span, "here")
+                        .help("use transform(m, p) to transform a point by a matrix"),
                     );
                 }
                 let mut ty = self.unify(a.ty, b.ty, span);
@@ -1311,7 +1619,13 @@ impl<'a> Lowerer<'a> {
                     _ => {}
                 }
                 let t = self.temp(ty, varying);
-                self.emit(Instr::Arith { op: arith, kind: Kind::of(ty), dst: t.reg, a: a.reg, b: b.reg });
+                self.emit(Instr::Arith {
+                    op: arith,
+                    kind: Kind::of(ty),
+                    dst: t.reg,
+                    a: a.reg,
+                    b: b.reg,
+                });
                 t
             }
         }
@@ -1330,30 +1644,39 @@ impl<'a> Lowerer<'a> {
                             .help(if GLOBALS.iter().any(|g| g.0 == name) {
                                 format!("{} shaders may only read `{name}`", self.kind.name())
                             } else {
-                                "function parameters are read-only unless declared `output`".to_string()
+                                "function parameters are read-only unless declared `output`"
+                                    .to_string()
                             }),
                     );
                 }
                 if var.array.is_some() {
                     return self.error(
-                        Diag::error("sl::array", "arrays cannot be assigned as a whole").label(span, "assignment"),
+                        Diag::error("sl::array", "arrays cannot be assigned as a whole")
+                            .label(span, "assignment"),
                     );
                 }
                 let v = self.assign_value(op, &var_val(&var), value, span);
                 let v = self.coerce(v, var.ty, value.span);
                 self.store(&var, v, span);
                 self.mark_written(var.reg);
-                Val { reg: var.reg, ty: var.ty, varying: var.varying, array: None }
+                Val {
+                    reg: var.reg,
+                    ty: var.ty,
+                    varying: var.varying,
+                    array: None,
+                }
             }
             ExprKind::Index { base, index } => {
                 let Some((var, _)) = self.array_var(base) else {
                     return self.error(
-                        Diag::error("sl::type", "only arrays can be indexed").label(base.span, "not an array"),
+                        Diag::error("sl::type", "only arrays can be indexed")
+                            .label(base.span, "not an array"),
                     );
                 };
                 if !var.writable {
                     return self.error(
-                        Diag::error("sl::readonly", "this array cannot be assigned here").label(target.span, "read-only"),
+                        Diag::error("sl::readonly", "this array cannot be assigned here")
+                            .label(target.span, "read-only"),
                     );
                 }
                 let n = var.array.unwrap_or(1);
@@ -1366,8 +1689,11 @@ impl<'a> Lowerer<'a> {
                     let i = i as i64;
                     if i < 0 || i >= n as i64 {
                         return self.error(
-                            Diag::error("sl::array", format!("index {i} is outside the array of {n}"))
-                                .label(index.span, "index"),
+                            Diag::error(
+                                "sl::array",
+                                format!("index {i} is outside the array of {n}"),
+                            )
+                            .label(index.span, "index"),
                         );
                     }
                     self.store_reg(&var, var.reg + i as Reg, v, span);
@@ -1378,9 +1704,12 @@ impl<'a> Lowerer<'a> {
                             return v;
                         }
                         return self.error(
-                            Diag::error("sl::detail", "cannot assign a varying value to a uniform array")
-                                .label(span, "assignment")
-                                .label(var.decl_span, "declared uniform here"),
+                            Diag::error(
+                                "sl::detail",
+                                "cannot assign a varying value to a uniform array",
+                            )
+                            .label(span, "assignment")
+                            .label(var.decl_span, "declared uniform here"),
                         );
                     }
                     self.emit(Instr::SetIndex {
@@ -1395,8 +1724,11 @@ impl<'a> Lowerer<'a> {
                 v
             }
             _ => self.error(
-                Diag::error("sl::assign", "only a variable or an array element can be assigned")
-                    .label(target.span, "not assignable"),
+                Diag::error(
+                    "sl::assign",
+                    "only a variable or an array element can be assigned",
+                )
+                .label(target.span, "not assignable"),
             ),
         }
     }
@@ -1425,23 +1757,42 @@ impl<'a> Lowerer<'a> {
             _ => Arith::Div,
         };
         let t = self.temp(ty, a.varying || b.varying);
-        self.emit(Instr::Arith { op: arith, kind: Kind::of(ty), dst: t.reg, a: a.reg, b: b.reg });
+        self.emit(Instr::Arith {
+            op: arith,
+            kind: Kind::of(ty),
+            dst: t.reg,
+            a: a.reg,
+            b: b.reg,
+        });
         t
     }
 
     // ---- calls ----
 
-    fn call(&mut self, name: &str, name_span: Span, args: &[Expr], span: Span, hint: Option<BaseType>) -> Val {
+    fn call(
+        &mut self,
+        name: &str,
+        name_span: Span,
+        args: &[Expr],
+        span: Span,
+        hint: Option<BaseType>,
+    ) -> Val {
         if let Some(entries) = self.lookup_funcs(name) {
             return self.user_call(name, entries, args, span, hint);
         }
         match name {
-            "texture" | "environment" | "shadow" | "bump" => return self.texture_call(name, args, span, hint),
-            "transform" | "vtransform" | "ntransform" => return self.transform_call(name, args, span),
+            "texture" | "environment" | "shadow" | "bump" => {
+                return self.texture_call(name, args, span, hint)
+            }
+            "transform" | "vtransform" | "ntransform" => {
+                return self.transform_call(name, args, span)
+            }
             "filterstep" => return self.filterstep(args, span),
             "printf" | "format" => return self.printf(name, args, span),
             "atmosphere" | "displacement" | "lightsource" | "surface" | "incident" | "opposite"
-            | "attribute" | "option" | "rendererinfo" | "textureinfo" => return self.message(name, args, span),
+            | "attribute" | "option" | "rendererinfo" | "textureinfo" => {
+                return self.message(name, args, span)
+            }
             "shadername" => {
                 let mut regs = Vec::new();
                 for a in args {
@@ -1450,14 +1801,22 @@ impl<'a> Lowerer<'a> {
                     regs.push(v.reg);
                 }
                 let t = self.temp(BaseType::String, false);
-                self.emit(Instr::Call { f: Builtin::ShaderName, dst: t.reg, args: regs, span });
+                self.emit(Instr::Call {
+                    f: Builtin::ShaderName,
+                    dst: t.reg,
+                    args: regs,
+                    span,
+                });
                 return t;
             }
             "arraylength" => {
                 return match args.first().and_then(|a| self.array_var(a)) {
-                    Some((v, _)) => self.const_val(Const::F(v.array.unwrap_or(1) as f32), BaseType::Float),
+                    Some((v, _)) => {
+                        self.const_val(Const::F(v.array.unwrap_or(1) as f32), BaseType::Float)
+                    }
                     None => self.error(
-                        Diag::error("sl::call", "`arraylength` takes an array variable").label(span, "here"),
+                        Diag::error("sl::call", "`arraylength` takes an array variable")
+                            .label(span, "here"),
                     ),
                 };
             }
@@ -1470,12 +1829,14 @@ impl<'a> Lowerer<'a> {
         }
         let sigs: Vec<&'static Sig> = builtins::overloads(name).collect();
         if sigs.is_empty() {
-            let mut candidates: Vec<String> = builtins::SIGS.iter().map(|s| s.name.to_string()).collect();
+            let mut candidates: Vec<String> =
+                builtins::SIGS.iter().map(|s| s.name.to_string()).collect();
             candidates.extend(builtins::SPECIAL.iter().map(|s| s.to_string()));
             for s in &self.funcs {
                 candidates.extend(s.keys().cloned());
             }
-            let mut d = Diag::error("sl::name", format!("unknown function `{name}`")).label(name_span, "not defined");
+            let mut d = Diag::error("sl::name", format!("unknown function `{name}`"))
+                .label(name_span, "not defined");
             if let Some(m) = did_you_mean(name, candidates.iter().map(String::as_str)) {
                 d = d.help(format!("did you mean `{m}`?"));
             }
@@ -1491,10 +1852,16 @@ impl<'a> Lowerer<'a> {
                 .iter()
                 .filter_map(|s| {
                     let (list, rep) = builtins::parse_args(s.args);
-                    list.get(i).or(if rep { list.last() } else { None }).map(|c| c.0)
+                    list.get(i)
+                        .or(if rep { list.last() } else { None })
+                        .map(|c| c.0)
                 })
                 .collect();
-            let h = if codes.len() == 1 { codes.into_iter().next().and_then(builtins::code_type) } else { None };
+            let h = if codes.len() == 1 {
+                codes.into_iter().next().and_then(builtins::code_type)
+            } else {
+                None
+            };
             let is_out = sigs.iter().any(|s| {
                 let (list, _) = builtins::parse_args(s.args);
                 list.get(i).map(|c| c.1).unwrap_or(false)
@@ -1518,9 +1885,12 @@ impl<'a> Lowerer<'a> {
             let found: Vec<String> = vals.iter().map(|(v, _)| ty_name(v.ty, v.array)).collect();
             let forms: Vec<String> = sigs.iter().map(|s| sig_text(s)).collect();
             return self.error(
-                Diag::error("sl::call", format!("no form of `{name}` takes ({})", found.join(", ")))
-                    .label(span, "call")
-                    .help(format!("`{name}` takes {}", forms.join(" or "))),
+                Diag::error(
+                    "sl::call",
+                    format!("no form of `{name}` takes ({})", found.join(", ")),
+                )
+                .label(span, "call")
+                .help(format!("`{name}` takes {}", forms.join(" or "))),
             );
         };
         let (codes, _) = builtins::parse_args(sig.args);
@@ -1528,14 +1898,20 @@ impl<'a> Lowerer<'a> {
         let mut outs = Vec::new();
         let mut varying = always_varying(sig.f);
         for (i, (v, e)) in vals.iter().enumerate() {
-            let (code, out) = codes.get(i).copied().unwrap_or_else(|| *codes.last().expect("repeat code"));
+            let (code, out) = codes
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| *codes.last().expect("repeat code"));
             let want = resolve_code(code, tvar).unwrap_or(v.ty);
             let sp = e.map(|e| e.span).unwrap_or(span);
             if out {
                 // Output: a temporary holding the current value, stored back after the call.
                 let cur = self.coerce(*v, want, sp);
                 let t = self.temp(want, true);
-                self.emit(Instr::Copy { dst: t.reg, src: cur.reg });
+                self.emit(Instr::Copy {
+                    dst: t.reg,
+                    src: cur.reg,
+                });
                 regs.push(t.reg);
                 outs.push((t, *e));
             } else {
@@ -1550,7 +1926,12 @@ impl<'a> Lowerer<'a> {
             self.regs[t.reg as usize].varying = varying;
         }
         let dst = self.temp(ret_ty, varying);
-        self.emit(Instr::Call { f: sig.f, dst: dst.reg, args: regs, span });
+        self.emit(Instr::Call {
+            f: sig.f,
+            dst: dst.reg,
+            args: regs,
+            span,
+        });
         for (t, e) in outs {
             if let Some(e) = e {
                 let tv = Val { varying, ..t };
@@ -1571,8 +1952,11 @@ impl<'a> Lowerer<'a> {
                 }
                 _ => {
                     self.diags.push(
-                        Diag::error("sl::readonly", format!("output argument `{name}` is not writable"))
-                            .label(target.span, "output argument"),
+                        Diag::error(
+                            "sl::readonly",
+                            format!("output argument `{name}` is not writable"),
+                        )
+                        .label(target.span, "output argument"),
                     );
                 }
             },
@@ -1596,12 +1980,18 @@ impl<'a> Lowerer<'a> {
                 }
             }
             _ => self.diags.push(
-                Diag::error("sl::call", "an output argument must be a variable").label(target.span, "not a variable"),
+                Diag::error("sl::call", "an output argument must be a variable")
+                    .label(target.span, "not a variable"),
             ),
         }
     }
 
-    fn score(&self, s: &Sig, vals: &[(Val, Option<&Expr>)], hint: Option<BaseType>) -> Option<(u32, Option<BaseType>)> {
+    fn score(
+        &self,
+        s: &Sig,
+        vals: &[(Val, Option<&Expr>)],
+        hint: Option<BaseType>,
+    ) -> Option<(u32, Option<BaseType>)> {
         let (codes, repeat) = builtins::parse_args(s.args);
         if vals.len() < codes.len() || (!repeat && vals.len() != codes.len()) {
             return None;
@@ -1609,7 +1999,10 @@ impl<'a> Lowerer<'a> {
         // Resolve the type variable from the first t/q argument that is a triple.
         let mut tvar: Option<BaseType> = None;
         for (i, (v, _)) in vals.iter().enumerate() {
-            let (c, _) = codes.get(i).copied().unwrap_or_else(|| *codes.last().unwrap());
+            let (c, _) = codes
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| *codes.last().unwrap());
             if (c == 't' || c == 'q') && v.ty.is_triple() && tvar.is_none() {
                 tvar = Some(v.ty);
             }
@@ -1625,7 +2018,10 @@ impl<'a> Lowerer<'a> {
             if v.array.is_some() {
                 return None;
             }
-            let (c, out) = codes.get(i).copied().unwrap_or_else(|| *codes.last().unwrap());
+            let (c, out) = codes
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| *codes.last().unwrap());
             match c {
                 't' | 'q' => {
                     if v.ty.is_triple() {
@@ -1687,8 +2083,11 @@ impl<'a> Lowerer<'a> {
     ) -> Val {
         if self.inline_stack.iter().any(|n| n == name) {
             return self.error(
-                Diag::error("sl::recursion", format!("`{name}` calls itself; the shading language has no recursion"))
-                    .label(span, "recursive call"),
+                Diag::error(
+                    "sl::recursion",
+                    format!("`{name}` calls itself; the shading language has no recursion"),
+                )
+                .label(span, "recursive call"),
             );
         }
         // Lower arguments (output formals need lvalues; read them as values too).
@@ -1714,7 +2113,9 @@ impl<'a> Lowerer<'a> {
                 if f.ty.base == v.ty {
                 } else if f.ty.base.is_triple() && v.ty.is_triple() {
                     score += 1;
-                } else if v.ty == BaseType::Float && (f.ty.base.is_triple() || f.ty.base == BaseType::Matrix) && !f.output
+                } else if v.ty == BaseType::Float
+                    && (f.ty.base.is_triple() || f.ty.base == BaseType::Matrix)
+                    && !f.output
                 {
                     score += 2;
                 } else {
@@ -1737,9 +2138,12 @@ impl<'a> Lowerer<'a> {
         let Some((_, entry)) = best else {
             let found: Vec<String> = vals.iter().map(|v| ty_name(v.ty, v.array)).collect();
             return self.error(
-                Diag::error("sl::call", format!("no definition of `{name}` takes ({})", found.join(", ")))
-                    .label(span, "call")
-                    .label(entries[0].def.name_span, "defined here"),
+                Diag::error(
+                    "sl::call",
+                    format!("no definition of `{name}` takes ({})", found.join(", ")),
+                )
+                .label(span, "call")
+                .label(entries[0].def.name_span, "defined here"),
             );
         };
         let def = entry.def.clone();
@@ -1754,7 +2158,12 @@ impl<'a> Lowerer<'a> {
                 let target = match &a.kind {
                     ExprKind::Ident(n) => {
                         // look the name up in the caller's scopes
-                        saved_scopes.iter().rev().find_map(|s| s.get(n)).cloned().or_else(|| self.lookup(n))
+                        saved_scopes
+                            .iter()
+                            .rev()
+                            .find_map(|s| s.get(n))
+                            .cloned()
+                            .or_else(|| self.lookup(n))
                     }
                     _ => None,
                 };
@@ -1764,7 +2173,12 @@ impl<'a> Lowerer<'a> {
                             self.diags.push(
                                 Diag::error(
                                     "sl::type",
-                                    format!("output parameter `{}` is {} but the argument is {}", f.name, f.ty.base.name(), var.ty.name()),
+                                    format!(
+                                        "output parameter `{}` is {} but the argument is {}",
+                                        f.name,
+                                        f.ty.base.name(),
+                                        var.ty.name()
+                                    ),
                                 )
                                 .label(a.span, "argument"),
                             );
@@ -1775,8 +2189,11 @@ impl<'a> Lowerer<'a> {
                     }
                     _ => {
                         self.diags.push(
-                            Diag::error("sl::call", format!("output parameter `{}` needs a variable", f.name))
-                                .label(a.span, "not a writable variable"),
+                            Diag::error(
+                                "sl::call",
+                                format!("output parameter `{}` needs a variable", f.name),
+                            )
+                            .label(a.span, "not a writable variable"),
                         );
                         let tmp = self.temp(f.ty.base, true);
                         self.declare(
@@ -1794,12 +2211,22 @@ impl<'a> Lowerer<'a> {
                     }
                 }
             } else {
-                let cv = if v.array.is_some() { *v } else { self.coerce(*v, f.ty.base, a.span) };
+                let cv = if v.array.is_some() {
+                    *v
+                } else {
+                    self.coerce(*v, f.ty.base, a.span)
+                };
                 if f.ty.detail == Some(Detail::Uniform) && cv.varying {
                     self.diags.push(
-                        Diag::error("sl::detail", format!("parameter `{}` is uniform but the argument is varying", f.name))
-                            .label(a.span, "varying argument")
-                            .label(f.span, "declared uniform here"),
+                        Diag::error(
+                            "sl::detail",
+                            format!(
+                                "parameter `{}` is uniform but the argument is varying",
+                                f.name
+                            ),
+                        )
+                        .label(a.span, "varying argument")
+                        .label(f.span, "declared uniform here"),
                     );
                 }
                 self.declare(
@@ -1831,7 +2258,11 @@ impl<'a> Lowerer<'a> {
                 varying,
                 reg,
                 writable: true,
-                candidate: if def.ret.detail.is_none() { Some(def.name_span) } else { None },
+                candidate: if def.ret.detail.is_none() {
+                    Some(def.name_span)
+                } else {
+                    None
+                },
                 decl_span: def.name_span,
             })
         };
@@ -1840,7 +2271,11 @@ impl<'a> Lowerer<'a> {
         if forced_fn {
             self.varying_ctx += 1;
         }
-        self.fn_frames.push(FuncFrame { ret: ret.clone(), varying_ctx: fctx + u32::from(forced_fn), span: def.span });
+        self.fn_frames.push(FuncFrame {
+            ret: ret.clone(),
+            varying_ctx: fctx + u32::from(forced_fn),
+            span: def.span,
+        });
         self.inline_stack.push(name.to_string());
         // Nested functions defined in the body are visible inside it.
         let (body, ()) = self.with_block(|lw| lw.block_stmts(&def.body));
@@ -1854,8 +2289,18 @@ impl<'a> Lowerer<'a> {
         self.funcs.extend(saved_funcs);
         self.emit(Instr::Function { body });
         match ret {
-            Some(r) => Val { reg: r.reg, ty: r.ty, varying: r.varying, array: None },
-            None => Val { reg: self.error_reg, ty: BaseType::Void, varying: false, array: None },
+            Some(r) => Val {
+                reg: r.reg,
+                ty: r.ty,
+                varying: r.varying,
+                array: None,
+            },
+            None => Val {
+                reg: self.error_reg,
+                ty: BaseType::Void,
+                varying: false,
+                array: None,
+            },
         }
     }
 
@@ -1868,11 +2313,17 @@ impl<'a> Lowerer<'a> {
         };
         if args.len() < 2 || args.len() > 3 {
             return self.error(
-                Diag::error("sl::call", format!("`{name}` takes ([from,] to, x) or ([from,] matrix, x)"))
-                    .label(span, "call"),
+                Diag::error(
+                    "sl::call",
+                    format!("`{name}` takes ([from,] to, x) or ([from,] matrix, x)"),
+                )
+                .label(span, "call"),
             );
         }
-        let ops: Vec<Val> = args[..args.len() - 1].iter().map(|a| self.expr(a, None)).collect();
+        let ops: Vec<Val> = args[..args.len() - 1]
+            .iter()
+            .map(|a| self.expr(a, None))
+            .collect();
         let xe = &args[args.len() - 1];
         let x = self.expr(xe, Some(ty));
         let x = self.coerce(x, ty, xe.span);
@@ -1883,8 +2334,11 @@ impl<'a> Lowerer<'a> {
                 BaseType::Matrix => spaces.push(Space::Matrix(v.reg)),
                 _ => {
                     return self.error(
-                        Diag::error("sl::call", format!("`{name}` takes space names or a matrix before the value"))
-                            .label(a.span, format!("this is {}", v.ty.name())),
+                        Diag::error(
+                            "sl::call",
+                            format!("`{name}` takes space names or a matrix before the value"),
+                        )
+                        .label(a.span, format!("this is {}", v.ty.name())),
                     )
                 }
             }
@@ -1894,8 +2348,11 @@ impl<'a> Lowerer<'a> {
             [from, to] => {
                 if matches!(from, Space::Matrix(_)) {
                     return self.error(
-                        Diag::error("sl::call", format!("`{name}`: the source space must be a name"))
-                            .label(args[0].span, "matrix"),
+                        Diag::error(
+                            "sl::call",
+                            format!("`{name}`: the source space must be a name"),
+                        )
+                        .label(args[0].span, "matrix"),
                     );
                 }
                 (*from, *to)
@@ -1904,7 +2361,13 @@ impl<'a> Lowerer<'a> {
         };
         let varying = x.varying || ops.iter().any(|v| v.varying);
         let t = self.temp(x.ty, varying);
-        self.emit(Instr::Transform { kind, dst: t.reg, from, to, a: x.reg });
+        self.emit(Instr::Transform {
+            kind,
+            dst: t.reg,
+            from,
+            to,
+            a: x.reg,
+        });
         t
     }
 
@@ -1922,9 +2385,12 @@ impl<'a> Lowerer<'a> {
             basis = true;
             i = 1;
         } else if args.len() != 2 {
-            return Some(self.error(
-                Diag::error("sl::call", "spline with an array takes ([basis,] x, array)").label(span, "call"),
-            ));
+            return Some(
+                self.error(
+                    Diag::error("sl::call", "spline with an array takes ([basis,] x, array)")
+                        .label(span, "call"),
+                ),
+            );
         }
         let x = self.expr(&args[i], Some(BaseType::Float));
         let x = self.coerce(x, BaseType::Float, args[i].span);
@@ -1942,14 +2408,27 @@ impl<'a> Lowerer<'a> {
             (true, false) => Builtin::SplineBasisArrayT,
         };
         let t = self.temp(ty, x.varying || arr.varying);
-        self.emit(Instr::Call { f, dst: t.reg, args: regs, span });
+        self.emit(Instr::Call {
+            f,
+            dst: t.reg,
+            args: regs,
+            span,
+        });
         Some(t)
     }
 
     /// texture/environment/shadow/bump: (name[chan], coordinates…, "param", value, …).
-    fn texture_call(&mut self, name: &str, args: &[Expr], span: Span, hint: Option<BaseType>) -> Val {
+    fn texture_call(
+        &mut self,
+        name: &str,
+        args: &[Expr],
+        span: Span,
+        hint: Option<BaseType>,
+    ) -> Val {
         let Some(first) = args.first() else {
-            return self.error(Diag::error("sl::call", format!("`{name}` needs a map name")).label(span, "call"));
+            return self.error(
+                Diag::error("sl::call", format!("`{name}` needs a map name")).label(span, "call"),
+            );
         };
         // name[channel]
         let (map, chan) = match &first.kind {
@@ -1958,12 +2437,18 @@ impl<'a> Lowerer<'a> {
                 let c = self.expr(index, Some(BaseType::Float));
                 (m, self.coerce(c, BaseType::Float, index.span))
             }
-            _ => (self.expr(first, Some(BaseType::String)), self.const_val(Const::F(0.0), BaseType::Float)),
+            _ => (
+                self.expr(first, Some(BaseType::String)),
+                self.const_val(Const::F(0.0), BaseType::Float),
+            ),
         };
         if map.ty != BaseType::String {
             return self.error(
-                Diag::error("sl::call", format!("`{name}` takes a map name (a string) first"))
-                    .label(first.span, "not a string"),
+                Diag::error(
+                    "sl::call",
+                    format!("`{name}` takes a map name (a string) first"),
+                )
+                .label(first.span, "not a string"),
             );
         }
         // Positional coordinates until the first string argument.
@@ -1984,14 +2469,18 @@ impl<'a> Lowerer<'a> {
             let pn = self.expr(&args[k], Some(BaseType::String));
             if pn.ty != BaseType::String {
                 self.diags.push(
-                    Diag::error("sl::call", format!("`{name}` parameters come in \"name\", value pairs"))
-                        .label(args[k].span, "expected a parameter name"),
+                    Diag::error(
+                        "sl::call",
+                        format!("`{name}` parameters come in \"name\", value pairs"),
+                    )
+                    .label(args[k].span, "expected a parameter name"),
                 );
                 break;
             }
             let Some(val) = args.get(k + 1) else {
                 self.diags.push(
-                    Diag::error("sl::call", "texture parameter without a value").label(args[k].span, "no value"),
+                    Diag::error("sl::call", "texture parameter without a value")
+                        .label(args[k].span, "no value"),
                 );
                 break;
             };
@@ -2009,8 +2498,15 @@ impl<'a> Lowerer<'a> {
         };
         if !counts.contains(&coords.len()) {
             return self.error(
-                Diag::error("sl::call", format!("`{name}` takes {:?} coordinates, found {}", counts, coords.len()))
-                    .label(span, "call"),
+                Diag::error(
+                    "sl::call",
+                    format!(
+                        "`{name}` takes {:?} coordinates, found {}",
+                        counts,
+                        coords.len()
+                    ),
+                )
+                .label(span, "call"),
             );
         }
         let mut regs = vec![map.reg, chan.reg, self.const_float(coords.len() as f32)];
@@ -2024,8 +2520,11 @@ impl<'a> Lowerer<'a> {
                     }
                     None => {
                         return self.error(
-                            Diag::error("sl::call", format!("`{name}` without coordinates needs s and t"))
-                                .label(span, "call"),
+                            Diag::error(
+                                "sl::call",
+                                format!("`{name}` without coordinates needs s and t"),
+                            )
+                            .label(span, "call"),
                         )
                     }
                 }
@@ -2055,7 +2554,12 @@ impl<'a> Lowerer<'a> {
             _ => (Builtin::Shadow, BaseType::Float),
         };
         let t = self.temp(ty, varying || true);
-        self.emit(Instr::Call { f, dst: t.reg, args: regs, span });
+        self.emit(Instr::Call {
+            f,
+            dst: t.reg,
+            args: regs,
+            span,
+        });
         t
     }
 
@@ -2075,8 +2579,11 @@ impl<'a> Lowerer<'a> {
         }
         if regs.len() < 2 {
             return self.error(
-                Diag::error("sl::call", "`filterstep` takes (edge, s1 [, s2] [, \"param\", value…])")
-                    .label(span, "call"),
+                Diag::error(
+                    "sl::call",
+                    "`filterstep` takes (edge, s1 [, s2] [, \"param\", value…])",
+                )
+                .label(span, "call"),
             );
         }
         let npos = regs.len();
@@ -2092,7 +2599,12 @@ impl<'a> Lowerer<'a> {
         all.extend(regs);
         all.extend(params);
         let t = self.temp(BaseType::Float, varying);
-        self.emit(Instr::Call { f: Builtin::FilterStep, dst: t.reg, args: all, span });
+        self.emit(Instr::Call {
+            f: Builtin::FilterStep,
+            dst: t.reg,
+            args: all,
+            span,
+        });
         t
     }
 
@@ -2103,7 +2615,8 @@ impl<'a> Lowerer<'a> {
             let v = self.expr(a, None);
             if i == 0 && v.ty != BaseType::String {
                 self.diags.push(
-                    Diag::error("sl::call", format!("`{name}` takes a format string first")).label(a.span, "not a string"),
+                    Diag::error("sl::call", format!("`{name}` takes a format string first"))
+                        .label(a.span, "not a string"),
                 );
             }
             varying |= v.varying;
@@ -2111,12 +2624,25 @@ impl<'a> Lowerer<'a> {
         }
         if name == "printf" {
             let t = self.temp(BaseType::Void, false);
-            self.emit(Instr::Call { f: Builtin::Printf, dst: t.reg, args: regs, span });
-            Val { ty: BaseType::Void, ..t }
+            self.emit(Instr::Call {
+                f: Builtin::Printf,
+                dst: t.reg,
+                args: regs,
+                span,
+            });
+            Val {
+                ty: BaseType::Void,
+                ..t
+            }
         } else {
             let t = self.temp(BaseType::String, false);
             let _ = varying;
-            self.emit(Instr::Call { f: Builtin::Format, dst: t.reg, args: regs, span });
+            self.emit(Instr::Call {
+                f: Builtin::Format,
+                dst: t.reg,
+                args: regs,
+                span,
+            });
             t
         }
     }
@@ -2129,8 +2655,11 @@ impl<'a> Lowerer<'a> {
         };
         if args.len() != nin + 1 {
             return self.error(
-                Diag::error("sl::call", format!("`{name}` takes {} names and an output variable", nin))
-                    .label(span, "call"),
+                Diag::error(
+                    "sl::call",
+                    format!("`{name}` takes {} names and an output variable", nin),
+                )
+                .label(span, "call"),
             );
         }
         let which = self.const_val(Const::S(Arc::from(name)), BaseType::String);
@@ -2147,14 +2676,18 @@ impl<'a> Lowerer<'a> {
                 Some(v) if v.writable => (v.clone(), v.reg),
                 _ => {
                     return self.error(
-                        Diag::error("sl::call", format!("`{name}` needs a writable variable to store into"))
-                            .label(target.span, "not writable"),
+                        Diag::error(
+                            "sl::call",
+                            format!("`{name}` needs a writable variable to store into"),
+                        )
+                        .label(target.span, "not writable"),
                     )
                 }
             },
             _ => {
                 return self.error(
-                    Diag::error("sl::call", format!("`{name}` stores into a variable")).label(target.span, "not a variable"),
+                    Diag::error("sl::call", format!("`{name}` stores into a variable"))
+                        .label(target.span, "not a variable"),
                 )
             }
         };
@@ -2165,12 +2698,20 @@ impl<'a> Lowerer<'a> {
         let mut temps = Vec::new();
         for k in 0..n {
             let t = self.temp(var.ty, varying);
-            self.emit(Instr::Copy { dst: t.reg, src: base_reg + k as Reg });
+            self.emit(Instr::Copy {
+                dst: t.reg,
+                src: base_reg + k as Reg,
+            });
             regs.push(t.reg);
             temps.push(t);
         }
         let ok = self.temp(BaseType::Float, varying);
-        self.emit(Instr::Call { f, dst: ok.reg, args: regs, span });
+        self.emit(Instr::Call {
+            f,
+            dst: ok.reg,
+            args: regs,
+            span,
+        });
         for (k, t) in temps.into_iter().enumerate() {
             self.store_reg(&var, var.reg + k as Reg, t, target.span);
         }
@@ -2180,7 +2721,12 @@ impl<'a> Lowerer<'a> {
 }
 
 fn var_val(v: &Var) -> Val {
-    Val { reg: v.reg, ty: v.ty, varying: v.varying, array: v.array }
+    Val {
+        reg: v.reg,
+        ty: v.ty,
+        varying: v.varying,
+        array: v.array,
+    }
 }
 
 /// Function formals as written `(float a, b; output color c)` are already one per name in the

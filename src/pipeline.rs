@@ -1,0 +1,231 @@
+//! The whole pipeline behind `arbor render` and `arbor check`: read RIB, build scenes,
+//! compile shaders, render each frame and write its displays.
+//!
+//! Input: file paths (or "-" for stdin) and command-line settings. Output: image files and
+//! diagnostics in the shared sink. Invariants: an error in one frame does not stop the others;
+//! a frame whose scene had errors still renders what it can (RISpec's error model), but the
+//! run's exit status reports the errors.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::diag::{Diag, Diagnostics, SourceMap};
+use crate::render::driver::{render_frame, RenderOptions};
+use crate::render::hider::Aov;
+use crate::render::stats::Stats;
+use crate::scene::{build_scenes, BuildContext, ParamType, Scene};
+use crate::shade::system::ShadeSystem;
+use crate::sl::{CompileOptions, ShaderLibrary};
+
+/// Settings from the command line.
+#[derive(Clone, Debug, Default)]
+pub struct Settings {
+    pub shader_paths: Vec<String>,
+    pub texture_paths: Vec<String>,
+    pub archive_paths: Vec<String>,
+    pub include_dirs: Vec<PathBuf>,
+    pub defines: Vec<(String, Option<String>)>,
+    pub resolution: Option<(u32, u32)>,
+    pub crop: Option<[f32; 4]>,
+    pub frames: Option<(i32, i32)>,
+    pub threads: usize,
+    pub bucket_size: Option<[u32; 2]>,
+    pub output: Option<PathBuf>,
+    pub stats: bool,
+    pub progress: bool,
+}
+
+/// Reads and builds every scene of a RIB file.
+pub fn load_scenes(
+    path: &Path,
+    settings: &Settings,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+) -> Vec<Scene> {
+    let requests = match crate::rib::read_path(path, sources, diags) {
+        Ok(r) => r,
+        Err(d) => {
+            diags.report(d);
+            return Vec::new();
+        }
+    };
+    let base_dir = if path.as_os_str() == "-" {
+        std::env::current_dir().ok()
+    } else {
+        path.parent().map(|p| {
+            if p.as_os_str().is_empty() {
+                PathBuf::from(".")
+            } else {
+                p.to_path_buf()
+            }
+        })
+    };
+    let ctx = BuildContext {
+        sources,
+        diags,
+        shader_paths: settings.shader_paths.clone(),
+        texture_paths: settings.texture_paths.clone(),
+        archive_paths: settings.archive_paths.clone(),
+        base_dir,
+        frames: settings.frames,
+    };
+    build_scenes(requests, &ctx)
+}
+
+/// The shader library for a scene: CLI paths, the scene's search path, the scene's folder.
+pub fn library_for(scene: &Scene, settings: &Settings) -> ShaderLibrary {
+    let mut search: Vec<PathBuf> = settings.shader_paths.iter().map(PathBuf::from).collect();
+    for p in &scene.options.search_paths.shader {
+        let pb = PathBuf::from(p);
+        let pb = match (&scene.source_dir, pb.is_relative()) {
+            (Some(d), true) => d.join(pb),
+            _ => pb,
+        };
+        if !search.contains(&pb) {
+            search.push(pb);
+        }
+    }
+    if let Some(d) = &scene.source_dir {
+        if !search.contains(d) {
+            search.push(d.clone());
+        }
+    }
+    ShaderLibrary::new(CompileOptions {
+        include_dirs: settings.include_dirs.clone(),
+        defines: settings.defines.clone(),
+        search_paths: search,
+    })
+}
+
+/// Arbitrary output variables the displays ask for (modes other than r g b a z).
+pub fn aovs_for(scene: &Scene) -> Vec<Aov> {
+    let mut out: Vec<Aov> = Vec::new();
+    for d in &scene.options.displays {
+        let mode = d.mode.trim();
+        let plain = mode
+            .chars()
+            .all(|c| matches!(c, 'r' | 'g' | 'b' | 'a' | 'z'))
+            && !mode.is_empty();
+        if plain {
+            continue;
+        }
+        // "N", "Ci", "varying color diffuse" style modes: the last word is the name.
+        let words: Vec<&str> = mode.split_whitespace().collect();
+        let name = words.last().copied().unwrap_or(mode).to_string();
+        let ty = if words.contains(&"float") {
+            ParamType::Float
+        } else if words.contains(&"normal") {
+            ParamType::Normal
+        } else if words.contains(&"point") {
+            ParamType::Point
+        } else if words.contains(&"vector") {
+            ParamType::Vector
+        } else {
+            match name.as_str() {
+                "N" | "Ng" => ParamType::Normal,
+                "P" => ParamType::Point,
+                "s" | "t" | "u" | "v" => ParamType::Float,
+                _ => ParamType::Color,
+            }
+        };
+        if !out.iter().any(|a| a.name == name) {
+            out.push(Aov::new(name, ty));
+        }
+    }
+    out
+}
+
+/// Renders every frame of every file. Returns the files written.
+pub fn render_paths(
+    paths: &[PathBuf],
+    settings: &Settings,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+) -> Vec<PathBuf> {
+    let mut written = Vec::new();
+    let mut first_display = true;
+    for path in paths {
+        let scenes = load_scenes(path, settings, sources, diags);
+        if scenes.is_empty() && !diags.has_errors() {
+            diags.report(Diag::warning(
+                "render::empty",
+                format!("`{}` contains no world block to render", path.display()),
+            ));
+        }
+        for scene in &scenes {
+            let library = library_for(scene, settings);
+            let system = ShadeSystem {
+                library: &library,
+                sources,
+                diags,
+                textures: None,
+            };
+            let stats = Stats::default();
+            let bar = if settings.progress {
+                Some(progress_bar())
+            } else {
+                None
+            };
+            let progress = |done: usize, total: usize| {
+                if let Some(b) = &bar {
+                    b.set_length(total as u64);
+                    b.set_position(done as u64);
+                }
+            };
+            let opts = RenderOptions {
+                threads: settings.threads,
+                bucket_size: settings.bucket_size,
+                crop: settings.crop,
+                resolution: settings.resolution,
+                stats: if settings.stats { Some(&stats) } else { None },
+                progress: if bar.is_some() { Some(&progress) } else { None },
+                aovs: aovs_for(scene),
+            };
+            let start = Instant::now();
+            let film = render_frame(scene, &system, &opts, diags);
+            if let Some(b) = &bar {
+                b.finish_and_clear();
+            }
+            let options = crate::render::driver::effective_options(&scene.options, &opts);
+            // -o replaces the first display of the first frame only.
+            let override_path = if first_display {
+                settings.output.clone()
+            } else {
+                None
+            };
+            first_display = false;
+            match crate::film::output::write_displays(
+                &film,
+                &options,
+                diags,
+                override_path.as_deref(),
+            ) {
+                Ok(files) => written.extend(files),
+                Err(d) => diags.report(d),
+            }
+            if settings.stats {
+                eprintln!(
+                    "frame {}: {:.3} s",
+                    scene
+                        .frame
+                        .map(|f| f.to_string())
+                        .unwrap_or_else(|| "-".into()),
+                    start.elapsed().as_secs_f64()
+                );
+                eprintln!("{stats}");
+            }
+        }
+    }
+    written
+}
+
+fn progress_bar() -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(1);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{bar:40}] {pos}/{len} buckets {elapsed}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar
+}
