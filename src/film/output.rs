@@ -132,7 +132,7 @@ fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, F
                         imager.name
                     ),
                 )
-                .label(imager.span, "this Imager"),
+                .maybe_label(imager.span, "this Imager"),
             );
         }
     }
@@ -172,7 +172,7 @@ fn plan(
         if d.name.trim().is_empty() {
             return Err(
                 Diag::error("film::display", "Display has an empty file name")
-                    .label(d.span, "this Display")
+                    .maybe_label(d.span, "this Display")
                     .help("Display \"name.tif\" \"file\" \"rgba\""),
             );
         }
@@ -198,7 +198,7 @@ fn plan(
                             d.name
                         ),
                     )
-                    .label(d.span, "this Display"),
+                    .maybe_label(d.span, "this Display"),
                 );
                 Format::ZFile
             }
@@ -213,7 +213,7 @@ fn plan(
                             path.display()
                         ),
                     )
-                    .label(d.span, "this Display"),
+                    .maybe_label(d.span, "this Display"),
                 );
                 Format::Png
             }
@@ -233,7 +233,7 @@ fn plan(
                             path.display()
                         ),
                     )
-                    .label(d.span, "this Display")
+                    .maybe_label(d.span, "this Display")
                     .help("display types: file, tiff, png, exr, zfile, shadow, framebuffer"),
                 );
                 f
@@ -305,7 +305,7 @@ fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
         "" => {
             diags.report(
                 Diag::warning("film::display", "Display has an empty mode; using \"rgba\"")
-                    .label(t.span, "this Display"),
+                    .maybe_label(t.span, "this Display"),
             );
             return standard(true, true, false);
         }
@@ -325,7 +325,7 @@ fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
                 "film::display",
                 format!("display mode \"{mode}\" is not supported; using \"{closest}\""),
             )
-            .label(t.span, "this Display")
+            .maybe_label(t.span, "this Display")
             .help("modes: rgb, rgba, a, z, rgbz, rgbaz, or output variable names"),
         );
         return standard(rgb, a, z);
@@ -341,7 +341,7 @@ fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
                         "output variable `{name}` was not rendered; its channel is written as 0"
                     ),
                 )
-                .label(t.span, "this Display")
+                .maybe_label(t.span, "this Display")
                 .help("the surface shader must declare it as an `output varying` parameter"),
             );
             planes.push(Plane {
@@ -377,7 +377,7 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
                                 "film::display",
                                 "display \"quantize\" zero offset is not supported; ignored",
                             )
-                            .label(p.span, "here"),
+                            .maybe_label(p.span, "here"),
                         );
                     }
                     qc = Quantize {
@@ -398,7 +398,7 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
                             "film::display",
                             "display \"quantize\" takes 4 numbers [zero one min max]; ignored",
                         )
-                        .label(p.span, "here"),
+                        .maybe_label(p.span, "here"),
                     );
                 }
             }
@@ -419,7 +419,7 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
                         t.kind
                     ),
                 )
-                .label(p.span, "here"),
+                .maybe_label(p.span, "here"),
             ),
         }
     }
@@ -429,7 +429,7 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
 fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) -> Result<(), Diag> {
     let (qc, qz) = display_quantizers(t, opts, diags);
     let warn = |msg: String| {
-        diags.report(Diag::warning("film::display", msg).label(t.span, "this Display"));
+        diags.report(Diag::warning("film::display", msg).maybe_label(t.span, "this Display"));
     };
     let (w, h) = (film.width, film.height);
     if t.format == Format::ZFile {
@@ -441,19 +441,11 @@ fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) ->
                 t.path.display()
             ));
         }
-        let zc = film.channel("z");
-        let depths = (0..w * h)
-            .map(|i| zc.map_or(f32::INFINITY, |z| film.data[i * film.channels() + z]))
-            .collect();
-        let z = ZFile {
-            width: w as u32,
-            height: h as u32,
-            matrices: None,
-            depths,
-        };
+        // Camera matrices are not known here yet: the header's slot stays empty (flag 0).
+        let z = ZFile::from_film(film, None);
         let bytes = z.to_bytes();
         return write_atomically(&t.path, |f| f.write_all(&bytes).map_err(|e| e.to_string()))
-            .map_err(|d| d.label(t.span, "this Display"));
+            .map_err(|d| d.maybe_label(t.span, "this Display"));
     }
 
     let mut planes = select_planes(film, t, diags);
@@ -526,7 +518,7 @@ fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) ->
             "film::display",
             format!("display `{}` selects no channels", t.path.display()),
         )
-        .label(t.span, "this Display"));
+        .maybe_label(t.span, "this Display"));
     }
     let sample = |x: usize, y: usize, k: usize| -> f32 {
         let Some(p) = planes.get(k) else { return 0.0 };
@@ -599,7 +591,7 @@ fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) ->
         }
         encode(path, t.format, &bytes, w, h, ct)
     };
-    result.map_err(|d| d.label(t.span, "this Display"))
+    result.map_err(|d| d.maybe_label(t.span, "this Display"))
 }
 
 fn finite_range(film: &Film, zc: Option<usize>) -> (f32, f32) {
@@ -660,7 +652,7 @@ fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> 
                                 "exr pixel type {other:?} is not \"half\" or \"float\"; using half"
                             ),
                         )
-                        .label(p.span, "here"),
+                        .maybe_label(p.span, "here"),
                     ),
                 }
             }
@@ -684,7 +676,7 @@ fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> 
                                 "film::display",
                                 format!("exr compression {other:?} is not supported; using zip"),
                             )
-                            .label(p.span, "here")
+                            .maybe_label(p.span, "here")
                             .help("compression: none, rle, zips, zip, piz, pxr24"),
                         );
                         Compression::ZIP16
@@ -719,7 +711,7 @@ fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> 
             "film::display",
             format!("display `{}` selects no channels", t.path.display()),
         )
-        .label(t.span, "this Display"));
+        .maybe_label(t.span, "this Display"));
     }
     let encoding = Encoding {
         compression,
@@ -740,7 +732,22 @@ fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> 
             .to_buffered(f)
             .map_err(|e| e.to_string())
     })
-    .map_err(|d| d.label(t.span, "this Display"))
+    .map_err(|d| d.maybe_label(t.span, "this Display"))
+}
+
+/// Labels a diagnostic only with a real span (the default display has none).
+trait MaybeLabel {
+    fn maybe_label(self, span: Span, text: &str) -> Self;
+}
+
+impl MaybeLabel for Diag {
+    fn maybe_label(self, span: Span, text: &str) -> Diag {
+        if span == Span::default() {
+            self
+        } else {
+            self.label(span, text)
+        }
+    }
 }
 
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);

@@ -527,6 +527,54 @@ mod tests {
     }
 
     #[test]
+    fn samples_outside_the_image_are_ignored() {
+        let pf = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 3.0,
+            ywidth: 3.0,
+        };
+        // Raster pixels −2..4 × −2..4; anything outside the 3×3 image holds 100.
+        let val = |x: f32, y: f32, c: usize| {
+            if x < 0.0 || y < 0.0 || x >= 3.0 || y >= 3.0 {
+                100.0
+            } else {
+                x * 0.1 + y * 0.01 + c as f32
+            }
+        };
+        let wide = buffer(-2, -2, 7, 7, 2, 5, val);
+        let mut a = Film::new(3, 3, Film::standard_channels(&[]));
+        filter_into(&mut a, &wide, &pf, 0, 0, 3, 3, DepthFilter::Min);
+        for v in &a.data {
+            assert!(*v < 10.0, "outside samples leaked: {v}");
+        }
+        // Same as a buffer clipped to the image (same samples inside).
+        let mut clipped = SampleBuffer {
+            x0: 0,
+            y0: 0,
+            width: 3,
+            height: 3,
+            spp_x: 2,
+            spp_y: 2,
+            channels: 5,
+            ..Default::default()
+        };
+        for py in 2..5 {
+            for px in 2..5 {
+                for s in 0..4 {
+                    let i = (py * 7 + px) * 4 + s;
+                    clipped.positions.push(wide.positions[i]);
+                    clipped
+                        .values
+                        .extend_from_slice(&wide.values[i * 5..i * 5 + 5]);
+                }
+            }
+        }
+        let mut b = Film::new(3, 3, Film::standard_channels(&[]));
+        filter_into(&mut b, &clipped, &pf, 0, 0, 3, 3, DepthFilter::Min);
+        assert_eq!(a.data, b.data);
+    }
+
+    #[test]
     fn depth_min_max_average() {
         let mut buf = buffer(0, 0, 1, 1, 2, 5, |_, _, _| 0.5);
         let zs = [4.0, 2.0, f32::INFINITY, 3.0];

@@ -34,6 +34,21 @@ pub struct ZFile {
 }
 
 impl ZFile {
+    /// The depth channel (`z`) of a film, +∞ everywhere when the film has none.
+    pub fn from_film(film: &super::Film, matrices: Option<([f32; 16], [f32; 16])>) -> ZFile {
+        let n = film.channels();
+        let depths = match film.channel("z") {
+            Some(z) => film.data.chunks_exact(n).map(|px| px[z]).collect(),
+            None => vec![f32::INFINITY; film.width * film.height],
+        };
+        ZFile {
+            width: film.width as u32,
+            height: film.height as u32,
+            matrices,
+            depths,
+        }
+    }
+
     /// Serialises to the documented layout.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = Vec::with_capacity(ZFILE_HEADER_LEN + self.depths.len() * 4);
