@@ -154,11 +154,13 @@ pub fn render_paths(
         }
         for scene in &scenes {
             let library = library_for(scene, settings);
+            let aovs = aovs_for(scene);
             let system = ShadeSystem {
                 library: &library,
                 sources,
                 diags,
                 textures: None,
+                aovs: aovs.iter().map(|a| a.name.clone()).collect(),
             };
             let stats = Stats::default();
             let bar = if settings.progress {
@@ -179,7 +181,7 @@ pub fn render_paths(
                 resolution: settings.resolution,
                 stats: if settings.stats { Some(&stats) } else { None },
                 progress: if bar.is_some() { Some(&progress) } else { None },
-                aovs: aovs_for(scene),
+                aovs,
             };
             let start = Instant::now();
             let film = render_frame(scene, &system, &opts, diags);

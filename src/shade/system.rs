@@ -28,6 +28,8 @@ pub struct ShadeSystem<'a> {
     pub sources: &'a SourceMap,
     pub diags: &'a Diagnostics,
     pub textures: Option<&'a dyn TextureLookup>,
+    /// Output variables the displays want (shader output parameters or globals by name).
+    pub aovs: Vec<String>,
 }
 
 fn uses_lights(instrs: &[Instr]) -> bool {
@@ -204,7 +206,7 @@ impl<'a> ShadeSystem<'a> {
                     let ty = match gname {
                         "N" => BaseType::Normal,
                         "P" => BaseType::Point,
-                        "Cs" | "Os" => BaseType::Color,
+                        "Cs" | "Os" | "Ci" | "Oi" => BaseType::Color,
                         _ => BaseType::Float,
                     };
                     grid.outputs

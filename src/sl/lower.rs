@@ -152,6 +152,9 @@ struct Lowerer<'a> {
     in_illuminance: u32,
     in_light_construct: u32,
     error_reg: Reg,
+    /// Registers below this are globals; those read or written are kept in the program.
+    globals_end: usize,
+    used_globals: HashSet<Reg>,
 }
 
 fn ty_name(ty: BaseType, array: Option<usize>) -> String {
@@ -221,6 +224,8 @@ impl<'a> Lowerer<'a> {
             in_illuminance: 0,
             in_light_construct: 0,
             error_reg: 0,
+            globals_end: 0,
+            used_globals: HashSet::new(),
         };
         lw.error_reg = lw.const_float(0.0);
         lw
@@ -386,6 +391,7 @@ impl<'a> Lowerer<'a> {
                 },
             );
         }
+        self.globals_end = self.regs.len();
         for f in functions {
             self.define_function(f);
         }
@@ -465,13 +471,17 @@ impl<'a> Lowerer<'a> {
         });
         let (body, ()) = self.with_block(|lw| lw.block_stmts(&def.body));
         self.pop_scope();
+        // L, Cl, Ol are set by illuminance/illuminate; keep them when those constructs appear.
+        let used = std::mem::take(&mut self.used_globals);
+        let mut globals = std::mem::take(&mut self.globals);
+        globals.retain(|g| used.contains(&g.reg) || matches!(g.name, "L" | "Cl" | "Ol" | "du" | "dv"));
         Program {
             name: def.name.clone(),
             kind: def.kind,
             regs: std::mem::take(&mut self.regs),
             consts: std::mem::take(&mut self.consts),
             params,
-            globals: std::mem::take(&mut self.globals),
+            globals,
             init,
             body,
             span: def.span,
@@ -986,6 +996,13 @@ impl<'a> Lowerer<'a> {
                 g.written = true;
             }
         }
+        self.mark_used(reg);
+    }
+
+    fn mark_used(&mut self, reg: Reg) {
+        if (reg as usize) < self.globals_end {
+            self.used_globals.insert(reg);
+        }
     }
 
     // ---- expressions ----
@@ -1178,6 +1195,7 @@ impl<'a> Lowerer<'a> {
     fn ident(&mut self, name: &str, span: Span) -> Val {
         match self.lookup(name) {
             Some(var) => {
+                self.mark_used(var.reg);
                 if GLOBALS.iter().any(|g| g.0 == name)
                     && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg)
                 {
@@ -2515,6 +2533,7 @@ impl<'a> Lowerer<'a> {
             for g in ["s", "t"] {
                 match self.lookup(g) {
                     Some(v) => {
+                        self.mark_used(v.reg);
                         regs.push(v.reg);
                         varying |= v.varying;
                     }
