@@ -133,3 +133,17 @@ fn corrupt_gzip_is_an_error() {
     assert!(r.is_empty());
     assert_eq!(d.snapshot()[0].0.code, "rib::gzip");
 }
+
+#[test]
+fn binary_diagnostics_snapshot() {
+    let mut b = b"WorldBegin\n".to_vec();
+    b.extend_from_slice(&[0o246, 9, 0o200, 1, b'\n']);
+    b.extend_from_slice(b"Sphere 1 ");
+    b.extend_from_slice(&[0o317, 4]);
+    b.extend_from_slice(b"\nWorldEnd\n");
+    let (r, d, sm) = parse(&b);
+    let names: Vec<&str> = r.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["WorldBegin", "WorldEnd"]);
+    assert_eq!(d.error_count(), 2);
+    insta::assert_snapshot!(d.render_plain(&sm));
+}

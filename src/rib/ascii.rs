@@ -17,6 +17,10 @@ use crate::diag::{Diag, Diagnostics, Span};
 #[grammar = "../grammar/rib.pest"]
 pub(crate) struct RibParser;
 
+/// Requests per `chunk` call: must equal the bound in the grammar's `chunk` rule
+/// (`request{, 256}`), so a full chunk means "keep going" rather than "stopped at an error".
+const CHUNK: usize = 256;
+
 /// Why a request parsed by pest could not be turned into a `Request`.
 enum BuildError {
     /// A number array held something that is not a number (absolute byte range, and the
@@ -90,7 +94,7 @@ pub(crate) fn parse_text(
             break;
         }
         pos += end;
-        if count == 256 {
+        if count == CHUNK {
             continue;
         }
         // The chunk stopped early: the next request is malformed. Confirm with `one` (it

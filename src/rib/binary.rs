@@ -36,6 +36,7 @@ pub(crate) fn transcode(b: &[u8]) -> (String, Vec<Issue>) {
         strings: HashMap::new(),
     };
     t.run();
+    // Always valid: ASCII, escaped strings and `copy_text`'s checked UTF-8.
     let text = match String::from_utf8(t.out) {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
@@ -68,13 +69,11 @@ impl<'a> Transcoder<'a> {
                 b'"' => {
                     // A quoted string is copied as is, whatever bytes it holds.
                     let end = lex::string_end(b, self.i).unwrap_or(b.len()).min(b.len());
-                    self.out.extend_from_slice(&b[self.i..end]);
-                    self.i = end;
+                    self.copy_text(end);
                 }
                 b'#' => {
                     let end = lex::next_line(b, self.i);
-                    self.out.extend_from_slice(&b[self.i..end]);
-                    self.i = end;
+                    self.copy_text(end);
                 }
                 0..=0x7F => {
                     self.out.push(c);
@@ -87,6 +86,18 @@ impl<'a> Transcoder<'a> {
                 }
             }
         }
+    }
+
+    /// Copies string or comment text up to `end`; bytes that are not UTF-8 become U+FFFD so
+    /// the decoded text is valid UTF-8 and issue offsets stay exact.
+    fn copy_text(&mut self, end: usize) {
+        for chunk in self.b[self.i..end].utf8_chunks() {
+            self.out.extend_from_slice(chunk.valid().as_bytes());
+            for _ in chunk.invalid() {
+                self.out.extend_from_slice("\u{FFFD}".as_bytes());
+            }
+        }
+        self.i = end;
     }
 
     fn issue(&mut self, error: bool, message: String, help: &'static str, placeholder: bool) {
@@ -253,7 +264,9 @@ impl<'a> Transcoder<'a> {
                     None => {
                         // A name placeholder: the reader drops this request (and its
                         // arguments) silently, keeping the previous request intact.
-                        self.out.push(b'\n');
+                        if self.out.last().is_some_and(|&l| l != b'\n') {
+                            self.out.push(b'\n');
+                        }
                         let at = self.out.len();
                         self.out.extend_from_slice(UNDEFINED_REQUEST.as_bytes());
                         self.out.push(b' ');
@@ -396,6 +409,13 @@ mod tests {
         assert!(i[0].placeholder && i[0].message.contains("reserved"));
         assert!(i[1].message.contains("ends inside"));
         assert_eq!(&t[i[0].at..i[0].at + 1], "?");
+    }
+
+    #[test]
+    fn invalid_utf8_in_strings_becomes_replacement() {
+        let (t, i) = transcode(b"A \"\xFFx\" # \xFE\n");
+        assert!(i.is_empty());
+        assert_eq!(t, "A \"\u{FFFD}x\" # \u{FFFD}\n");
     }
 
     #[test]

@@ -118,7 +118,7 @@ pub(crate) fn scan_number(b: &[u8], start: usize) -> Option<(Num, usize)> {
         return Some((Num::Float(s.parse::<f32>().ok()?), i));
     }
     if !inexact {
-        while mant > (1 << 24) && mant % 10 == 0 {
+        while mant > (1 << 24) && mant.is_multiple_of(10) {
             mant /= 10;
             e10 += 1;
         }

@@ -1,7 +1,9 @@
 //! RIB input: ASCII (pest grammar `grammar/rib.pest`), binary (RISpec C.1) and gzip.
 //!
-//! Input: bytes of a RIB stream registered in the `SourceMap`.
-//! Output: a stream of [`Request`]s, each with the span of its name and of every argument.
+//! Input: bytes of a RIB stream, registered in the `SourceMap` (pure ASCII as is; a stream
+//! with binary tokens as its decoded ASCII form, see `binary.rs`; gzip is decompressed first).
+//! Output: a stream of [`Request`]s, each with the span of its name and of every argument;
+//! [`format_requests`] prints requests back as canonical ASCII RIB.
 //! Invariants: a syntax error costs at most one request (the reader resynchronises at the next
 //! request name, RISpec C.2.2); numbers in arrays are read without a pest pair per number.
 
@@ -179,7 +181,13 @@ pub fn parse_bytes(
     let file = sources.add(name, text.clone());
     let mut quiet = Vec::new();
     for is in issues {
-        let end = (is.at + 1).min(text.len()).max(is.at);
+        let rest = text.as_bytes().get(is.at..).unwrap_or_default();
+        let len = if rest.starts_with(binary::UNDEFINED_REQUEST.as_bytes()) {
+            binary::UNDEFINED_REQUEST.len()
+        } else {
+            1
+        };
+        let end = (is.at + len).min(text.len()).max(is.at);
         let d = if is.error {
             Diag::error("rib::binary", is.message)
         } else {
