@@ -317,7 +317,12 @@ const LANES: usize = 8;
 /// the same order per lane). The lattice set-up and the gradient arithmetic run as
 /// lane-parallel loops the compiler vectorises; only the permutation lookups stay scalar.
 #[inline(always)]
-fn snoise3_lanes(px: &[f32; LANES], py: &[f32; LANES], pz: &[f32; LANES]) -> [f32; LANES] {
+fn snoise3_lanes(
+    px: &[f32; LANES],
+    py: &[f32; LANES],
+    pz: &[f32; LANES],
+    off: i32,
+) -> [f32; LANES] {
     let mut f = [[0.0f32; LANES]; 3];
     let mut i = [[0i32; LANES]; 3];
     for l in 0..LANES {
@@ -329,13 +334,14 @@ fn snoise3_lanes(px: &[f32; LANES], py: &[f32; LANES], pz: &[f32; LANES]) -> [f3
     }
     let mut h = [[0u8; LANES]; 8];
     for l in 0..LANES {
+        let xo = i[0][l].wrapping_add(off);
         let (x0, y0, z0) = (
-            (i[0][l] & 255) as usize,
+            (xo & 255) as usize,
             (i[1][l] & 255) as usize,
             (i[2][l] & 255) as usize,
         );
         let (x1, y1, z1) = (
-            (i[0][l].wrapping_add(1) & 255) as usize,
+            (xo.wrapping_add(1) & 255) as usize,
             (i[1][l].wrapping_add(1) & 255) as usize,
             (i[2][l].wrapping_add(1) & 255) as usize,
         );
@@ -395,7 +401,7 @@ fn snoise3_batch(p: &[Vec3], out: &mut [f32], map: impl Fn(f32) -> f32) {
             y[l] = pp[l].y;
             z[l] = pp[l].z;
         }
-        let r = snoise3_lanes(&x, &y, &z);
+        let r = snoise3_lanes(&x, &y, &z, 0);
         for l in 0..LANES {
             oo[l] = map(r[l]);
         }
@@ -408,7 +414,7 @@ fn snoise3_batch(p: &[Vec3], out: &mut [f32], map: impl Fn(f32) -> f32) {
 /// Batch `snoise3` over structure-of-arrays lanes, for the fractal kernels.
 #[inline]
 pub(crate) fn snoise3_x8(x: &[f32; 8], y: &[f32; 8], z: &[f32; 8]) -> [f32; 8] {
-    snoise3_lanes(x, y, z)
+    snoise3_lanes(x, y, z, 0)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -769,8 +775,19 @@ pub fn noise4_slice(p: &[Vec3], t: &[f32], out: &mut [f32]) {
 
 /// `out[i] = vnoise3(p[i])`.
 pub fn vnoise3_slice(p: &[Vec3], out: &mut [Vec3]) {
-    for (o, &q) in out.iter_mut().zip(p) {
-        *o = vnoise3(q);
+    let n = p.len().min(out.len());
+    let full = n - n % LANES;
+    for c in (0..full).step_by(LANES) {
+        let x = std::array::from_fn(|l| p[c + l].x);
+        let y = std::array::from_fn(|l| p[c + l].y);
+        let z = std::array::from_fn(|l| p[c + l].z);
+        let r = CHANNEL_OFFSETS.map(|o| snoise3_lanes(&x, &y, &z, o));
+        for l in 0..LANES {
+            out[c + l] = vto_unit(Vec3::new(r[0][l], r[1][l], r[2][l]));
+        }
+    }
+    for k in full..n {
+        out[k] = vnoise3(p[k]);
     }
 }
 
@@ -823,11 +840,18 @@ mod tests {
         let p: Vec<Vec3> = pts(1003, 300.0, 11).map(|(p, _)| p).collect();
         let mut a = vec![0.0f32; p.len()];
         let mut b = vec![0.0f32; p.len()];
+        let mut v = vec![Vec3::ZERO; p.len()];
         noise3_slice(&p, &mut a);
         snoise3_slice(&p, &mut b);
+        vnoise3_slice(&p, &mut v);
         for i in 0..p.len() {
             assert_eq!(a[i].to_bits(), noise3(p[i]).to_bits());
             assert_eq!(b[i].to_bits(), snoise3(p[i]).to_bits());
+            let w = vnoise3(p[i]);
+            assert_eq!(
+                v[i].to_array().map(f32::to_bits),
+                w.to_array().map(f32::to_bits)
+            );
         }
     }
 
