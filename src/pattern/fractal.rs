@@ -79,7 +79,8 @@ impl Octaves {
 /// filter of width `fw`: 1 for `freq·fw ≤ ¼`, 0 for `freq·fw ≥ ½` (Nyquist), linear between.
 #[inline]
 pub fn octave_weight(freq: f32, fw: f32) -> f32 {
-    if !(fw > 0.0) || !fw.is_finite() {
+    // NaN, ±∞, 0 and negative widths all mean "unfiltered".
+    if fw.is_nan() || fw <= 0.0 || fw.is_infinite() {
         return 1.0;
     }
     ((0.5 - freq * fw) * 4.0).clamp(0.0, 1.0)

@@ -272,7 +272,11 @@ pub fn diamond_square(params: &TerrainParams) -> HeightGrid {
         // Diamond step: edge midpoints (one coordinate an odd multiple of half).
         sigma *= shrink;
         for j in (0..side).step_by(half) {
-            let start = if (j / half) % 2 == 0 { half } else { 0 };
+            let start = if (j / half).is_multiple_of(2) {
+                half
+            } else {
+                0
+            };
             for i in (start..side).step_by(step) {
                 let (mut s, mut c) = (0.0, 0.0);
                 if i >= half {
@@ -917,7 +921,7 @@ mod tests {
                 })
                 .collect();
             column_curvature(n, 150, |s, i, j| {
-                (j < n / 4 && i + j <= n - 1).then(|| meshes[s as usize].positions[idx(i, j)].z)
+                (j < n / 4 && i + j < n).then(|| meshes[s as usize].positions[idx(i, j)].z)
             })[n / 2]
         };
         let mid = stat(TriangleScheme::Midpoint);
