@@ -86,6 +86,22 @@ pub fn octave_weight(freq: f32, fw: f32) -> f32 {
     ((0.5 - freq * fw) * 4.0).clamp(0.0, 1.0)
 }
 
+/// Band-limited `snoise3` for a footprint of width `fw`: faded to its mean 0 by the same
+/// Peachey ramp as the octaves (the `filteredsnoise` of SL headers).
+pub fn filtered_snoise3(p: Vec3, fw: f32) -> f32 {
+    let w = octave_weight(1.0, fw);
+    if w > 0.0 {
+        w * snoise3(p)
+    } else {
+        0.0
+    }
+}
+
+/// Band-limited `noise3`: fades to 0.5 as the footprint reaches a noise cell.
+pub fn filtered_noise3(p: Vec3, fw: f32) -> f32 {
+    0.5 + 0.5 * filtered_snoise3(p, fw)
+}
+
 /// Number of octaves a fractal sum actually evaluates for filter width `fw` (those with a
 /// non-zero weight).
 pub fn octave_count(fw: f32, o: &Octaves) -> u32 {
@@ -444,6 +460,15 @@ mod tests {
         assert_eq!(octave_weight(2.0, 0.3), 0.0);
         assert!((octave_weight(1.0, 0.375) - 0.5).abs() < 1e-6);
         assert_eq!(octave_weight(1.0, f32::NAN), 1.0);
+    }
+
+    #[test]
+    fn filtered_noise_fades() {
+        let p = Vec3::new(0.3, 0.6, 0.2);
+        assert_eq!(filtered_snoise3(p, 0.0), snoise3(p));
+        assert_eq!(filtered_snoise3(p, 0.6), 0.0);
+        assert_eq!(filtered_noise3(p, 1.0), 0.5);
+        assert!((filtered_snoise3(p, 0.375) - 0.5 * snoise3(p)).abs() < 1e-6);
     }
 
     #[test]
