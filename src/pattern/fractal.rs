@@ -16,7 +16,7 @@
 
 use glam::Vec3;
 
-use super::noise::{snoise3, snoise4, vsnoise3, ABS_SNOISE3_MEAN, ABS_SNOISE4_MEAN};
+use super::noise::{snoise3, snoise3_x8, snoise4, vsnoise3, ABS_SNOISE3_MEAN, ABS_SNOISE4_MEAN};
 
 /// Upper bound on the octaves any sum evaluates (guards against absurd parameters).
 pub const MAX_OCTAVES: u32 = 32;
@@ -79,10 +79,27 @@ impl Octaves {
 /// filter of width `fw`: 1 for `freq·fw ≤ ¼`, 0 for `freq·fw ≥ ½` (Nyquist), linear between.
 #[inline]
 pub fn octave_weight(freq: f32, fw: f32) -> f32 {
-    if !(fw > 0.0) || !fw.is_finite() {
+    // NaN, ±∞, 0 and negative widths all mean "unfiltered".
+    if fw.is_nan() || fw <= 0.0 || fw.is_infinite() {
         return 1.0;
     }
     ((0.5 - freq * fw) * 4.0).clamp(0.0, 1.0)
+}
+
+/// Band-limited `snoise3` for a footprint of width `fw`: faded to its mean 0 by the same
+/// Peachey ramp as the octaves (the `filteredsnoise` of SL headers).
+pub fn filtered_snoise3(p: Vec3, fw: f32) -> f32 {
+    let w = octave_weight(1.0, fw);
+    if w > 0.0 {
+        w * snoise3(p)
+    } else {
+        0.0
+    }
+}
+
+/// Band-limited `noise3`: fades to 0.5 as the footprint reaches a noise cell.
+pub fn filtered_noise3(p: Vec3, fw: f32) -> f32 {
+    0.5 + 0.5 * filtered_snoise3(p, fw)
 }
 
 /// Number of octaves a fractal sum actually evaluates for filter width `fw` (those with a
@@ -344,18 +361,74 @@ pub fn gardner(p: Vec3, fw: f32, g: &GardnerParams) -> f32 {
 // Batch forms (each processes min(len) elements)
 // ---------------------------------------------------------------------------------------------
 
-/// `out[i] = turbulence3(p[i], fw[i], o)`.
-pub fn turbulence3_slice(p: &[Vec3], fw: &[f32], o: &Octaves, out: &mut [f32]) {
-    for ((r, &q), &w) in out.iter_mut().zip(p).zip(fw) {
-        *r = turbulence3(q, w, o);
+/// Shared batch kernel of [`turbulence3_slice`] and [`fbm3_slice`]: 8 points at a time through
+/// the lane-parallel noise kernel. All lanes step through the same octave sequence (the
+/// frequencies do not depend on the point); a lane whose footprint has stopped its octaves
+/// just stops accumulating. Bit-identical to the scalar functions.
+fn octave_slice(
+    p: &[Vec3],
+    fw: &[f32],
+    o: &Octaves,
+    out: &mut [f32],
+    term: impl Fn(f32, f32, f32) -> f32,
+    tail: impl Fn(&OctaveIter) -> f32,
+    scalar: impl Fn(Vec3, f32) -> f32,
+) {
+    const L: usize = 8;
+    let n = p.len().min(fw.len()).min(out.len());
+    let full = n - n % L;
+    for c in (0..full).step_by(L) {
+        let mut its: [OctaveIter; L] = std::array::from_fn(|l| OctaveIter::new(fw[c + l], o));
+        let mut sum = [0.0f32; L];
+        loop {
+            let items: [Option<(u32, f32, f32, f32)>; L] = std::array::from_fn(|l| its[l].next());
+            let Some(&Some((i, f, _, _))) = items.iter().find(|it| it.is_some()) else {
+                break;
+            };
+            let off = octave_offset(i);
+            let x = std::array::from_fn(|l| p[c + l].x * f + off.x);
+            let y = std::array::from_fn(|l| p[c + l].y * f + off.y);
+            let z = std::array::from_fn(|l| p[c + l].z * f + off.z);
+            let r = snoise3_x8(&x, &y, &z);
+            for l in 0..L {
+                if let Some((_, _, a, w)) = items[l] {
+                    sum[l] += term(r[l], a, w);
+                }
+            }
+        }
+        for l in 0..L {
+            out[c + l] = sum[l] + tail(&its[l]);
+        }
+    }
+    for k in full..n {
+        out[k] = scalar(p[k], fw[k]);
     }
 }
 
-/// `out[i] = fbm3(p[i], fw[i], o)`.
+/// `out[i] = turbulence3(p[i], fw[i], o)` (bit-identical, batched).
+pub fn turbulence3_slice(p: &[Vec3], fw: &[f32], o: &Octaves, out: &mut [f32]) {
+    octave_slice(
+        p,
+        fw,
+        o,
+        out,
+        |v, a, w| a * (w * v.abs() + (1.0 - w) * ABS_SNOISE3_MEAN),
+        |it| tail_mean(it, ABS_SNOISE3_MEAN),
+        |q, w| turbulence3(q, w, o),
+    );
+}
+
+/// `out[i] = fbm3(p[i], fw[i], o)` (bit-identical, batched).
 pub fn fbm3_slice(p: &[Vec3], fw: &[f32], o: &Octaves, out: &mut [f32]) {
-    for ((r, &q), &w) in out.iter_mut().zip(p).zip(fw) {
-        *r = fbm3(q, w, o);
-    }
+    octave_slice(
+        p,
+        fw,
+        o,
+        out,
+        |v, a, w| a * w * v,
+        |_| 0.0,
+        |q, w| fbm3(q, w, o),
+    );
 }
 
 /// `out[i] = vfbm3(p[i], fw[i], o)`.
@@ -387,6 +460,15 @@ mod tests {
         assert_eq!(octave_weight(2.0, 0.3), 0.0);
         assert!((octave_weight(1.0, 0.375) - 0.5).abs() < 1e-6);
         assert_eq!(octave_weight(1.0, f32::NAN), 1.0);
+    }
+
+    #[test]
+    fn filtered_noise_fades() {
+        let p = Vec3::new(0.3, 0.6, 0.2);
+        assert_eq!(filtered_snoise3(p, 0.0), snoise3(p));
+        assert_eq!(filtered_snoise3(p, 0.6), 0.0);
+        assert_eq!(filtered_noise3(p, 1.0), 0.5);
+        assert!((filtered_snoise3(p, 0.375) - 0.5 * snoise3(p)).abs() < 1e-6);
     }
 
     #[test]
@@ -533,14 +615,28 @@ mod tests {
 
     #[test]
     fn slices_match_scalar() {
-        let p: Vec<Vec3> = pts(64, 5.0, 6).map(|(p, _)| p).collect();
-        let fw: Vec<f32> = (0..64).map(|i| i as f32 * 0.005).collect();
-        let o = Octaves::default();
-        let mut out = vec![0.0; 64];
+        // 203 points: 25 full batches with mixed footprints (lanes stop at different octaves,
+        // some at none) plus a scalar tail; results must be bit-identical.
+        let p: Vec<Vec3> = pts(203, 5.0, 6).map(|(p, _)| p).collect();
+        let fw: Vec<f32> = (0..203).map(|i| (i % 13) as f32 * 0.05).collect();
+        let o = Octaves::new(5.5, 2.0, 0.5);
+        let mut out = vec![0.0; 203];
         turbulence3_slice(&p, &fw, &o, &mut out);
-        assert_eq!(out[10], turbulence3(p[10], fw[10], &o));
+        for i in 0..203 {
+            assert_eq!(
+                out[i].to_bits(),
+                turbulence3(p[i], fw[i], &o).to_bits(),
+                "i = {i}"
+            );
+        }
         fbm3_slice(&p, &fw, &o, &mut out);
-        assert_eq!(out[63], fbm3(p[63], fw[63], &o));
+        for i in 0..203 {
+            assert_eq!(out[i].to_bits(), fbm3(p[i], fw[i], &o).to_bits(), "i = {i}");
+        }
+        let mut short = vec![0.0; 5];
+        turbulence3_slice(&p, &fw[..3], &o, &mut short);
+        assert_eq!(short[2], turbulence3(p[2], fw[2], &o));
+        assert_eq!(short[3], 0.0);
         let mut vout = vec![Vec3::ZERO; 64];
         vfbm3_slice(&p, &fw, &o, &mut vout);
         assert_eq!(vout[5], vfbm3(p[5], fw[5], &o));
