@@ -64,6 +64,7 @@ fn all_quadrics() -> Vec<Geometry> {
     vec![
         sphere(1.5, -1.0, 1.2, 300.0),
         sphere(1.0, -2.0, 2.0, 360.0),
+        sphere(-1.0, -0.5, 2.0, 180.0),
         Geometry::Cone {
             height: 2.0,
             radius: 1.0,
