@@ -397,6 +397,7 @@ fn polygons(
         flip,
         color: prim.attributes.color,
         opacity: prim.attributes.opacity,
+        split_triangles: prim.attributes.displacement.is_some(),
     };
     vec![Box::new(Mesh {
         data: Arc::new(data),

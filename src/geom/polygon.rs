@@ -3,9 +3,10 @@
 //! Input: `Geometry::Polygons` (loops per face, vertices per loop, vertex indices), "P" (or
 //! "Pw") and the other primitive variables, `camera_from_object`.
 //! Output: a [`Mesh`] surface (not diceable) that splits into halves of its face range and, once
-//! small, into one bilinear patch per convex quad and one degenerate bilinear patch
-//! `(a, b, c, c)` per triangle of every other face (ear clipping, holes bridged first, in the
-//! face's dominant plane).
+//! small, into one bilinear patch per convex quad and, for every other face, per triangle
+//! (ear clipping, holes bridged first, in the face's dominant plane) either one degenerate
+//! bilinear patch `(a, b, c, c)` (cheap; its v = 1 row collapses to c) or, when the primitive is
+//! displaced, three quads meeting at the centroid (no collapsed rows, so calculatenormal works).
 //! Invariants: vertex positions are transformed once, so faces sharing an edge dice onto the
 //! same straight segment (no cracks); Ng is the face's Newell normal with the orientation rule of
 //! `geom` applied, N the "N" primvar when given; per RISpec §5.1 polygons do not inherit
@@ -19,7 +20,7 @@ use std::sync::Arc;
 use glam::{Vec2, Vec3};
 
 use super::patch::{ParamPatch, Shape};
-use super::primvar::{patch_vars, Defaults, Selector, SourceVar};
+use super::primvar::{patch_vars, Defaults, PatchVars, Selector, SourceVar};
 use super::triangulate::triangulate;
 use super::{Bound, Surface};
 use crate::shade::Grid;
@@ -47,6 +48,9 @@ pub(crate) struct MeshData {
     pub flip: bool,
     pub color: Vec3,
     pub opacity: Vec3,
+    /// Cut triangles into three quads instead of one collapsed patch (set when the primitive
+    /// has a displacement shader, which needs derivatives at every grid point).
+    pub split_triangles: bool,
 }
 
 /// A range of a mesh's faces.
@@ -128,12 +132,51 @@ impl Mesh {
         }
         let loop_ids: Vec<Vec<usize>> = loops.iter().map(|r| r.clone().collect()).collect();
         for t in triangulate(&pts, &loop_ids) {
-            out.push(self.patch(f, [t[0], t[1], t[2], t[2]], ng));
+            if d.split_triangles {
+                self.triangle_quads(f, t, ng, out);
+            } else {
+                out.push(self.patch(f, [t[0], t[1], t[2], t[2]], ng));
+            }
+        }
+    }
+
+    /// A triangle as three quads (corner, edge midpoint, centroid, edge midpoint): no collapsed
+    /// grid rows, so finite-difference derivatives (calculatenormal after displacement) stay
+    /// defined everywhere. Bilinear interpolation reproduces the triangle's linear
+    /// interpolation exactly, since positions and values use the same weights.
+    fn triangle_quads(&self, f: usize, t: [usize; 3], ng: Vec3, out: &mut Vec<Box<dyn Surface>>) {
+        let d = &*self.data;
+        let base = self.corner_vars(f, [t[0], t[1], t[2], t[2]]);
+        let p = t.map(|l| d.p[d.verts[d.fv_start[f] + l] as usize]);
+        const H: f32 = 0.5;
+        const G: f32 = 1.0 / 3.0;
+        // Barycentric weights of the corners (0,0) (1,0) (0,1) (1,1) of each quad.
+        let quads: [[[f32; 3]; 4]; 3] = [
+            [[1., 0., 0.], [H, H, 0.], [H, 0., H], [G, G, G]],
+            [[0., 1., 0.], [0., H, H], [H, H, 0.], [G, G, G]],
+            [[0., 0., 1.], [H, 0., H], [0., H, H], [G, G, G]],
+        ];
+        for w in &quads {
+            let corners = w.map(|w| w[0] * p[0] + w[1] * p[1] + w[2] * p[2]);
+            let shape = Shape::Bilinear { p: corners, ng };
+            out.push(Box::new(ParamPatch::new(d.index, shape, base.remap(w))));
         }
     }
 
     /// One patch whose corners are the given face-local face-vertices.
     fn patch(&self, f: usize, local: [usize; 4], ng: Vec3) -> Box<dyn Surface> {
+        let d = &*self.data;
+        let vx = local.map(|l| d.verts[d.fv_start[f] + l] as usize);
+        let vars = self.corner_vars(f, local);
+        let shape = Shape::Bilinear {
+            p: vx.map(|v| d.p[v]),
+            ng,
+        };
+        Box::new(ParamPatch::new(d.index, shape, vars))
+    }
+
+    /// Primitive variables at four face-local face-vertices.
+    fn corner_vars(&self, f: usize, local: [usize; 4]) -> PatchVars {
         let d = &*self.data;
         let fv = local.map(|l| d.fv_start[f] + l);
         let vx = fv.map(|i| d.verts[i] as usize);
@@ -148,12 +191,7 @@ impl Mesh {
             color: d.color,
             opacity: d.opacity,
         };
-        let vars = patch_vars(&d.vars, &sel, &defaults);
-        let shape = Shape::Bilinear {
-            p: vx.map(|v| d.p[v]),
-            ng,
-        };
-        Box::new(ParamPatch::new(d.index, shape, vars))
+        patch_vars(&d.vars, &sel, &defaults)
     }
 }
 

@@ -206,6 +206,51 @@ pub(crate) struct PatchVars {
     pub user: Vec<CornerVar>,
 }
 
+impl PatchVars {
+    /// The values at new corners, each a weighted sum of the old corners 0, 1, 2 (used to cut a
+    /// triangle `(a, b, c, c)` into quads). Uniform values are kept.
+    pub fn remap(&self, w: &[[f32; 3]; 4]) -> PatchVars {
+        fn f(c: &[f32; 4], w: &[[f32; 3]; 4]) -> [f32; 4] {
+            w.map(|w| w[0] * c[0] + w[1] * c[1] + w[2] * c[2])
+        }
+        fn v(c: &[Vec3; 4], w: &[[f32; 3]; 4]) -> [Vec3; 4] {
+            w.map(|w| w[0] * c[0] + w[1] * c[1] + w[2] * c[2])
+        }
+        let user = self
+            .user
+            .iter()
+            .map(|cv| {
+                if cv.uniform || cv.ty == ParamType::String {
+                    return cv.clone();
+                }
+                let width = cv.floats.len() / 4;
+                let mut floats = Vec::with_capacity(4 * width);
+                for wk in w {
+                    for c in 0..width {
+                        floats.push(
+                            wk[0] * cv.floats[c]
+                                + wk[1] * cv.floats[width + c]
+                                + wk[2] * cv.floats[2 * width + c],
+                        );
+                    }
+                }
+                CornerVar {
+                    floats,
+                    ..cv.clone()
+                }
+            })
+            .collect();
+        PatchVars {
+            s: f(&self.s, w),
+            t: f(&self.t, w),
+            cs: v(&self.cs, w),
+            os: v(&self.os, w),
+            n: self.n.as_ref().map(|n| v(n, w)),
+            user,
+        }
+    }
+}
+
 /// Defaults for the standard globals at the four corners.
 pub(crate) struct Defaults {
     pub s: [f32; 4],

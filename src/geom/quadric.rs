@@ -83,11 +83,11 @@ impl Profile {
                 (z / r).clamp(-1.0, 1.0).asin()
             }
         };
-        let ar = r.abs();
+        // Literally the spec's tests (`zmin > −radius`, `zmax < radius`), also for r < 0.
         Profile::Sphere {
             r,
-            phi0: phi(zmin, -FRAC_PI_2, zmin <= -ar),
-            phi1: phi(zmax, FRAC_PI_2, zmax >= ar),
+            phi0: phi(zmin, -FRAC_PI_2, zmin <= -r),
+            phi1: phi(zmax, FRAC_PI_2, zmax >= r),
         }
     }
 

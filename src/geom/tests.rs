@@ -64,6 +64,7 @@ fn all_quadrics() -> Vec<Geometry> {
     vec![
         sphere(1.5, -1.0, 1.2, 300.0),
         sphere(1.0, -2.0, 2.0, 360.0),
+        sphere(-1.0, -0.5, 2.0, 180.0),
         Geometry::Cone {
             height: 2.0,
             radius: 1.0,
@@ -964,4 +965,49 @@ fn st_and_hpoint_primvars() {
     let ph = g.primvar("Ph").unwrap();
     assert_eq!(ph.ty, ParamType::Point);
     assert_eq!(ph.floats, vec![2.0, 2.0, 3.0]);
+}
+
+#[test]
+fn displaced_triangles_become_three_quads_without_collapsed_rows() {
+    let a = Attributes {
+        displacement: Some(Arc::new(crate::scene::ShaderRef {
+            name: "bumpy".into(),
+            params: ParamList::default(),
+            span: Span::default(),
+            world_from_shader: Mat4::IDENTITY,
+        })),
+        ..Default::default()
+    };
+    let pts = [(0.0f32, 0.0f32), (3.0, 0.0), (0.0, 2.0)];
+    let pos: Vec<f32> = pts.iter().flat_map(|&(x, y)| [x, y, 1.0]).collect();
+    let val: Vec<f32> = pts.iter().map(|&(x, y)| 2.0 * x + y).collect();
+    let p = prim(
+        Geometry::Polygons {
+            nloops: vec![1],
+            nverts: vec![3],
+            verts: vec![0, 1, 2],
+            nvertices: 3,
+        },
+        vec![
+            param("P", Class::Vertex, ParamType::Point, &pos),
+            param("val", Class::Vertex, ParamType::Float, &val),
+            param("fv", Class::FaceVarying, ParamType::Float, &[1.0, 2.0, 3.0]),
+        ],
+        a,
+        Mat4::IDENTITY,
+    );
+    let parts = one(&p, Mat4::IDENTITY).split();
+    assert_eq!(parts.len(), 3);
+    assert!((polygon_area(&parts) - 3.0).abs() < 1e-5);
+    for s in &parts {
+        let g = s.dice(4, 4);
+        let v = g.primvar("val").unwrap();
+        for k in 0..g.len() {
+            assert!(g.dpdu[k].length() > 1e-3 && g.dpdv[k].length() > 1e-3);
+            assert!((v.floats[k] - (2.0 * g.p[k].x + g.p[k].y)).abs() < 1e-5);
+            assert!((g.s[k] - g.p[k].x).abs() < 1e-5 && (g.t[k] - g.p[k].y).abs() < 1e-5);
+        }
+        // The centroid corner (1,1) carries the mean face-varying value.
+        assert!((g.primvar("fv").unwrap().floats[15] - 2.0).abs() < 1e-6);
+    }
 }

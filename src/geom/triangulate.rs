@@ -142,6 +142,23 @@ fn bridge(pts: &[Vec2], poly: &mut Vec<usize>, h: &[usize]) {
             }
         }
     }
+    // A vertex already used by earlier bridges occurs several times: splice at the occurrence
+    // whose interior wedge holds the new bridge, or the loop would cross itself.
+    let p = pts[poly[pos]];
+    let d = mp - p;
+    if let Some(k) = (0..n).find(|&k| {
+        pts[poly[k]] == p && {
+            let a = pts[poly[(k + 1) % n]] - p;
+            let b = pts[poly[(k + n - 1) % n]] - p;
+            if a.perp_dot(b) > 0.0 {
+                a.perp_dot(d) > 0.0 && d.perp_dot(b) > 0.0
+            } else {
+                !(b.perp_dot(d) >= 0.0 && d.perp_dot(a) >= 0.0)
+            }
+        }
+    }) {
+        pos = k;
+    }
     let mut out = Vec::with_capacity(poly.len() + h.len() + 2);
     out.extend_from_slice(&poly[..=pos]);
     out.extend(h[mi..].iter().chain(h[..=mi].iter()));
@@ -275,5 +292,87 @@ mod tests {
             .collect();
         let tris = triangulate(&pts, &[(0..4).collect()]);
         assert!(area(&pts, &tris).abs() < 1e-6);
+    }
+
+    /// Random star-shaped (concave) outlines with random rectangular holes in separate cells:
+    /// the triangles' areas always sum to outline area minus hole areas.
+    #[test]
+    fn random_polygons_with_holes_cover_their_area() {
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for case in 0..200 {
+            let n = 8 + (rnd() * 30.0) as usize; // keeps the hole lattice inside
+            let mut pts = Vec::new();
+            for i in 0..n {
+                let a = i as f32 / n as f32 * std::f32::consts::TAU;
+                let r = 6.0 + 4.0 * rnd();
+                pts.push(Vec2::new(r * a.cos(), r * a.sin()));
+            }
+            let outline: Vec<usize> = if case % 2 == 0 {
+                (0..n).collect()
+            } else {
+                (0..n).rev().collect()
+            };
+            let mut loops = vec![outline];
+            let mut hole_area = 0.0;
+            // Holes in the cells of a 3×3 lattice inside radius 6 (|x|,|y| < 4).
+            for cell in 0..9 {
+                if rnd() < 0.5 {
+                    continue;
+                }
+                let (cx, cy) = ((cell % 3) as f32 * 2.6 - 2.6, (cell / 3) as f32 * 2.6 - 2.6);
+                let (w, h) = (0.2 + rnd(), 0.2 + rnd());
+                let base = pts.len();
+                pts.extend([
+                    Vec2::new(cx - w / 2.0, cy - h / 2.0),
+                    Vec2::new(cx + w / 2.0, cy - h / 2.0),
+                    Vec2::new(cx + w / 2.0, cy + h / 2.0),
+                    Vec2::new(cx - w / 2.0, cy + h / 2.0),
+                ]);
+                loops.push((base..base + 4).collect());
+                hole_area += w * h;
+            }
+            let want = signed_area(&pts, &(0..n).collect::<Vec<_>>()).abs() - hole_area;
+            let tris = triangulate(&pts, &loops);
+            let got = area(&pts, &tris);
+            assert!(
+                (got - want).abs() < 1e-3 * want,
+                "case {case}: {got} vs {want}"
+            );
+            for t in &tris {
+                assert!(cross(pts[t[0]], pts[t[1]], pts[t[2]]) > 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn aligned_holes_share_ray_heights() {
+        // A 10×4 rectangle with three unit holes on one row and one touching its height: the
+        // bridging rays pass exactly through hole vertices.
+        let mut pts = vec![
+            Vec2::new(0., 0.),
+            Vec2::new(10., 0.),
+            Vec2::new(10., 4.),
+            Vec2::new(0., 4.),
+        ];
+        let mut loops = vec![vec![0, 1, 2, 3]];
+        for x0 in [1.0, 4.0, 7.0] {
+            let b = pts.len();
+            pts.extend(
+                [(x0, 1.), (x0 + 1., 1.), (x0 + 1., 2.), (x0, 2.)].map(|(x, y)| Vec2::new(x, y)),
+            );
+            loops.push((b..b + 4).collect());
+        }
+        let tris = triangulate(&pts, &loops);
+        assert!(
+            (area(&pts, &tris) - 37.0).abs() < 1e-4,
+            "{}",
+            area(&pts, &tris)
+        );
     }
 }
