@@ -121,6 +121,8 @@ pub struct LightResult {
     pub lit: Vec<bool>,
     /// Direction from the surface point toward the light (length = distance for local lights).
     pub l: Vec<Vec3>,
+    /// The direction when it is the same at every point (distant lights).
+    pub l_uniform: Option<Vec3>,
     pub cl: Vec<Vec3>,
     pub ol: Vec<Vec3>,
     pub category: String,

@@ -1369,16 +1369,20 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             out = Slot::VT(c);
         }
         Diffuse => {
+            // Normalise N once; each light's direction once per point (once per grid when
+            // the light is distant).
             let nn = arg(ex, args, 0).t();
+            let nv: Vec<Vec3> = (0..n).map(|i| normalize(nn.at(i))).collect();
             let mut c = vec![Vec3::ZERO; n];
             for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nondiffuse) {
+                let lu = l.l_uniform.map(normalize);
                 for i in 0..n {
-                    if !l.lit[i] {
-                        continue;
-                    }
-                    let nv = normalize(nn.at(i));
-                    let d = normalize(l.l[i]).dot(nv);
-                    if d > 0.0 {
+                    let ln = match lu {
+                        Some(v) => v,
+                        None => normalize(l.l[i]),
+                    };
+                    let d = ln.dot(nv[i]);
+                    if l.lit[i] && d > 0.0 {
                         c[i] += l.cl[i] * d;
                     }
                 }
@@ -1411,28 +1415,53 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).t(),
                 arg(ex, args, 2).f(),
             );
+            let nv: Vec<Vec3> = (0..n).map(|i| normalize(nn.at(i))).collect();
+            let vn: Vec<Vec3> = (0..n).map(|i| normalize(vv.at(i))).collect();
+            let phong = f == Phong;
+            // exponent per point: 1/roughness (specular) or size (phong)
+            let expo: Vec<f32> = (0..n)
+                .map(|i| {
+                    let x = r.at(i);
+                    if phong {
+                        x
+                    } else if x > 0.0 {
+                        1.0 / x
+                    } else {
+                        1e4
+                    }
+                })
+                .collect();
+            let refl: Vec<Vec3> = if phong {
+                (0..n).map(|i| reflect(-vn[i], nv[i])).collect()
+            } else {
+                Vec::new()
+            };
             for l in ex
                 .env
                 .lights
                 .iter()
                 .filter(|l| !l.ambient && !l.nonspecular)
             {
+                let lu = l.l_uniform.map(normalize);
                 for i in 0..n {
                     if !l.lit[i] {
                         continue;
                     }
-                    let nv = normalize(nn.at(i));
-                    let ln = normalize(l.l[i]);
-                    if ln.dot(nv) <= 0.0 {
+                    let ln = match lu {
+                        Some(v) => v,
+                        None => normalize(l.l[i]),
+                    };
+                    if ln.dot(nv[i]) <= 0.0 {
                         continue;
                     }
-                    let w = if f == Specular {
-                        spec_brdf(ln, nv, normalize(vv.at(i)), r.at(i))
+                    let base = if phong {
+                        refl[i].dot(ln)
                     } else {
-                        let rv = reflect(-normalize(vv.at(i)), nv);
-                        rv.dot(ln).max(0.0).powf(r.at(i))
+                        nv[i].dot(normalize(ln + vn[i]))
                     };
-                    c[i] += l.cl[i] * w;
+                    if base > 0.0 {
+                        c[i] += l.cl[i] * base.powf(expo[i]);
+                    }
                 }
             }
             out = Slot::VT(c);

@@ -305,7 +305,12 @@ impl<'a> ShadeSystem<'a> {
                 }
                 outputs.push((par.name.clone(), slot));
             }
+            let l_uniform = match l.first() {
+                Some(&f) if l.iter().all(|&x| x == f) => Some(f),
+                _ => None,
+            };
             out.push(LightResult {
+                l_uniform,
                 ambient,
                 lit,
                 l,

@@ -474,7 +474,8 @@ impl<'a> Lowerer<'a> {
         // L, Cl, Ol are set by illuminance/illuminate; keep them when those constructs appear.
         let used = std::mem::take(&mut self.used_globals);
         let mut globals = std::mem::take(&mut self.globals);
-        globals.retain(|g| used.contains(&g.reg) || matches!(g.name, "L" | "Cl" | "Ol" | "du" | "dv"));
+        globals
+            .retain(|g| used.contains(&g.reg) || matches!(g.name, "L" | "Cl" | "Ol" | "du" | "dv"));
         Program {
             name: def.name.clone(),
             kind: def.kind,
