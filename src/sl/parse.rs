@@ -27,8 +27,9 @@ struct SlParser;
 /// in the parser and the tree builder bounded).
 pub const MAX_NESTING: usize = 96;
 
-/// Longest run of prefix operators / right-associative chain links accepted, for the same reason.
-const MAX_CHAIN: usize = 256;
+/// Deepest recursion the tree builder may need: pair nesting plus the prefix operators and
+/// right-associative links (`=`, `?:`) the Pratt parser recurses through.
+pub const MAX_TREE_DEPTH: usize = 600;
 
 /// Parses preprocessed shader text. `span` maps a byte range of `text` to a Span in the
 /// original source (the preprocessor provides it). Syntax errors are reported to `diags`
@@ -45,6 +46,17 @@ pub fn parse(
     match SlParser::parse(Rule::file, text) {
         Ok(mut pairs) => {
             let file = pairs.next()?;
+            if let Some(at) = too_deep(&file) {
+                diags.report(
+                    Diag::error("sl::syntax", "expression or statement is nested too deeply")
+                        .label(
+                            span(at, at),
+                            format!("more than {MAX_TREE_DEPTH} levels deep"),
+                        )
+                        .help("split it into several statements"),
+                );
+                return None;
+            }
             let b = Builder { span, diags };
             Some(b.file(file))
         }
@@ -350,13 +362,17 @@ impl<'a> Builder<'a> {
     }
 
     /// The statements among a pair's children (keywords and argument lists skipped).
-    fn sub_stmts<'i>(&self, pairs: impl Iterator<Item = Pair<'i, Rule>>) -> Vec<Box<Stmt>> {
+    fn sub_stmts<'i>(
+        &self,
+        pairs: impl Iterator<Item = Pair<'i, Rule>>,
+    ) -> impl Iterator<Item = Box<Stmt>> {
         pairs
             .filter(|p| {
                 !is_keyword_pair(p.as_rule()) && !matches!(p.as_rule(), Rule::expr | Rule::args)
             })
             .map(|p| Box::new(self.stmt(p)))
-            .collect()
+            .collect::<Vec<_>>()
+            .into_iter()
     }
 
     fn stmt(&self, pair: Pair<Rule>) -> Stmt {
@@ -378,7 +394,7 @@ impl<'a> Builder<'a> {
                     .find(|p| p.as_rule() == Rule::expr)
                     .map(|e| self.expr(e))
                     .unwrap_or_else(|| float_expr(0.0, span));
-                let mut subs = self.sub_stmts(pair.into_inner()).into_iter();
+                let mut subs = self.sub_stmts(pair.into_inner());
                 let then = subs.next().unwrap_or_else(|| empty_stmt(span));
                 if rule == Rule::if_stmt {
                     StmtKind::If {
@@ -445,7 +461,7 @@ impl<'a> Builder<'a> {
                     .find(|p| p.as_rule() == Rule::args)
                     .map(|a| self.args(a))
                     .unwrap_or_default();
-                let mut subs = self.sub_stmts(pair.into_inner()).into_iter();
+                let mut subs = self.sub_stmts(pair.into_inner());
                 let body = subs.next().unwrap_or_else(|| empty_stmt(span));
                 match rule {
                     Rule::illuminance_stmt => StmtKind::Illuminance { args, body },
@@ -581,7 +597,11 @@ impl<'a> Builder<'a> {
         let op_span = self.sp(&op);
         let span = op_span.to(rhs.span);
         let kind = match op.as_rule() {
-            Rule::neg => unary(UnOp::Neg, rhs),
+            // `-1` is a literal, not an operation (shader defaults stay constants).
+            Rule::neg => match rhs.kind {
+                ExprKind::Float(v) => ExprKind::Float(-v),
+                _ => unary(UnOp::Neg, rhs),
+            },
             Rule::not => unary(UnOp::Not, rhs),
             Rule::plus => unary(UnOp::Plus, rhs),
             Rule::pre_inc | Rule::pre_dec => {
@@ -842,11 +862,56 @@ fn unescape_into(s: &str, out: &mut String) {
 
 // ---------------------------------------------------------------- errors
 
+/// Where the tree builder's recursion would exceed [`MAX_TREE_DEPTH`], found by one
+/// iterative walk over the pair tokens.
+fn too_deep(file: &Pair<Rule>) -> Option<usize> {
+    use pest::Token;
+    // Per open pair: the recursion links its operator children add.
+    let mut stack: Vec<usize> = Vec::new();
+    let mut links = 0usize;
+    for tok in file.clone().tokens() {
+        match tok {
+            Token::Start { rule, pos } => {
+                let recursive_op = matches!(
+                    rule,
+                    Rule::neg
+                        | Rule::not
+                        | Rule::plus
+                        | Rule::pre_inc
+                        | Rule::pre_dec
+                        | Rule::cast
+                        | Rule::assign
+                        | Rule::assign_add
+                        | Rule::assign_sub
+                        | Rule::assign_mul
+                        | Rule::assign_div
+                        | Rule::ternary
+                );
+                if recursive_op {
+                    if let Some(top) = stack.last_mut() {
+                        *top += 1;
+                        links += 1;
+                    }
+                }
+                stack.push(0);
+                if stack.len() + links > MAX_TREE_DEPTH {
+                    return Some(pos.pos());
+                }
+            }
+            Token::End { .. } => {
+                if let Some(n) = stack.pop() {
+                    links -= n;
+                }
+            }
+        }
+    }
+    None
+}
+
 /// Refuses input nested too deeply for the recursive parser and tree builder.
 fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> {
     let b = text.as_bytes();
     let mut depth = 0usize;
-    let (mut run, mut links) = (0usize, 0usize);
     let mut i = 0;
     while i < b.len() {
         let c = b[i];
@@ -857,6 +922,21 @@ fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> 
                 while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
                     i += if b[i] == b'\\' { 2 } else { 1 };
                 }
+            }
+            // Comments (banners of `====` or `----`) do not count either.
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+                continue;
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                i += 2;
+                while i + 1 < b.len() && !(b[i] == b'*' && b[i + 1] == b'/') {
+                    i += 1;
+                }
+                i += 2;
+                continue;
             }
             b'(' | b'[' | b'{' => {
                 depth += 1;
@@ -873,38 +953,6 @@ fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> 
             }
             b')' | b']' | b'}' => depth = depth.saturating_sub(1),
             _ => {}
-        }
-        // Prefix-operator runs (`- - - x`) and right-associative chains (`a=b=c=…`,
-        // `a?b:c?…`) deepen the recursion too.
-        let chained = match c {
-            b'-' | b'+' | b'!' => {
-                run += 1;
-                run
-            }
-            b'=' | b'?'
-                if !matches!(b.get(i + 1), Some(b'='))
-                    && !(i > 0 && b"=<>!+-*/".contains(&b[i - 1])) =>
-            {
-                links += 1;
-                links
-            }
-            b';' | b'{' | b'}' => {
-                links = 0;
-                run = 0;
-                0
-            }
-            b' ' | b'\t' | b'\r' | b'\n' => 0,
-            _ => {
-                run = 0;
-                0
-            }
-        };
-        if chained > MAX_CHAIN {
-            return Some(
-                Diag::error("sl::syntax", "expression is too deeply nested")
-                    .label(span(i, i + 1), "too many operators chained here")
-                    .help("split the expression into several statements"),
-            );
         }
         i += 1;
     }
@@ -983,7 +1031,11 @@ fn syntax_error(
 
     if at_eof && opens > closes {
         message = "unexpected end of file: a block is not closed".to_string();
-        let end_span = span(prev_end.saturating_sub(1), prev_end);
+        let last = text[..prev_end]
+            .chars()
+            .next_back()
+            .map_or(0, char::len_utf8);
+        let end_span = span(prev_end - last, prev_end);
         if let Some(open) = last_unclosed_brace(text) {
             label_span = span(open, open + 1);
             label = "this `{` is never closed".to_string();
@@ -1316,5 +1368,61 @@ fn scan_braces(text: &str, mut f: impl FnMut(usize, bool)) {
             _ => {}
         }
         i += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sp(s: usize, e: usize) -> Span {
+        Span::new(0, s, e)
+    }
+
+    #[test]
+    fn escapes_follow_c() {
+        let mut out = String::new();
+        unescape_into(r#"a\tb\n\"\\\101\x42\q"#, &mut out);
+        assert_eq!(out, "a\tb\n\"\\ABq");
+    }
+
+    #[test]
+    fn numbers_accept_suffixes_and_exponents() {
+        assert_eq!(parse_number("1.5"), 1.5);
+        assert_eq!(parse_number(".25"), 0.25);
+        assert_eq!(parse_number("2."), 2.0);
+        assert_eq!(parse_number("1e-3"), 0.001);
+        assert_eq!(parse_number("3.0f"), 3.0);
+    }
+
+    #[test]
+    fn depth_check_ignores_strings_and_comments() {
+        let deep = "(".repeat(MAX_NESTING + 1);
+        assert!(check_depth(&deep, &sp).is_some());
+        assert!(check_depth(&format!("\"{deep}\""), &sp).is_none());
+        assert!(check_depth(&format!("/* {deep} */"), &sp).is_none());
+        assert!(check_depth(&format!("// {deep}\n"), &sp).is_none());
+        assert!(check_depth("a == b; c <= d; e != f", &sp).is_none());
+    }
+
+    #[test]
+    fn expected_lists_read_as_words() {
+        let mut e = Expected::default();
+        e.token(";");
+        e.rule(Rule::add);
+        e.rule(Rule::ident);
+        e.rule(Rule::number);
+        assert_eq!(e.words(), "`;`, an expression or an operator");
+        let mut e = Expected::default();
+        e.rule(Rule::ident);
+        assert_eq!(e.words(), "a name");
+        assert!(e.wants_name);
+    }
+
+    #[test]
+    fn braces_outside_strings_are_counted() {
+        assert_eq!(count_braces("{ \"}\" { } // }\n"), (2, 1));
+        assert_eq!(last_unclosed_brace("{ { } "), Some(0));
+        assert_eq!(last_unclosed_brace("{ }"), None);
     }
 }
