@@ -807,3 +807,34 @@ fn fifty_kilobytes_parse_quickly() {
     // The target is well under 50 ms in debug; the bound here leaves room for a loaded CI box.
     assert!(dt.as_millis() < 250, "parsing took {dt:?}");
 }
+
+#[test]
+fn a_late_error_in_a_large_file_is_reported_quickly() {
+    let mut text = String::new();
+    let body = input("marble");
+    let mut n = 0;
+    while text.len() < 50_000 {
+        text.push_str(
+            &body
+                .replace("turbulence", &format!("turbulence{n}"))
+                .replace("marble", &format!("marble{n}")),
+        );
+        n += 1;
+    }
+    text.push_str("surface broken() { Ci = 1 }\n");
+    let t0 = std::time::Instant::now();
+    let r = err(&text);
+    let dt = t0.elapsed();
+    eprintln!("error path over {} bytes took {:?}", text.len(), dt);
+    assert!(r.contains("expected `;` or an operator, found `}`"), "{r}");
+    assert!(dt.as_millis() < 1000, "error path took {dt:?}");
+}
+
+#[test]
+fn several_syntax_errors_are_reported_without_cascades() {
+    let text = "surface t()\n{\n    float a = 1\n    Ci = a;\n    if (a > 0)\n        Ci = (1, 2;\n    for (i = 0; i < 3 i += 1) {\n        Oi = ;\n    }\n    Ci = 1 + ;\n}\n";
+    let (tree, r, diags) = parse_named("multi.sl", text);
+    assert!(tree.is_none());
+    insta::assert_snapshot!("err_several", r);
+    assert_eq!(diags.error_count(), 4, "{r}");
+}

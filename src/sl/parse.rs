@@ -1,9 +1,11 @@
 //! Shading-language parser: preprocessed text → [`ast::SourceFile`].
 //!
 //! Input: the preprocessor's output text and a function mapping its byte ranges to spans in
-//! the original sources. Output: the syntax tree, or `None` after a syntax error, which is
-//! reported as one `sl::syntax` diagnostic ("expected …, found …" in plain words, with a help
-//! line where the fix is likely: a missing `;`, unbalanced braces, a reserved word as a name).
+//! the original sources. Output: the syntax tree, or `None` after syntax errors, each reported
+//! as an `sl::syntax` diagnostic ("expected …, found …" in plain words, with a help line where
+//! the fix is likely: a missing `;`, unbalanced braces, a reserved word as a name). After the
+//! first error the parser resynchronises at statement boundaries to report up to
+//! [`MAX_SYNTAX_ERRORS`] more without cascades.
 //! Invariants: never panics (nesting deeper than [`MAX_NESTING`] is refused up front so neither
 //! pest nor the tree builder can exhaust the stack); operator precedence lives only in
 //! [`pratt`], the grammar (`grammar/sl.pest`) keeps expressions flat.
@@ -61,10 +63,122 @@ pub fn parse(
             Some(b.file(file))
         }
         Err(e) => {
-            diags.report(syntax_error(text, span, e));
+            report_syntax_errors(text, span, diags, e);
             None
         }
     }
+}
+
+/// Most syntax errors reported for one file.
+pub const MAX_SYNTAX_ERRORS: usize = 10;
+
+fn error_pos(err: &pest::error::Error<Rule>) -> usize {
+    match err.location {
+        InputLocation::Pos(p) => p,
+        InputLocation::Span((s, _)) => s,
+    }
+}
+
+/// Reports the first syntax error, then keeps looking for more: the statement holding the
+/// error is blanked out (replaced by spaces and a `;`, so offsets and lines stay put) and the
+/// text is parsed again. Recovery stops at an error outside any block, at end of file, or when
+/// the next error is not past the blanked statement (a likely cascade).
+fn report_syntax_errors(
+    text: &str,
+    span: &dyn Fn(usize, usize) -> Span,
+    diags: &Diagnostics,
+    first: pest::error::Error<Rule>,
+) {
+    let mut buf: Option<String> = None;
+    let mut err = first;
+    for _ in 0..MAX_SYNTAX_ERRORS {
+        let cur = buf.as_deref().unwrap_or(text);
+        let pos = error_pos(&err).min(cur.len());
+        let custom = matches!(err.variant, ErrorVariant::CustomError { .. });
+        diags.report(syntax_error(cur, span, err));
+        if custom || cur[pos..].trim().is_empty() {
+            break;
+        }
+        let Some((a, b)) = statement_around(cur, pos) else {
+            break;
+        };
+        let repaired = blank_statement(cur, a, b);
+        match SlParser::parse(Rule::file, &repaired) {
+            Ok(_) => break,
+            Err(next) if error_pos(&next) >= b => {
+                err = next;
+                buf = Some(repaired);
+            }
+            Err(_) => break,
+        }
+    }
+}
+
+/// The byte range of the statement containing `pos`, inside its innermost enclosing block:
+/// from just after the previous `;` / block end to just after the next `;` at bracket depth
+/// zero (or up to the block's closing `}`). `None` outside any block.
+fn statement_around(text: &str, pos: usize) -> Option<(usize, usize)> {
+    let mut stack = Vec::new();
+    scan_braces(&text[..pos], |i, open| {
+        if open {
+            stack.push(i);
+        } else {
+            stack.pop();
+        }
+    });
+    let open = *stack.last()?;
+    let b = text.as_bytes();
+    let (mut paren, mut brace) = (0i32, 0i32);
+    let mut start = open + 1;
+    let mut i = open + 1;
+    while i < b.len() {
+        let mut boundary = false;
+        match b[i] {
+            b'"' => {
+                i += 1;
+                while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
+                    i += if b[i] == b'\\' { 2 } else { 1 };
+                }
+            }
+            b'(' | b'[' => paren += 1,
+            b')' | b']' => paren -= 1,
+            b'{' => brace += 1,
+            b'}' => {
+                if brace == 0 {
+                    // The enclosing block ends: the statement runs up to here.
+                    return (i > pos && !text[start..i].trim().is_empty()).then_some((start, i));
+                }
+                brace -= 1;
+                boundary = brace == 0 && paren <= 0;
+            }
+            // Past the error, an unclosed `(` must not swallow the rest of the block.
+            b';' => boundary = brace == 0 && (paren <= 0 || i >= pos),
+            _ => {}
+        }
+        if boundary {
+            if i >= pos {
+                return Some((start, (i + 1).min(text.len())));
+            }
+            start = i + 1;
+            paren = 0;
+        }
+        i += 1;
+    }
+    None
+}
+
+/// `text` with `a..b` replaced by spaces (newlines kept) ending in a `;`.
+fn blank_statement(text: &str, a: usize, b: usize) -> String {
+    let mut bytes = text.as_bytes().to_vec();
+    for c in &mut bytes[a..b] {
+        if *c != b'\n' {
+            *c = b' ';
+        }
+    }
+    if let Some(last) = (a..b).rev().find(|&k| bytes[k] == b' ') {
+        bytes[last] = b';';
+    }
+    String::from_utf8(bytes).unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
 }
 
 /// The operator table, loosest first (RISpec 3.2 / the reference compilers' yacc grammars):
