@@ -838,3 +838,15 @@ fn several_syntax_errors_are_reported_without_cascades() {
     insta::assert_snapshot!("err_several", r);
     assert_eq!(diags.error_count(), 4, "{r}");
 }
+
+#[test]
+fn unterminated_string_and_stray_brace() {
+    let r = err("surface t()\n{\n    string s = \"abc;\n    Ci = 1;\n}\n");
+    insta::assert_snapshot!("err_unterminated_string", r);
+    assert!(r.contains("unterminated string literal"));
+    let r = err("surface t()\n{\n    Ci = 1;\n}\n}\n");
+    insta::assert_snapshot!("err_stray_brace", r);
+    assert!(r.contains("unmatched `}`"));
+    let r = err("surface t()\n{\n    else Ci = 1;\n}\n");
+    assert!(r.contains("must directly follow"), "{r}");
+}

@@ -1143,7 +1143,19 @@ fn syntax_error(
     let mut extra: Option<(Span, String)> = None;
     let mut help: Option<String> = None;
 
-    if at_eof && opens > closes {
+    if let Some(q) = unterminated_string(text).filter(|&q| q < pos) {
+        message = "unterminated string literal".to_string();
+        let line_end = text[q..].find('\n').map_or(text.len(), |n| q + n);
+        label_span = span(q, line_end);
+        label = "this string has no closing `\"`".to_string();
+        help = Some("close the string with `\"` on the same line".to_string());
+    } else if found_word == "}" && closes > opens {
+        message = "unmatched `}`".to_string();
+        label = "this `}` closes no block".to_string();
+        help = Some(brace_help(opens, closes));
+    } else if found_word == "else" {
+        help = Some("an `else` must directly follow the statement of an `if`".to_string());
+    } else if at_eof && opens > closes {
         message = "unexpected end of file: a block is not closed".to_string();
         let last = text[..prev_end]
             .chars()
@@ -1191,8 +1203,6 @@ fn syntax_error(
         ));
     } else if opens != closes {
         help = Some(brace_help(opens, closes));
-    } else if found_word == "else" {
-        help = Some("an `else` must directly follow the statement of an `if`".to_string());
     }
 
     let mut d = Diag::error("sl::syntax", message).label(label_span, label);
@@ -1431,6 +1441,41 @@ fn describe_found(text: &str, pos: usize, end: usize) -> String {
     let tok = &text[pos..end];
     let tok: String = tok.chars().take(24).collect();
     format!("`{tok}`")
+}
+
+/// Position of the first `"` whose string reaches the end of its line (comments skipped).
+fn unterminated_string(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        match b[i] {
+            b'"' => {
+                let q = i;
+                i += 1;
+                while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
+                    i += if b[i] == b'\\' { 2 } else { 1 };
+                }
+                if i >= b.len() || b[i] == b'\n' {
+                    return Some(q);
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                i += 2;
+                while i + 1 < b.len() && !(b[i] == b'*' && b[i + 1] == b'/') {
+                    i += 1;
+                }
+                i += 1;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
 }
 
 /// Position of the innermost `{` left open at the end of the text.
