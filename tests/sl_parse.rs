@@ -370,6 +370,9 @@ fn increments_become_compound_assignments() {
 #[test]
 fn literals() {
     assert_eq!(e("1"), "1");
+    assert_eq!(e("-1"), "-1");
+    assert_eq!(e("- -2.5"), "2.5");
+    assert_eq!(e("-1 . x"), "(. -1 x)");
     assert_eq!(e("1.5"), "1.5");
     assert_eq!(e(".5"), "0.5");
     assert_eq!(e("1e-3"), "0.001");
@@ -578,7 +581,7 @@ fn standard_shader_signatures() {
 
 #[test]
 fn classic_shaders_parse() {
-    for name in ["wood", "marble", "illum", "nested", "misc"] {
+    for name in ["wood", "marble", "illum", "nested", "misc", "arman"] {
         let f = ok(&input(name));
         insta::assert_snapshot!(format!("classic_{name}"), outline(&f));
     }
@@ -689,18 +692,62 @@ fn deep_nesting_is_refused_not_overflowed() {
         "(".repeat(5000),
         ")".repeat(5000)
     );
-    let r = err(&deep);
-    assert!(r.contains("nested too deeply"));
+    assert!(err(&deep).contains("nested too deeply"));
     let chain = format!("surface t() {{ Ci = {}1; }}", "- ".repeat(5000));
-    assert!(err(&chain).contains("too deeply nested"));
-    let assigns = format!("surface t() {{ {}1; }}", "a = ".repeat(5000));
-    assert!(err(&assigns).contains("too deeply nested"));
+    assert!(err(&chain).contains("nested too deeply"));
+    let assigns = format!("surface t() {{ {}1; }}", "a += ".repeat(5000));
+    assert!(err(&assigns).contains("nested too deeply"));
+    let casts = format!("surface t() {{ Ci = {}1; }}", "float ".repeat(5000));
+    assert!(err(&casts).contains("nested too deeply"));
+    let ifs = format!("surface t() {{ {}; }}", "if (x) ".repeat(5000));
+    assert!(parse_named("deep.sl", &ifs).2.has_errors());
+    // Long comment banners are not operator chains.
+    ok(&format!(
+        "/* {} */\n// {}\nsurface t() {{ }}",
+        "=-".repeat(600),
+        "-".repeat(600)
+    ));
     // Moderate nesting is fine.
     ok(&format!(
         "surface t() {{ Ci = {}1{}; }}",
         "(".repeat(40),
         ")".repeat(40)
     ));
+}
+
+#[test]
+fn nesting_just_under_the_limits_fits_a_small_stack() {
+    // Input just under the depth limits is accepted and built on a 1 MiB thread stack
+    // (test threads get 2 MiB, rayon workers 2 MiB, the main thread 8 MiB).
+    let inputs = [
+        format!("surface t() {{ {}1; }}", "a = ".repeat(560)),
+        format!("surface t() {{ Ci = {}1; }}", "- ".repeat(560)),
+        format!("surface t() {{ Ci = {}1; }}", "color ".repeat(560)),
+        format!(
+            "surface t() {{ Ci = {}1{}; }}",
+            "(".repeat(90),
+            ")".repeat(90)
+        ),
+        format!(
+            "surface t() {{ Ci = {}1{}; }}",
+            "f(".repeat(90),
+            ")".repeat(90)
+        ),
+        format!("surface t() {{ {}; }}", "if (x) ".repeat(280)),
+        format!("surface t() {{ {}; }}", "while (x) ".repeat(280)),
+        format!("surface t() {{ Ci = {}1; }}", "a ? b : ".repeat(560)),
+    ];
+    for text in inputs {
+        let handle = std::thread::Builder::new()
+            .stack_size(1 << 20)
+            .spawn(move || {
+                let (tree, _, diags) = parse_named("deep.sl", &text);
+                (tree.is_some(), diags.error_count())
+            })
+            .expect("thread");
+        let (built, errors) = handle.join().expect("no panic");
+        assert!(built && errors == 0);
+    }
 }
 
 // ------------------------------------------------------------------ robustness and speed
@@ -759,4 +806,47 @@ fn fifty_kilobytes_parse_quickly() {
     eprintln!("parsed {} bytes in {:?}", text.len(), dt);
     // The target is well under 50 ms in debug; the bound here leaves room for a loaded CI box.
     assert!(dt.as_millis() < 250, "parsing took {dt:?}");
+}
+
+#[test]
+fn a_late_error_in_a_large_file_is_reported_quickly() {
+    let mut text = String::new();
+    let body = input("marble");
+    let mut n = 0;
+    while text.len() < 50_000 {
+        text.push_str(
+            &body
+                .replace("turbulence", &format!("turbulence{n}"))
+                .replace("marble", &format!("marble{n}")),
+        );
+        n += 1;
+    }
+    text.push_str("surface broken() { Ci = 1 }\n");
+    let t0 = std::time::Instant::now();
+    let r = err(&text);
+    let dt = t0.elapsed();
+    eprintln!("error path over {} bytes took {:?}", text.len(), dt);
+    assert!(r.contains("expected `;` or an operator, found `}`"), "{r}");
+    assert!(dt.as_millis() < 1000, "error path took {dt:?}");
+}
+
+#[test]
+fn several_syntax_errors_are_reported_without_cascades() {
+    let text = "surface t()\n{\n    float a = 1\n    Ci = a;\n    if (a > 0)\n        Ci = (1, 2;\n    for (i = 0; i < 3 i += 1) {\n        Oi = ;\n    }\n    Ci = 1 + ;\n}\n";
+    let (tree, r, diags) = parse_named("multi.sl", text);
+    assert!(tree.is_none());
+    insta::assert_snapshot!("err_several", r);
+    assert_eq!(diags.error_count(), 4, "{r}");
+}
+
+#[test]
+fn unterminated_string_and_stray_brace() {
+    let r = err("surface t()\n{\n    string s = \"abc;\n    Ci = 1;\n}\n");
+    insta::assert_snapshot!("err_unterminated_string", r);
+    assert!(r.contains("unterminated string literal"));
+    let r = err("surface t()\n{\n    Ci = 1;\n}\n}\n");
+    insta::assert_snapshot!("err_stray_brace", r);
+    assert!(r.contains("unmatched `}`"));
+    let r = err("surface t()\n{\n    else Ci = 1;\n}\n");
+    assert!(r.contains("must directly follow"), "{r}");
 }

@@ -1,9 +1,11 @@
 //! Shading-language parser: preprocessed text → [`ast::SourceFile`].
 //!
 //! Input: the preprocessor's output text and a function mapping its byte ranges to spans in
-//! the original sources. Output: the syntax tree, or `None` after a syntax error, which is
-//! reported as one `sl::syntax` diagnostic ("expected …, found …" in plain words, with a help
-//! line where the fix is likely: a missing `;`, unbalanced braces, a reserved word as a name).
+//! the original sources. Output: the syntax tree, or `None` after syntax errors, each reported
+//! as an `sl::syntax` diagnostic ("expected …, found …" in plain words, with a help line where
+//! the fix is likely: a missing `;`, unbalanced braces, a reserved word as a name). After the
+//! first error the parser resynchronises at statement boundaries to report up to
+//! [`MAX_SYNTAX_ERRORS`] more without cascades.
 //! Invariants: never panics (nesting deeper than [`MAX_NESTING`] is refused up front so neither
 //! pest nor the tree builder can exhaust the stack); operator precedence lives only in
 //! [`pratt`], the grammar (`grammar/sl.pest`) keeps expressions flat.
@@ -27,8 +29,9 @@ struct SlParser;
 /// in the parser and the tree builder bounded).
 pub const MAX_NESTING: usize = 96;
 
-/// Longest run of prefix operators / right-associative chain links accepted, for the same reason.
-const MAX_CHAIN: usize = 256;
+/// Deepest recursion the tree builder may need: pair nesting plus the prefix operators and
+/// right-associative links (`=`, `?:`) the Pratt parser recurses through.
+pub const MAX_TREE_DEPTH: usize = 600;
 
 /// Parses preprocessed shader text. `span` maps a byte range of `text` to a Span in the
 /// original source (the preprocessor provides it). Syntax errors are reported to `diags`
@@ -45,14 +48,137 @@ pub fn parse(
     match SlParser::parse(Rule::file, text) {
         Ok(mut pairs) => {
             let file = pairs.next()?;
+            if let Some(at) = too_deep(&file) {
+                diags.report(
+                    Diag::error("sl::syntax", "expression or statement is nested too deeply")
+                        .label(
+                            span(at, at),
+                            format!("more than {MAX_TREE_DEPTH} levels deep"),
+                        )
+                        .help("split it into several statements"),
+                );
+                return None;
+            }
             let b = Builder { span, diags };
             Some(b.file(file))
         }
         Err(e) => {
-            diags.report(syntax_error(text, span, e));
+            report_syntax_errors(text, span, diags, e);
             None
         }
     }
+}
+
+/// Most syntax errors reported for one file.
+pub const MAX_SYNTAX_ERRORS: usize = 10;
+
+fn error_pos(err: &pest::error::Error<Rule>) -> usize {
+    match err.location {
+        InputLocation::Pos(p) => p,
+        InputLocation::Span((s, _)) => s,
+    }
+}
+
+/// Reports the first syntax error, then keeps looking for more: the statement holding the
+/// error is blanked out (replaced by spaces and a `;`, so offsets and lines stay put) and the
+/// text is parsed again. Recovery stops at an error outside any block, at end of file, or when
+/// the next error is not past the blanked statement (a likely cascade).
+fn report_syntax_errors(
+    text: &str,
+    span: &dyn Fn(usize, usize) -> Span,
+    diags: &Diagnostics,
+    first: pest::error::Error<Rule>,
+) {
+    let mut buf: Option<String> = None;
+    let mut err = first;
+    for _ in 0..MAX_SYNTAX_ERRORS {
+        let cur = buf.as_deref().unwrap_or(text);
+        let pos = error_pos(&err).min(cur.len());
+        let custom = matches!(err.variant, ErrorVariant::CustomError { .. });
+        diags.report(syntax_error(cur, span, err));
+        if custom || cur[pos..].trim().is_empty() {
+            break;
+        }
+        let Some((a, b)) = statement_around(cur, pos) else {
+            break;
+        };
+        let repaired = blank_statement(cur, a, b);
+        match SlParser::parse(Rule::file, &repaired) {
+            Ok(_) => break,
+            Err(next) if error_pos(&next) >= b => {
+                err = next;
+                buf = Some(repaired);
+            }
+            Err(_) => break,
+        }
+    }
+}
+
+/// The byte range of the statement containing `pos`, inside its innermost enclosing block:
+/// from just after the previous `;` / block end to just after the next `;` at bracket depth
+/// zero (or up to the block's closing `}`). `None` outside any block.
+fn statement_around(text: &str, pos: usize) -> Option<(usize, usize)> {
+    let mut stack = Vec::new();
+    scan_braces(&text[..pos], |i, open| {
+        if open {
+            stack.push(i);
+        } else {
+            stack.pop();
+        }
+    });
+    let open = *stack.last()?;
+    let b = text.as_bytes();
+    let (mut paren, mut brace) = (0i32, 0i32);
+    let mut start = open + 1;
+    let mut i = open + 1;
+    while i < b.len() {
+        let mut boundary = false;
+        match b[i] {
+            b'"' => {
+                i += 1;
+                while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
+                    i += if b[i] == b'\\' { 2 } else { 1 };
+                }
+            }
+            b'(' | b'[' => paren += 1,
+            b')' | b']' => paren -= 1,
+            b'{' => brace += 1,
+            b'}' => {
+                if brace == 0 {
+                    // The enclosing block ends: the statement runs up to here.
+                    return (i > pos && !text[start..i].trim().is_empty()).then_some((start, i));
+                }
+                brace -= 1;
+                boundary = brace == 0 && paren <= 0;
+            }
+            // Past the error, an unclosed `(` must not swallow the rest of the block.
+            b';' => boundary = brace == 0 && (paren <= 0 || i >= pos),
+            _ => {}
+        }
+        if boundary {
+            if i >= pos {
+                return Some((start, (i + 1).min(text.len())));
+            }
+            start = i + 1;
+            paren = 0;
+        }
+        i += 1;
+    }
+    None
+}
+
+/// `text` with `a..b` replaced by spaces (newlines kept) ending in a `;`.
+fn blank_statement(text: &str, a: usize, b: usize) -> String {
+    let mut bytes = text.as_bytes().to_vec();
+    for c in &mut bytes[a..b] {
+        if *c != b'\n' {
+            *c = b' ';
+        }
+    }
+    if let Some(last) = (a..b).rev().find(|&k| bytes[k] == b' ') {
+        bytes[last] = b';';
+    }
+    String::from_utf8(bytes).unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
 }
 
 /// The operator table, loosest first (RISpec 3.2 / the reference compilers' yacc grammars):
@@ -350,13 +476,17 @@ impl<'a> Builder<'a> {
     }
 
     /// The statements among a pair's children (keywords and argument lists skipped).
-    fn sub_stmts<'i>(&self, pairs: impl Iterator<Item = Pair<'i, Rule>>) -> Vec<Box<Stmt>> {
+    fn sub_stmts<'i>(
+        &self,
+        pairs: impl Iterator<Item = Pair<'i, Rule>>,
+    ) -> impl Iterator<Item = Box<Stmt>> {
         pairs
             .filter(|p| {
                 !is_keyword_pair(p.as_rule()) && !matches!(p.as_rule(), Rule::expr | Rule::args)
             })
             .map(|p| Box::new(self.stmt(p)))
-            .collect()
+            .collect::<Vec<_>>()
+            .into_iter()
     }
 
     fn stmt(&self, pair: Pair<Rule>) -> Stmt {
@@ -378,7 +508,7 @@ impl<'a> Builder<'a> {
                     .find(|p| p.as_rule() == Rule::expr)
                     .map(|e| self.expr(e))
                     .unwrap_or_else(|| float_expr(0.0, span));
-                let mut subs = self.sub_stmts(pair.into_inner()).into_iter();
+                let mut subs = self.sub_stmts(pair.into_inner());
                 let then = subs.next().unwrap_or_else(|| empty_stmt(span));
                 if rule == Rule::if_stmt {
                     StmtKind::If {
@@ -445,7 +575,7 @@ impl<'a> Builder<'a> {
                     .find(|p| p.as_rule() == Rule::args)
                     .map(|a| self.args(a))
                     .unwrap_or_default();
-                let mut subs = self.sub_stmts(pair.into_inner()).into_iter();
+                let mut subs = self.sub_stmts(pair.into_inner());
                 let body = subs.next().unwrap_or_else(|| empty_stmt(span));
                 match rule {
                     Rule::illuminance_stmt => StmtKind::Illuminance { args, body },
@@ -581,7 +711,11 @@ impl<'a> Builder<'a> {
         let op_span = self.sp(&op);
         let span = op_span.to(rhs.span);
         let kind = match op.as_rule() {
-            Rule::neg => unary(UnOp::Neg, rhs),
+            // `-1` is a literal, not an operation (shader defaults stay constants).
+            Rule::neg => match rhs.kind {
+                ExprKind::Float(v) => ExprKind::Float(-v),
+                _ => unary(UnOp::Neg, rhs),
+            },
             Rule::not => unary(UnOp::Not, rhs),
             Rule::plus => unary(UnOp::Plus, rhs),
             Rule::pre_inc | Rule::pre_dec => {
@@ -842,11 +976,56 @@ fn unescape_into(s: &str, out: &mut String) {
 
 // ---------------------------------------------------------------- errors
 
+/// Where the tree builder's recursion would exceed [`MAX_TREE_DEPTH`], found by one
+/// iterative walk over the pair tokens.
+fn too_deep(file: &Pair<Rule>) -> Option<usize> {
+    use pest::Token;
+    // Per open pair: the recursion links its operator children add.
+    let mut stack: Vec<usize> = Vec::new();
+    let mut links = 0usize;
+    for tok in file.clone().tokens() {
+        match tok {
+            Token::Start { rule, pos } => {
+                let recursive_op = matches!(
+                    rule,
+                    Rule::neg
+                        | Rule::not
+                        | Rule::plus
+                        | Rule::pre_inc
+                        | Rule::pre_dec
+                        | Rule::cast
+                        | Rule::assign
+                        | Rule::assign_add
+                        | Rule::assign_sub
+                        | Rule::assign_mul
+                        | Rule::assign_div
+                        | Rule::ternary
+                );
+                if recursive_op {
+                    if let Some(top) = stack.last_mut() {
+                        *top += 1;
+                        links += 1;
+                    }
+                }
+                stack.push(0);
+                if stack.len() + links > MAX_TREE_DEPTH {
+                    return Some(pos.pos());
+                }
+            }
+            Token::End { .. } => {
+                if let Some(n) = stack.pop() {
+                    links -= n;
+                }
+            }
+        }
+    }
+    None
+}
+
 /// Refuses input nested too deeply for the recursive parser and tree builder.
 fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> {
     let b = text.as_bytes();
     let mut depth = 0usize;
-    let (mut run, mut links) = (0usize, 0usize);
     let mut i = 0;
     while i < b.len() {
         let c = b[i];
@@ -857,6 +1036,21 @@ fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> 
                 while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
                     i += if b[i] == b'\\' { 2 } else { 1 };
                 }
+            }
+            // Comments (banners of `====` or `----`) do not count either.
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+                continue;
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                i += 2;
+                while i + 1 < b.len() && !(b[i] == b'*' && b[i + 1] == b'/') {
+                    i += 1;
+                }
+                i += 2;
+                continue;
             }
             b'(' | b'[' | b'{' => {
                 depth += 1;
@@ -873,38 +1067,6 @@ fn check_depth(text: &str, span: &dyn Fn(usize, usize) -> Span) -> Option<Diag> 
             }
             b')' | b']' | b'}' => depth = depth.saturating_sub(1),
             _ => {}
-        }
-        // Prefix-operator runs (`- - - x`) and right-associative chains (`a=b=c=…`,
-        // `a?b:c?…`) deepen the recursion too.
-        let chained = match c {
-            b'-' | b'+' | b'!' => {
-                run += 1;
-                run
-            }
-            b'=' | b'?'
-                if !matches!(b.get(i + 1), Some(b'='))
-                    && !(i > 0 && b"=<>!+-*/".contains(&b[i - 1])) =>
-            {
-                links += 1;
-                links
-            }
-            b';' | b'{' | b'}' => {
-                links = 0;
-                run = 0;
-                0
-            }
-            b' ' | b'\t' | b'\r' | b'\n' => 0,
-            _ => {
-                run = 0;
-                0
-            }
-        };
-        if chained > MAX_CHAIN {
-            return Some(
-                Diag::error("sl::syntax", "expression is too deeply nested")
-                    .label(span(i, i + 1), "too many operators chained here")
-                    .help("split the expression into several statements"),
-            );
         }
         i += 1;
     }
@@ -981,9 +1143,25 @@ fn syntax_error(
     let mut extra: Option<(Span, String)> = None;
     let mut help: Option<String> = None;
 
-    if at_eof && opens > closes {
+    if let Some(q) = unterminated_string(text).filter(|&q| q < pos) {
+        message = "unterminated string literal".to_string();
+        let line_end = text[q..].find('\n').map_or(text.len(), |n| q + n);
+        label_span = span(q, line_end);
+        label = "this string has no closing `\"`".to_string();
+        help = Some("close the string with `\"` on the same line".to_string());
+    } else if found_word == "}" && closes > opens {
+        message = "unmatched `}`".to_string();
+        label = "this `}` closes no block".to_string();
+        help = Some(brace_help(opens, closes));
+    } else if found_word == "else" {
+        help = Some("an `else` must directly follow the statement of an `if`".to_string());
+    } else if at_eof && opens > closes {
         message = "unexpected end of file: a block is not closed".to_string();
-        let end_span = span(prev_end.saturating_sub(1), prev_end);
+        let last = text[..prev_end]
+            .chars()
+            .next_back()
+            .map_or(0, char::len_utf8);
+        let end_span = span(prev_end - last, prev_end);
         if let Some(open) = last_unclosed_brace(text) {
             label_span = span(open, open + 1);
             label = "this `{` is never closed".to_string();
@@ -1025,8 +1203,6 @@ fn syntax_error(
         ));
     } else if opens != closes {
         help = Some(brace_help(opens, closes));
-    } else if found_word == "else" {
-        help = Some("an `else` must directly follow the statement of an `if`".to_string());
     }
 
     let mut d = Diag::error("sl::syntax", message).label(label_span, label);
@@ -1267,6 +1443,41 @@ fn describe_found(text: &str, pos: usize, end: usize) -> String {
     format!("`{tok}`")
 }
 
+/// Position of the first `"` whose string reaches the end of its line (comments skipped).
+fn unterminated_string(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        match b[i] {
+            b'"' => {
+                let q = i;
+                i += 1;
+                while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
+                    i += if b[i] == b'\\' { 2 } else { 1 };
+                }
+                if i >= b.len() || b[i] == b'\n' {
+                    return Some(q);
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                i += 2;
+                while i + 1 < b.len() && !(b[i] == b'*' && b[i + 1] == b'/') {
+                    i += 1;
+                }
+                i += 1;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
 /// Position of the innermost `{` left open at the end of the text.
 fn last_unclosed_brace(text: &str) -> Option<usize> {
     let mut stack = Vec::new();
@@ -1316,5 +1527,61 @@ fn scan_braces(text: &str, mut f: impl FnMut(usize, bool)) {
             _ => {}
         }
         i += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sp(s: usize, e: usize) -> Span {
+        Span::new(0, s, e)
+    }
+
+    #[test]
+    fn escapes_follow_c() {
+        let mut out = String::new();
+        unescape_into(r#"a\tb\n\"\\\101\x42\q"#, &mut out);
+        assert_eq!(out, "a\tb\n\"\\ABq");
+    }
+
+    #[test]
+    fn numbers_accept_suffixes_and_exponents() {
+        assert_eq!(parse_number("1.5"), 1.5);
+        assert_eq!(parse_number(".25"), 0.25);
+        assert_eq!(parse_number("2."), 2.0);
+        assert_eq!(parse_number("1e-3"), 0.001);
+        assert_eq!(parse_number("3.0f"), 3.0);
+    }
+
+    #[test]
+    fn depth_check_ignores_strings_and_comments() {
+        let deep = "(".repeat(MAX_NESTING + 1);
+        assert!(check_depth(&deep, &sp).is_some());
+        assert!(check_depth(&format!("\"{deep}\""), &sp).is_none());
+        assert!(check_depth(&format!("/* {deep} */"), &sp).is_none());
+        assert!(check_depth(&format!("// {deep}\n"), &sp).is_none());
+        assert!(check_depth("a == b; c <= d; e != f", &sp).is_none());
+    }
+
+    #[test]
+    fn expected_lists_read_as_words() {
+        let mut e = Expected::default();
+        e.token(";");
+        e.rule(Rule::add);
+        e.rule(Rule::ident);
+        e.rule(Rule::number);
+        assert_eq!(e.words(), "`;`, an expression or an operator");
+        let mut e = Expected::default();
+        e.rule(Rule::ident);
+        assert_eq!(e.words(), "a name");
+        assert!(e.wants_name);
+    }
+
+    #[test]
+    fn braces_outside_strings_are_counted() {
+        assert_eq!(count_braces("{ \"}\" { } // }\n"), (2, 1));
+        assert_eq!(last_unclosed_brace("{ { } "), Some(0));
+        assert_eq!(last_unclosed_brace("{ }"), None);
     }
 }
