@@ -437,15 +437,15 @@ impl<'a> Builder<'a> {
             )
             .label(call.span(), "nothing to close");
             if let Some(top) = self.blocks.last() {
-                d = d
-                    .label(
-                        top.span,
-                        format!("the open block is this `{}`", top.kind.begin()),
-                    )
-                    .help(format!("did you mean `{}`?", top.kind.end()));
-            } else {
-                d = d.help(format!("remove it, or add `{}` before it", kind.begin()));
+                d = d.label(
+                    top.span,
+                    format!("the innermost open block is this `{}`", top.kind.begin()),
+                );
             }
+            d = d.help(format!(
+                "remove it, or add `{}` where the block should start",
+                kind.begin()
+            ));
             self.report(d);
             return None;
         };
