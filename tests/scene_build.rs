@@ -815,3 +815,22 @@ WorldEnd
     let m = s.primitives[1].world_from_object;
     assert!(close(m.transform_point3(Vec3::Y), Vec3::new(1.0, 4.0, 0.0)));
 }
+
+#[test]
+fn format_defaults_and_aspect_rules() {
+    let b = build("Format -1 -1 -1\nWorldBegin WorldEnd\nFormat 200 100 2\nWorldBegin WorldEnd\nFormat 0 10 1\n");
+    let e = b.errors();
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("scene.rib:5:"));
+    let o0 = &b.scenes[0].options;
+    assert_eq!((o0.xres, o0.yres, o0.pixel_aspect), (640, 480, 1.0));
+    assert_eq!(o0.frame_aspect, None);
+    assert_eq!(
+        o0.effective_screen_window(),
+        [-4.0 / 3.0, 4.0 / 3.0, -1.0, 1.0]
+    );
+    // 200·2/100 = 4: the screen window follows the aspect.
+    let o1 = &b.scenes[1].options;
+    assert_eq!(o1.effective_frame_aspect(), 4.0);
+    assert_eq!(o1.effective_screen_window(), [-4.0, 4.0, -1.0, 1.0]);
+}
