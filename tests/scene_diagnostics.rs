@@ -58,3 +58,10 @@ fn unimplemented_request_warns_once() {
         "WorldBegin\nBlobby 1 [1000 0] [1] [\"\"]\nBlobby 1 [1000 0] [1] [\"\"]\nWorldEnd\n"
     ));
 }
+
+#[test]
+fn light_without_handle() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nLightSource \"pointlight\" \"intensity\" 5\nWorldEnd\n"
+    ));
+}
