@@ -674,3 +674,163 @@ fn bad_patch_mesh_sizes_are_explained() {
         e[0]
     );
 }
+
+const ADVANCED: &str = r#"##RenderMan RIB
+version 3.03
+Option "searchpath" "shader" ["shaders:&"]
+Option "limits" "bucketsize" [16 16] "gridsize" [256]
+Option "render" "integer maxerror" [3]
+Option "statistics" "endofframe" [1]
+Display "out.tif" "tiff" "rgba"
+Display "+depth.z" "zfile" "z"
+Hider "hidden" "jitter" [1]
+PixelFilter "catmull-rom" 3 3
+Exposure 1 2.2
+Quantize "rgba" 255 0 255 0.5
+Clipping 0.1 100
+ScreenWindow -1 1 -1 1
+FrameAspectRatio 1
+CropWindow 0.25 0.75 0 1
+Imager "background" "background" [0.2 0.2 0.2]
+Projection "perspective" "fov" 30
+ClippingPlane 0 0 50 0 0 1
+Scale 1 1 -1
+Translate 0 -1 8
+WorldBegin
+  Attribute "identifier" "name" ["floor"]
+  Attribute "displacementbound" "sphere" [0.25] "coordinatesystem" ["shader"]
+  Attribute "user" "string pass" ["beauty"]
+  Attribute "visibility" "bogus" [1]
+  LightSource "spotlight" 3 "from" [0 5 0] "to" [0 0 0] "coneangle" [0.4] "intensity" [40]
+    "__nonspecular" [0]
+  ShadingRate 0.5
+  ShadingInterpolation "smooth"
+  Displacement "dented" "Km" [0.2] "frequency" [4]
+  Surface "wood" "ringscale" 10 "lightwood" [0.69 0.44 0.25]
+  TextureCoordinates 0 0 2 0 0 2 2 2
+  GeometricApproximation "flatness" 0.5
+  Matte 0
+  Bound [-1 1 -1 1 -1 1]
+  Patch "bicubic" "P" [0 0 0 1 0 0 2 0 0 3 0 0  0 1 0 1 1 0 2 1 0 3 1 0
+                       0 2 0 1 2 0 2 2 0 3 2 0  0 3 0 1 3 0 2 3 0 3 3 0]
+WorldEnd
+"#;
+
+#[test]
+fn advanced_renderman_style_scene() {
+    let b = build(ADVANCED);
+    let w = b.warnings();
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    // Only the undeclared renderer-specific attribute warns.
+    assert_eq!(w.len(), 1, "{w:#?}");
+    assert!(w[0].0.contains("\"bogus\" is not declared"));
+    let s = b.one();
+    let o = &s.options;
+    assert_eq!(o.user_floats("limits:bucketsize"), Some(&[16.0, 16.0][..]));
+    assert_eq!(o.user_floats("render:maxerror"), Some(&[3.0][..]));
+    assert_eq!(o.displays.len(), 2);
+    assert_eq!(o.displays[1].name, "depth.z");
+    assert_eq!(o.pixel_filter.name, "catmull-rom");
+    assert_eq!(o.frame_aspect, Some(1.0));
+    assert_eq!(o.screen_window, Some([-1.0, 1.0, -1.0, 1.0]));
+    assert_eq!(o.crop_window, [0.25, 0.75, 0.0, 1.0]);
+    assert_eq!(o.search_paths.shader, vec!["shaders"]);
+    assert_eq!(o.hider.params.float("jitter"), Some(1.0));
+    let im = o.imager.as_ref().unwrap();
+    assert_eq!(im.params.floats("background"), Some(&[0.2, 0.2, 0.2][..]));
+    // The clipping plane was given in camera space (before any transform): its world-space
+    // point and normal map back to camera z = 50 and +z.
+    let (p, n) = o.clipping_planes[0];
+    assert!(close(
+        s.camera_from_world.transform_point3(p),
+        Vec3::new(0.0, 0.0, 50.0)
+    ));
+    assert!(close(
+        s.camera_from_world.transform_vector3(n).normalize(),
+        Vec3::Z
+    ));
+    let a = &s.primitives[0].attributes;
+    assert_eq!(a.identifier.as_deref(), Some("floor"));
+    assert_eq!(a.displacement_bound, 0.25);
+    assert_eq!(a.displacement_bound_space, "shader");
+    assert_eq!(a.shading_rate, 0.5);
+    assert!(a.smooth_shading);
+    assert_eq!(a.texture_coordinates[2], 2.0);
+    assert_eq!(a.geometric_approximation["flatness"], 0.5);
+    assert_eq!(a.bound, Some([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0]));
+    let surf = a.surface.as_ref().unwrap();
+    assert_eq!(surf.params.floats("lightwood").unwrap().len(), 3);
+    assert_eq!(
+        a.displacement.as_ref().unwrap().params.float("Km"),
+        Some(0.2)
+    );
+    assert_eq!(s.lights[0].handle, "3");
+    assert!(a.user.contains_key("user:pass"));
+}
+
+#[test]
+fn scoped_coordinate_systems_delayed_archives_and_area_lights() {
+    let b = build(
+        r#"ArchiveBegin "bulb"
+  Sphere 0.1 -0.1 0.1 360
+ArchiveEnd
+WorldBegin
+AttributeBegin
+  Translate 0 3 0
+  ScopedCoordinateSystem "shelf"
+  CoordinateSystem "table"
+  AreaLightSource "arealight" "bulb1" "intensity" 2
+  Procedural "DelayedReadArchive" ["bulb"] [-1 1 -1 1 -1 1]
+AttributeEnd
+CoordSysTransform "table"
+CoordSysTransform "shelf"
+Skew 45 0 1 0 1 0 0
+Detail [-1 1 -1 1 -1 1]
+Disk 0 1 360
+WorldEnd
+"#,
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(
+        e[0].contains("no coordinate system named \"shelf\""),
+        "{}",
+        e[0]
+    );
+    assert_eq!(b.warnings().len(), 1);
+    let s = b.one();
+    assert!(s.coordinate_systems.contains_key("table"));
+    assert!(!s.coordinate_systems.contains_key("shelf"));
+    assert!(s.lights[0].area);
+    assert_eq!(s.primitives.len(), 2);
+    // The archive's sphere was lit by the area light and placed in the block's space.
+    assert_eq!(s.primitives[0].attributes.lights_on, vec![0]);
+    assert!(close(
+        s.primitives[0]
+            .world_from_object
+            .transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 3.0, 0.0)
+    ));
+    // Disk: moved to "table" then skewed (y leans towards x).
+    let m = s.primitives[1].world_from_object;
+    assert!(close(m.transform_point3(Vec3::Y), Vec3::new(1.0, 4.0, 0.0)));
+}
+
+#[test]
+fn format_defaults_and_aspect_rules() {
+    let b = build("Format -1 -1 -1\nWorldBegin WorldEnd\nFormat 200 100 2\nWorldBegin WorldEnd\nFormat 0 10 1\n");
+    let e = b.errors();
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("scene.rib:5:"));
+    let o0 = &b.scenes[0].options;
+    assert_eq!((o0.xres, o0.yres, o0.pixel_aspect), (640, 480, 1.0));
+    assert_eq!(o0.frame_aspect, None);
+    assert_eq!(
+        o0.effective_screen_window(),
+        [-4.0 / 3.0, 4.0 / 3.0, -1.0, 1.0]
+    );
+    // 200·2/100 = 4: the screen window follows the aspect.
+    let o1 = &b.scenes[1].options;
+    assert_eq!(o1.effective_frame_aspect(), 4.0);
+    assert_eq!(o1.effective_screen_window(), [-4.0, 4.0, -1.0, 1.0]);
+}

@@ -124,8 +124,30 @@ impl Builder<'_> {
             self.report(d);
             return;
         }
-        let shader = Arc::new(self.shader_ref(call));
         let handle = call.pos[1].str().to_string();
+        // `LightSource "pointlight" "intensity" 5`: the handle was left out and a parameter
+        // name taken for it (the list then has an odd length).
+        if call.rest.len() % 2 == 1
+            && matches!(
+                call.req.args.get(1).map(|a| &a.value),
+                Some(crate::rib::Value::Str(_))
+            )
+            && self.dict.get(&handle).is_some()
+        {
+            let d = Diag::error(
+                "scene::arguments",
+                format!("`{}` is missing its light handle", call.name()),
+            )
+            .label(call.pos_spans[1], format!("\"{handle}\" is a parameter, not a handle"))
+            .help(format!(
+                "`{} \"{}\" 1 \"{handle}\" …`: give a handle (a number or a string) after the shader name",
+                call.name(),
+                call.pos[0].str()
+            ));
+            self.report(d);
+            return;
+        }
+        let shader = Arc::new(self.shader_ref(call));
         let Some(scene) = self.world.as_mut() else {
             return;
         };

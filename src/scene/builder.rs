@@ -437,15 +437,15 @@ impl<'a> Builder<'a> {
             )
             .label(call.span(), "nothing to close");
             if let Some(top) = self.blocks.last() {
-                d = d
-                    .label(
-                        top.span,
-                        format!("the open block is this `{}`", top.kind.begin()),
-                    )
-                    .help(format!("did you mean `{}`?", top.kind.end()));
-            } else {
-                d = d.help(format!("remove it, or add `{}` before it", kind.begin()));
+                d = d.label(
+                    top.span,
+                    format!("the innermost open block is this `{}`", top.kind.begin()),
+                );
             }
+            d = d.help(format!(
+                "remove it, or add `{}` where the block should start",
+                kind.begin()
+            ));
             self.report(d);
             return None;
         };
@@ -751,5 +751,74 @@ impl<'a> Builder<'a> {
                 return;
             }
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rib::{Arg, Value};
+
+    /// Builds requests by hand: `("Translate", vec![1, 2, 3])`-style numbers only.
+    fn reqs(list: &[(&str, &[f32])]) -> Vec<Request> {
+        list.iter()
+            .map(|(n, nums)| Request {
+                name: n.to_string(),
+                span: Span::new(0, 0, n.len()),
+                args: nums
+                    .iter()
+                    .map(|&f| Arg {
+                        value: Value::Float(f),
+                        span: Span::new(0, 0, 1),
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn world_begin_saves_the_camera_and_resets_the_transform() {
+        let sm = SourceMap::new();
+        sm.add("t.rib", "");
+        let d = Diagnostics::new();
+        let ctx = BuildContext::new(&sm, &d);
+        let r = reqs(&[
+            ("Translate", &[0., 0., 5.]),
+            ("WorldBegin", &[]),
+            ("Translate", &[1., 0., 0.]),
+            ("Sphere", &[1., -1., 1., 360.]),
+            ("WorldEnd", &[]),
+        ]);
+        let s = build_scenes(r, &ctx);
+        assert!(!d.has_errors());
+        assert_eq!(s.len(), 1);
+        assert_eq!(
+            s[0].camera_from_world.transform_point3(Vec3::ZERO),
+            Vec3::new(0., 0., 5.)
+        );
+        let p = &s[0].primitives[0];
+        assert_eq!(p.world_from_object.transform_point3(Vec3::ZERO), Vec3::X);
+    }
+
+    #[test]
+    fn attribute_changes_do_not_leak_into_emitted_primitives() {
+        let sm = SourceMap::new();
+        sm.add("t.rib", "");
+        let d = Diagnostics::new();
+        let ctx = BuildContext::new(&sm, &d);
+        let r = reqs(&[
+            ("WorldBegin", &[]),
+            ("AttributeBegin", &[]),
+            ("Color", &[1., 0., 0.]),
+            ("Sphere", &[1., -1., 1., 360.]),
+            ("Color", &[0., 1., 0.]),
+            ("Sphere", &[1., -1., 1., 360.]),
+            ("AttributeEnd", &[]),
+            ("Sphere", &[1., -1., 1., 360.]),
+            ("WorldEnd", &[]),
+        ]);
+        let s = build_scenes(r, &ctx);
+        let c: Vec<Vec3> = s[0].primitives.iter().map(|p| p.attributes.color).collect();
+        assert_eq!(c, vec![Vec3::X, Vec3::Y, Vec3::ONE]);
     }
 }

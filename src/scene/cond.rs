@@ -53,9 +53,9 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < b.len() {
-        let c = b[i] as char;
+        let c = s[i..].chars().next().unwrap_or(' ');
         if c.is_whitespace() {
-            i += 1;
+            i += c.len_utf8();
             continue;
         }
         let two = s.get(i..i + 2).unwrap_or("");
@@ -119,7 +119,8 @@ fn lex(s: &str) -> Result<Vec<Tok>, String> {
         if c.is_alphanumeric() || c == '_' {
             let n = s[i..]
                 .find(|ch: char| !(ch.is_alphanumeric() || ch == '_' || ch == '.' || ch == '-'))
-                .map_or(s.len(), |p| p + i);
+                .map_or(s.len(), |p| p + i)
+                .max(i + c.len_utf8());
             out.push(Tok::Word(s[i..n].to_string()));
             i = n;
             continue;

@@ -574,11 +574,11 @@ impl Builder<'_> {
             (nu, nv)
         };
         let c = Counts {
-            uniform: nup * nvp,
-            varying: vu * vv,
-            vertex: nu * nv,
-            facevarying: nup * nvp * 4,
-            facevertex: nup * nvp * 4,
+            uniform: nup.saturating_mul(nvp),
+            varying: vu.saturating_mul(vv),
+            vertex: nu.saturating_mul(nv),
+            facevarying: nup.saturating_mul(nvp).saturating_mul(4),
+            facevertex: nup.saturating_mul(nvp).saturating_mul(4),
         };
         let a = &self.gs.attrs;
         let g = Geometry::PatchMesh {
@@ -657,11 +657,11 @@ impl Builder<'_> {
         let (nu, uo, nv, vo) = (nu as usize, uo as usize, nv as usize, vo as usize);
         let (nus, nvs) = (nu - uo + 1, nv - vo + 1);
         let c = Counts {
-            uniform: nus * nvs,
-            varying: (nus + 1) * (nvs + 1),
-            vertex: nu * nv,
-            facevarying: nus * nvs * 4,
-            facevertex: nus * nvs * 4,
+            uniform: nus.saturating_mul(nvs),
+            varying: (nus + 1).saturating_mul(nvs + 1),
+            vertex: nu.saturating_mul(nv),
+            facevarying: nus.saturating_mul(nvs).saturating_mul(4),
+            facevertex: nus.saturating_mul(nvs).saturating_mul(4),
         };
         let g = Geometry::NuPatch {
             nu,
@@ -683,7 +683,7 @@ impl Builder<'_> {
         let ncurves = call.pos[0].ints();
         let order = call.pos[1].ints();
         let n = call.pos[5].ints();
-        let total: i64 = ncurves.iter().sum();
+        let total: i64 = ncurves.iter().fold(0i64, |a, &c| a.saturating_add(c));
         let fail = |b: &mut Self, i: usize, m: String| {
             b.geom_error(call, call.pos_spans[i], m, call.spec.describe());
         };
@@ -704,7 +704,10 @@ impl Builder<'_> {
         if order.iter().zip(n).any(|(&o, &c)| o < 1 || c < o) {
             return fail(self, 1, "each curve needs 1 <= order <= n".into());
         }
-        let knots: i64 = order.iter().zip(n).map(|(o, c)| o + c).sum();
+        let knots: i64 = order
+            .iter()
+            .zip(n)
+            .fold(0i64, |acc, (o, c)| acc.saturating_add(o.saturating_add(*c)));
         if call.pos[2].floats().len() as i64 != knots {
             return fail(
                 self,
@@ -723,7 +726,7 @@ impl Builder<'_> {
                 format!("min and max need one value per curve ({total})"),
             );
         }
-        let pts: i64 = n.iter().sum();
+        let pts: i64 = n.iter().fold(0i64, |a, &c| a.saturating_add(c));
         for i in 6..9 {
             if call.pos[i].floats().len() as i64 != pts {
                 return fail(
@@ -801,8 +804,15 @@ impl Builder<'_> {
                 call.spec.describe(),
             );
         }
-        let ni: i64 = nargs.iter().step_by(2).sum();
-        let nf: i64 = nargs.iter().skip(1).step_by(2).sum();
+        let ni: i64 = nargs
+            .iter()
+            .step_by(2)
+            .fold(0i64, |a, &c| a.saturating_add(c));
+        let nf: i64 = nargs
+            .iter()
+            .skip(1)
+            .step_by(2)
+            .fold(0i64, |a, &c| a.saturating_add(c));
         if intargs.len() as i64 != ni || floatargs.len() as i64 != nf {
             return self.geom_error(
                 call,

@@ -59,19 +59,23 @@ impl Builder<'_> {
             return;
         }
         let (x, y, a) = (call.pos[0].num(), call.pos[1].num(), call.pos[2].num());
+        // RISpec §4.1.1: a negative value asks for the device default.
+        let d = Options::default();
+        let x = if x < 0.0 { d.xres as f32 } else { x };
+        let y = if y < 0.0 { d.yres as f32 } else { y };
         if x < 1.0 || y < 1.0 || x.fract() != 0.0 || y.fract() != 0.0 {
             self.bad_arg(
                 call,
                 if x < 1.0 || x.fract() != 0.0 { 0 } else { 1 },
                 format!("resolution {x}×{y} must be whole numbers of at least 1"),
-                "e.g. `Format 640 480 1`",
+                "e.g. `Format 640 480 1` (-1 asks for the default)",
             );
             return;
         }
         self.options.xres = x as u32;
         self.options.yres = y as u32;
-        // RISpec: a pixel aspect ratio of 0 or less means "the device default" (square).
-        self.options.pixel_aspect = if a > 0.0 { a } else { 1.0 };
+        // 0 or negative: the device default (square pixels).
+        self.options.pixel_aspect = if a > 0.0 { a } else { d.pixel_aspect };
     }
 
     pub(super) fn frame_aspect_ratio(&mut self, call: &Call<'_>) {

@@ -52,8 +52,8 @@ pub fn parse_decl(text: &str) -> Result<Decl, String> {
                 .trim()
                 .parse()
                 .map_err(|_| format!("array length `{inner}` is not a positive integer"))?;
-            if n == 0 {
-                return Err("array length must be at least 1".into());
+            if n == 0 || n > 1 << 20 {
+                return Err(format!("array length {n} must be between 1 and 1048576"));
             }
             (&ty_word[..b], n)
         }
@@ -543,7 +543,7 @@ pub fn validate_counts(
 ) {
     list.0.retain(|p| {
         let n = counts.of(p.decl.class);
-        let want = n * p.decl.width();
+        let want = n.saturating_mul(p.decl.width());
         if p.data.len() == want {
             return true;
         }

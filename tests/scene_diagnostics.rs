@@ -1,0 +1,67 @@
+//! Rendered diagnostics (plain text, fixed width) of malformed scenes: each mistake gives one
+//! clear diagnostic with file, line, column, a label and a help line.
+
+use arbor::diag::{Diagnostics, SourceMap};
+use arbor::rib::parse_bytes;
+use arbor::scene::{build_scenes, BuildContext};
+
+fn render(text: &str) -> String {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = parse_bytes("scene.rib", text.as_bytes(), &sources, &diags);
+    let ctx = BuildContext::new(&sources, &diags);
+    let _ = build_scenes(reqs, &ctx);
+    diags.render_plain(&sources)
+}
+
+#[test]
+fn unknown_request() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\n  AttributeBegin\n    Sphree 1 -1 1 360\n  AttributeEnd\nWorldEnd\n"
+    ));
+}
+
+#[test]
+fn wrong_positional_arguments() {
+    insta::assert_snapshot!(render("WorldBegin\nCylinder 1 0 \"tall\" 360\nWorldEnd\n"));
+}
+
+#[test]
+fn undeclared_primitive_variable() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nSphere 1 -1 1 360 \"temperature\" [1 2 3 4]\nWorldEnd\n"
+    ));
+}
+
+#[test]
+fn wrong_value_count() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nPolygon \"P\" [0 0 0  1 0 0  1 1 0  0 1 0]\n        \"Cs\" [1 0 0  0 1 0  0 0 1]\nWorldEnd\n"
+    ));
+}
+
+#[test]
+fn unbalanced_blocks() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nAttributeBegin\n  TransformBegin\n    Sphere 1 -1 1 360\nAttributeEnd\nAttributeEnd\nWorldEnd\n"
+    ));
+}
+
+#[test]
+fn unclosed_block() {
+    insta::assert_snapshot!(render("WorldBegin\nAttributeBegin\nSphere 1 -1 1 360\n"));
+}
+
+#[test]
+fn unimplemented_request_warns_once() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nBlobby 1 [1000 0] [1] [\"\"]\nBlobby 1 [1000 0] [1] [\"\"]\nWorldEnd\n"
+    ));
+}
+
+#[test]
+fn light_without_handle() {
+    insta::assert_snapshot!(render(
+        "WorldBegin\nLightSource \"pointlight\" \"intensity\" 5\nWorldEnd\n"
+    ));
+}
