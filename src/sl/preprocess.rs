@@ -508,14 +508,71 @@ struct Macro {
     loc: Span,
 }
 
+/// Macros by interned name id.
+#[derive(Default)]
+struct Macros(Vec<Option<Rc<Macro>>>);
+
+impl Macros {
+    fn get(&self, id: &u32) -> Option<&Rc<Macro>> {
+        self.0.get(*id as usize).and_then(Option::as_ref)
+    }
+    fn contains_key(&self, id: &u32) -> bool {
+        self.get(id).is_some()
+    }
+    fn insert(&mut self, id: u32, m: Rc<Macro>) {
+        let i = id as usize;
+        if self.0.len() <= i {
+            self.0.resize(i + 1, None);
+        }
+        self.0[i] = Some(m);
+    }
+    fn remove(&mut self, id: &u32) {
+        if let Some(slot) = self.0.get_mut(*id as usize) {
+            *slot = None;
+        }
+    }
+}
+
+/// A small fast hasher for short keys (identifiers, id pairs); no HashDoS concern here
+/// beyond the budgets, and SipHash dominated the profile.
+#[derive(Default, Clone, Copy)]
+struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+    }
+    fn write_u8(&mut self, i: u8) {
+        self.write_u64(i as u64);
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type FxMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+
 /// Interned hide sets: sorted macro-name ids; 0 is the empty set. Unions are memoised, so
 /// applying a macro's hide set to every token of its expansion is a hash lookup per token.
 #[derive(Default)]
 struct HideSets {
     sets: Vec<Box<[u32]>>,
-    index: HashMap<Box<[u32]>, u32>,
-    unions: HashMap<(u32, u32), u32>,
-    inters: HashMap<(u32, u32), u32>,
+    index: FxMap<Box<[u32]>, u32>,
+    unions: FxMap<(u32, u32), u32>,
+    inters: FxMap<(u32, u32), u32>,
 }
 
 impl HideSets {
@@ -602,8 +659,8 @@ struct Pp<'a> {
     info_by_id: HashMap<u32, usize>,
     ctxs: Vec<Ctx>,
     conds: Vec<Cond>,
-    macros: HashMap<u32, Rc<Macro>>,
-    name_ids: HashMap<Box<str>, u32>,
+    macros: Macros,
+    name_ids: FxMap<Box<str>, u32>,
     hs: HideSets,
     /// Tokens to read before the lexer, last first.
     pending: Vec<Tok>,
@@ -647,8 +704,8 @@ impl<'a> Pp<'a> {
             info_by_id: HashMap::new(),
             ctxs: Vec::new(),
             conds: Vec::new(),
-            macros: HashMap::new(),
-            name_ids: HashMap::new(),
+            macros: Macros::default(),
+            name_ids: FxMap::default(),
             hs: HideSets::new(),
             pending: Vec::new(),
             isolated: false,
@@ -690,7 +747,13 @@ impl<'a> Pp<'a> {
     }
 
     fn is(&self, t: Tok, s: &str) -> bool {
-        t.kind == K::Punct && self.text(t) == s
+        let (i, n) = (t.text as usize, s.len());
+        t.kind == K::Punct
+            && t.len as usize == n
+            && match n {
+                1 => self.arena.as_bytes().get(i) == s.as_bytes().first(),
+                _ => self.arena.as_bytes().get(i..i + n) == Some(s.as_bytes()),
+            }
     }
 
     fn error(&self, code: &'static str, msg: impl Into<String>, span: Span, label: &str) {
@@ -1003,7 +1066,15 @@ impl<'a> Pp<'a> {
             .get(t.text as usize..(t.text + t.len) as usize)
             .unwrap_or("");
         if let (Some(&last), Some(&first)) = (self.out.as_bytes().last(), txt.as_bytes().first()) {
-            if last != b'\n' && (t.ws || needs_space(self.last_kind, last, first)) {
+            // Tokens that touched in the source were lexed apart there, so they stay apart.
+            let touching = t.identity
+                && self.segs.last().is_some_and(|l| {
+                    l.identity
+                        && l.file == t.file
+                        && l.end == t.start
+                        && (l.out + (l.end - l.start)) as usize == self.out.len()
+                });
+            if last != b'\n' && (t.ws || (!touching && needs_space(self.last_kind, last, first))) {
                 self.out.push(' ');
             }
         }
@@ -2247,6 +2318,17 @@ impl<'e> Eval<'e> {
     }
 
     fn cond(&mut self, ev: bool) -> ER {
+        self.depth += 1;
+        if self.depth > MAX_EXPR_DEPTH {
+            let t = self.toks.get(self.i).copied().unwrap_or(self.end);
+            return Err(("#if expression nested too deeply".into(), t));
+        }
+        let r = self.cond_inner(ev);
+        self.depth -= 1;
+        r
+    }
+
+    fn cond_inner(&mut self, ev: bool) -> ER {
         let c = self.binary(1, ev)?;
         if self.peek_punct() != Some("?") {
             return Ok(c);
@@ -2264,8 +2346,7 @@ impl<'e> Eval<'e> {
 
     fn binary(&mut self, min: u8, ev: bool) -> ER {
         let mut l = self.unary(ev)?;
-        loop {
-            let Some(op) = self.peek_punct() else { break };
+        while let Some(op) = self.peek_punct() {
             let p = prec(op);
             if p == 0 || p < min {
                 break;
@@ -2961,6 +3042,35 @@ surface test(float freq = 4) {
         src.push_str("m39\n");
         let r = run(&src);
         assert!(messages(&r).iter().any(|m| m.contains("too large")));
+    }
+
+    #[test]
+    fn adjacent_tokens_are_kept_apart_only_when_needed() {
+        let out = clean_run(
+            "#define M -1\n#define P(x) x+\n#define I a\nx=-M; y=P(+); i++ +j; I.b é-é\n",
+        );
+        assert_eq!(out, "\n\n\nx=- -1; y=+ +; i++ +j; a.b é-é\n");
+    }
+
+    #[test]
+    fn deep_expressions_and_arguments_end_with_errors() {
+        let deep = |open: &str, mid: &str, close: &str, n: usize| {
+            format!("{}{}{}", open.repeat(n), mid, close.repeat(n))
+        };
+        let src = format!(
+            "#if {}\n#endif\n#if {}\n#endif\n#if {}\n#endif\n#if {}\n#endif\n",
+            deep("(", "1", ")", 100),
+            deep("(", "1", ")", 5000),
+            deep("- ", "1", "", 5000),
+            deep("1?1:", "1", "", 5000)
+        );
+        let r = run(&src);
+        let m = messages(&r);
+        assert_eq!(m.len(), 3, "{m:?}");
+        assert!(m.iter().all(|s| s.contains("nested too deeply")));
+        let src = format!("#define f(x) x\n{}\n", deep("f(", "1", ")", 2000));
+        let r = run(&src);
+        assert!(messages(&r).iter().any(|s| s.contains("nested more than")));
     }
 
     /// A tiny deterministic generator for the fuzz test.
