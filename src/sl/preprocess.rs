@@ -1072,7 +1072,8 @@ impl<'a> Pp<'a> {
                     l.identity
                         && l.file == t.file
                         && l.end == t.start
-                        && (l.out + (l.end - l.start)) as usize == self.out.len()
+                        && l.out.wrapping_add(l.end.wrapping_sub(l.start)) as usize
+                            == self.out.len()
                 });
             if last != b'\n' && (t.ws || (!touching && needs_space(self.last_kind, last, first))) {
                 self.out.push(' ');
@@ -1578,7 +1579,7 @@ impl<'a> Pp<'a> {
             .rev()
             .find(|c| c.info == i)
             .map_or(0, |c| c.line_delta);
-        line + delta
+        line.saturating_add(delta)
     }
 
     fn file_name(&self, file: u32) -> String {
@@ -2122,9 +2123,9 @@ impl<'a> Pp<'a> {
             .get(1)
             .filter(|t| t.kind == K::Str)
             .map(|&t| unquote(self.text(t)));
-        let next_line = self.line_number(Tok { hs: 0, ..nl }) + 1;
+        let next_line = self.line_number(nl).saturating_add(1);
         if let Some(c) = self.ctxs.last_mut() {
-            c.line_delta += n - next_line;
+            c.line_delta = c.line_delta.saturating_add(n.saturating_sub(next_line));
             if fname.is_some() {
                 c.file_name = fname;
             }
@@ -2550,7 +2551,10 @@ fn parse_char(s: &str) -> Result<V, String> {
     let mut i = 0;
     while i < b.len() {
         if b[i] != b'\\' {
-            let c = inner[i..].chars().next().ok_or_else(bad)?;
+            let c = inner
+                .get(i..)
+                .and_then(|r| r.chars().next())
+                .ok_or_else(bad)?;
             vals.push(c as i64);
             i += c.len_utf8();
             continue;
@@ -2581,7 +2585,9 @@ fn parse_char(s: &str) -> Result<V, String> {
                 let mut v: i64 = 0;
                 let start = i;
                 while i < b.len() && b[i].is_ascii_hexdigit() {
-                    v = v.wrapping_mul(16) + (b[i] as char).to_digit(16).unwrap_or(0) as i64;
+                    v = v
+                        .wrapping_mul(16)
+                        .wrapping_add((b[i] as char).to_digit(16).unwrap_or(0) as i64);
                     i += 1;
                 }
                 if i == start {
@@ -3073,6 +3079,20 @@ surface test(float freq = 4) {
         assert!(messages(&r).iter().any(|s| s.contains("nested more than")));
     }
 
+    #[test]
+    fn odd_constants_do_not_panic() {
+        let r = run("#if '\\é' || '\\xfffffffffffffffffffff' || 0xffffffffffffffff > 0 || 99999999999999999999999\n#endif\n#line 9223372036854775807\n#line 9223372036854775807\n__LINE__\n");
+        let m = messages(&r);
+        assert!(
+            m.iter().any(|m| m.contains("invalid character constant")),
+            "{m:?}"
+        );
+        let r = run("#if 99999999999999999999999\n#endif\n");
+        assert!(messages(&r)
+            .iter()
+            .any(|m| m.contains("invalid integer constant")));
+    }
+
     /// A tiny deterministic generator for the fuzz test.
     fn xorshift(state: &mut u64) -> u64 {
         *state ^= *state << 13;
@@ -3133,9 +3153,21 @@ surface test(float freq = 4) {
             "\t",
             "\r\n",
             "1/0",
+            "'\\",
+            "99999999999999999999",
+            "#line 9223372036854775807\n",
+            "#if '\\x",
+            "0xffffffffffffffff",
+            "<<",
+            "%",
         ];
         let mut st = 0x9e3779b97f4a7c15u64;
-        for case in 0..300 {
+        // ARBOR_PP_FUZZ=N runs more cases locally.
+        let cases: u64 = std::env::var("ARBOR_PP_FUZZ")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(300);
+        for case in 0..cases {
             let n = (xorshift(&mut st) % 120) as usize;
             let mut src = String::new();
             for _ in 0..n {
