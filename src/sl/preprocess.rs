@@ -15,6 +15,11 @@
 //! their logical line); an included file's text replaces its `#include` line; macro output maps
 //! to the invocation site, argument tokens to where they were written; never panics; linear work,
 //! with budgets on include nesting and macro expansion so hostile input ends with an error.
+//!
+//! Predefined: `__FILE__`, `__LINE__`, `ARBOR` (= 1). `#pragma` is ignored except `#pragma once`;
+//! `#line` changes `__LINE__`/`__FILE__` only (one warning says diagnostics keep real lines).
+//! Diagnostic codes: `sl::directive`, `sl::conditional`, `sl::macro`, `sl::include`, `sl::lex`,
+//! `sl::#error`, `sl::#warning`.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -22,9 +27,10 @@ use std::rc::Rc;
 
 use crate::diag::{Diag, Diagnostics, SourceMap, Span};
 
-/// Finds included files. `from` is the path of the including file (None for a string source;
-/// for an included file it is the display name its resolver returned); `system` is true for
-/// `<file>`. Returns (display name / path, text).
+/// Finds included files. `from` is the path of the including file (None for the embedded stdlib
+/// or a string source: for an included file it is the display name its resolver returned when
+/// that names a file on disk, else None); `system` is true for `<file>`. Returns
+/// (display name / path, text); the display name also keys `#pragma once` and the file cache.
 pub trait IncludeResolver {
     fn resolve(&self, name: &str, system: bool, from: Option<&Path>) -> Option<(String, String)>;
 }
@@ -2048,7 +2054,11 @@ impl<'a> Pp<'a> {
             }
             None => {
                 let id = self.sources.add(display.clone(), text.as_str());
-                self.add_info(id, display.clone(), Some(PathBuf::from(&display)), &text)
+                // A display name that is a file on disk is its path; anything else (the
+                // embedded standard library) has none.
+                let path = PathBuf::from(&display);
+                let path = path.is_file().then_some(path);
+                self.add_info(id, display.clone(), path, &text)
             }
         };
         let ret = (nl.kind == K::Newline).then_some(nl);
@@ -3091,6 +3101,45 @@ surface test(float freq = 4) {
         assert!(messages(&r)
             .iter()
             .any(|m| m.contains("invalid integer constant")));
+    }
+
+    /// Resolves `"name"` next to the including file, as the shader compiler's resolver will.
+    struct DirResolver;
+
+    impl IncludeResolver for DirResolver {
+        fn resolve(
+            &self,
+            name: &str,
+            _system: bool,
+            from: Option<&Path>,
+        ) -> Option<(String, String)> {
+            let dir = from?.parent()?;
+            let p = dir.join(name);
+            let text = std::fs::read_to_string(&p).ok()?;
+            Some((p.to_string_lossy().into_owned(), text))
+        }
+    }
+
+    #[test]
+    fn includes_are_found_next_to_the_including_file() {
+        let dir = std::env::temp_dir().join(format!("arbor-pp-{}", std::process::id()));
+        let sub = dir.join("sub");
+        std::fs::create_dir_all(&sub).unwrap();
+        std::fs::write(sub.join("a.h"), "#include \"b.h\"\nA\n").unwrap();
+        std::fs::write(sub.join("b.h"), "B\n").unwrap();
+        let main_path = dir.join("main.sl");
+        let src = "#include \"sub/a.h\"\nM\n";
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let main = sources.add(main_path.to_string_lossy(), src);
+        let pre = preprocess(main, Some(&main_path), &sources, &[], &DirResolver, &diags);
+        let _ = std::fs::remove_dir_all(&dir);
+        assert!(diags.snapshot().is_empty());
+        let words: Vec<&str> = pre.text.split_whitespace().collect();
+        assert_eq!(words, ["B", "A", "M"]);
+        let b = pre.text.find('B').unwrap();
+        let name = sources.get(pre.span(b, b + 1).file).unwrap().name.clone();
+        assert!(name.ends_with("b.h"), "{name}");
     }
 
     /// A tiny deterministic generator for the fuzz test.
