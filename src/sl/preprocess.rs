@@ -2876,6 +2876,8 @@ yes4
         let s = d.primary_span().unwrap();
         assert_eq!(s.file, span.file);
         assert_eq!(r.sources.line_col(s), (4, 1));
+        let shown = r.diags.render_plain(&r.sources);
+        assert!(shown.contains("inc.h:4:1"), "{shown}");
         // Text after the include maps back to the main file.
         let y = r.pre.text.find('y').unwrap();
         let sy = r.pre.span(y, y + 1);
