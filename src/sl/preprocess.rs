@@ -15,6 +15,11 @@
 //! their logical line); an included file's text replaces its `#include` line; macro output maps
 //! to the invocation site, argument tokens to where they were written; never panics; linear work,
 //! with budgets on include nesting and macro expansion so hostile input ends with an error.
+//!
+//! Predefined: `__FILE__`, `__LINE__`, `ARBOR` (= 1). `#pragma` is ignored except `#pragma once`;
+//! `#line` changes `__LINE__`/`__FILE__` only (one warning says diagnostics keep real lines).
+//! Diagnostic codes: `sl::directive`, `sl::conditional`, `sl::macro`, `sl::include`, `sl::lex`,
+//! `sl::#error`, `sl::#warning`.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -22,9 +27,10 @@ use std::rc::Rc;
 
 use crate::diag::{Diag, Diagnostics, SourceMap, Span};
 
-/// Finds included files. `from` is the path of the including file (None for a string source;
-/// for an included file it is the display name its resolver returned); `system` is true for
-/// `<file>`. Returns (display name / path, text).
+/// Finds included files. `from` is the path of the including file (None for the embedded stdlib
+/// or a string source: for an included file it is the display name its resolver returned when
+/// that names a file on disk, else None); `system` is true for `<file>`. Returns
+/// (display name / path, text); the display name also keys `#pragma once` and the file cache.
 pub trait IncludeResolver {
     fn resolve(&self, name: &str, system: bool, from: Option<&Path>) -> Option<(String, String)>;
 }
@@ -44,7 +50,7 @@ impl IncludeResolver for MapResolver {
 /// Nested `#include` levels before giving up (as GCC).
 const MAX_INCLUDE_DEPTH: usize = 200;
 /// Files included in one run before giving up (stops exponential self-inclusion).
-const MAX_INCLUDES: usize = 20_000;
+const MAX_INCLUDES: usize = 5_000;
 /// Nesting of macro calls inside macro arguments.
 const MAX_EXPAND_DEPTH: usize = 200;
 /// Tokens produced by macro expansion in one run (stops exponential definitions).
@@ -508,14 +514,71 @@ struct Macro {
     loc: Span,
 }
 
+/// Macros by interned name id.
+#[derive(Default)]
+struct Macros(Vec<Option<Rc<Macro>>>);
+
+impl Macros {
+    fn get(&self, id: &u32) -> Option<&Rc<Macro>> {
+        self.0.get(*id as usize).and_then(Option::as_ref)
+    }
+    fn contains_key(&self, id: &u32) -> bool {
+        self.get(id).is_some()
+    }
+    fn insert(&mut self, id: u32, m: Rc<Macro>) {
+        let i = id as usize;
+        if self.0.len() <= i {
+            self.0.resize(i + 1, None);
+        }
+        self.0[i] = Some(m);
+    }
+    fn remove(&mut self, id: &u32) {
+        if let Some(slot) = self.0.get_mut(*id as usize) {
+            *slot = None;
+        }
+    }
+}
+
+/// A small fast hasher for short keys (identifiers, id pairs); no HashDoS concern here
+/// beyond the budgets, and SipHash dominated the profile.
+#[derive(Default, Clone, Copy)]
+struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+    }
+    fn write_u8(&mut self, i: u8) {
+        self.write_u64(i as u64);
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type FxMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+
 /// Interned hide sets: sorted macro-name ids; 0 is the empty set. Unions are memoised, so
 /// applying a macro's hide set to every token of its expansion is a hash lookup per token.
 #[derive(Default)]
 struct HideSets {
     sets: Vec<Box<[u32]>>,
-    index: HashMap<Box<[u32]>, u32>,
-    unions: HashMap<(u32, u32), u32>,
-    inters: HashMap<(u32, u32), u32>,
+    index: FxMap<Box<[u32]>, u32>,
+    unions: FxMap<(u32, u32), u32>,
+    inters: FxMap<(u32, u32), u32>,
 }
 
 impl HideSets {
@@ -602,8 +665,8 @@ struct Pp<'a> {
     info_by_id: HashMap<u32, usize>,
     ctxs: Vec<Ctx>,
     conds: Vec<Cond>,
-    macros: HashMap<u32, Rc<Macro>>,
-    name_ids: HashMap<Box<str>, u32>,
+    macros: Macros,
+    name_ids: FxMap<Box<str>, u32>,
     hs: HideSets,
     /// Tokens to read before the lexer, last first.
     pending: Vec<Tok>,
@@ -614,6 +677,7 @@ struct Pp<'a> {
     /// The expansion budget ran out: macros are no longer expanded.
     disabled: bool,
     depth_reported: bool,
+    include_reported: bool,
     includes: usize,
     /// Newlines consumed by a multi-line macro call, emitted at the end of its line.
     deferred: u32,
@@ -646,8 +710,8 @@ impl<'a> Pp<'a> {
             info_by_id: HashMap::new(),
             ctxs: Vec::new(),
             conds: Vec::new(),
-            macros: HashMap::new(),
-            name_ids: HashMap::new(),
+            macros: Macros::default(),
+            name_ids: FxMap::default(),
             hs: HideSets::new(),
             pending: Vec::new(),
             isolated: false,
@@ -655,6 +719,7 @@ impl<'a> Pp<'a> {
             expanded: 0,
             disabled: false,
             depth_reported: false,
+            include_reported: false,
             includes: 0,
             deferred: 0,
             quiet_lex: false,
@@ -688,7 +753,13 @@ impl<'a> Pp<'a> {
     }
 
     fn is(&self, t: Tok, s: &str) -> bool {
-        t.kind == K::Punct && self.text(t) == s
+        let (i, n) = (t.text as usize, s.len());
+        t.kind == K::Punct
+            && t.len as usize == n
+            && match n {
+                1 => self.arena.as_bytes().get(i) == s.as_bytes().first(),
+                _ => self.arena.as_bytes().get(i..i + n) == Some(s.as_bytes()),
+            }
     }
 
     fn error(&self, code: &'static str, msg: impl Into<String>, span: Span, label: &str) {
@@ -1001,7 +1072,16 @@ impl<'a> Pp<'a> {
             .get(t.text as usize..(t.text + t.len) as usize)
             .unwrap_or("");
         if let (Some(&last), Some(&first)) = (self.out.as_bytes().last(), txt.as_bytes().first()) {
-            if last != b'\n' && (t.ws || needs_space(self.last_kind, last, first)) {
+            // Tokens that touched in the source were lexed apart there, so they stay apart.
+            let touching = t.identity
+                && self.segs.last().is_some_and(|l| {
+                    l.identity
+                        && l.file == t.file
+                        && l.end == t.start
+                        && l.out.wrapping_add(l.end.wrapping_sub(l.start)) as usize
+                            == self.out.len()
+                });
+            if last != b'\n' && (t.ws || (!touching && needs_space(self.last_kind, last, first))) {
                 self.out.push(' ');
             }
         }
@@ -1384,7 +1464,13 @@ impl<'a> Pp<'a> {
                     if !gnu_comma {
                         out.push(lhs);
                     }
-                } else if lhs.kind == K::Placemarker {
+                } else if lhs.kind == K::Placemarker
+                    || (variadic && rp as usize + 1 == args.len() && self.is(lhs, ","))
+                {
+                    // GNU: `, ## __VA_ARGS__` with arguments is a plain comma.
+                    if lhs.kind != K::Placemarker {
+                        out.push(lhs);
+                    }
                     out.extend(rhs);
                 } else {
                     let pasted = self.paste(lhs, rhs[0], inv);
@@ -1499,7 +1585,7 @@ impl<'a> Pp<'a> {
             .rev()
             .find(|c| c.info == i)
             .map_or(0, |c| c.line_delta);
-        line + delta
+        line.saturating_add(delta)
     }
 
     fn file_name(&self, file: u32) -> String {
@@ -1929,26 +2015,21 @@ impl<'a> Pp<'a> {
             return self.emit_newline(nl);
         };
         if self.ctxs.len() >= MAX_INCLUDE_DEPTH || self.includes >= MAX_INCLUDES {
-            self.diags.report(
-                Diag::error(
-                    "sl::include",
-                    format!("#include nested too deeply (more than {MAX_INCLUDE_DEPTH} levels) or too many includes"),
-                )
-                .label(span, "including here")
-                .help("a header probably includes itself without an include guard (#ifndef X / #define X / #endif)"),
-            );
-            // One report is enough: stop reading the whole nest.
-            let keep = 1.min(self.ctxs.len());
-            while self.ctxs.len() > keep {
-                let c = self.ctxs.pop();
-                if let Some(c) = c {
-                    self.conds.truncate(c.cond_base);
-                }
+            // Reported once; deeper or further includes are skipped so the run ends quickly.
+            if !self.include_reported {
+                self.include_reported = true;
+                self.diags.report(
+                    Diag::error(
+                        "sl::include",
+                        format!(
+                            "#include nested too deeply (more than {MAX_INCLUDE_DEPTH} levels) or too many includes (more than {MAX_INCLUDES})"
+                        ),
+                    )
+                    .label(span, "including here")
+                    .help("a header probably includes itself without an include guard (#ifndef X / #define X / #endif)"),
+                );
             }
-            if let Some(c) = self.ctxs.last_mut() {
-                c.pos = self.infos[c.info].len;
-            }
-            return;
+            return self.emit_newline(nl);
         }
         let from = self
             .ctxs
@@ -1973,7 +2054,11 @@ impl<'a> Pp<'a> {
             }
             None => {
                 let id = self.sources.add(display.clone(), text.as_str());
-                self.add_info(id, display.clone(), Some(PathBuf::from(&display)), &text)
+                // A display name that is a file on disk is its path; anything else (the
+                // embedded standard library) has none.
+                let path = PathBuf::from(&display);
+                let path = path.is_file().then_some(path);
+                self.add_info(id, display.clone(), path, &text)
             }
         };
         let ret = (nl.kind == K::Newline).then_some(nl);
@@ -2048,9 +2133,9 @@ impl<'a> Pp<'a> {
             .get(1)
             .filter(|t| t.kind == K::Str)
             .map(|&t| unquote(self.text(t)));
-        let next_line = self.line_number(Tok { hs: 0, ..nl }) + 1;
+        let next_line = self.line_number(nl).saturating_add(1);
         if let Some(c) = self.ctxs.last_mut() {
-            c.line_delta += n - next_line;
+            c.line_delta = c.line_delta.saturating_add(n.saturating_sub(next_line));
             if fname.is_some() {
                 c.file_name = fname;
             }
@@ -2244,6 +2329,17 @@ impl<'e> Eval<'e> {
     }
 
     fn cond(&mut self, ev: bool) -> ER {
+        self.depth += 1;
+        if self.depth > MAX_EXPR_DEPTH {
+            let t = self.toks.get(self.i).copied().unwrap_or(self.end);
+            return Err(("#if expression nested too deeply".into(), t));
+        }
+        let r = self.cond_inner(ev);
+        self.depth -= 1;
+        r
+    }
+
+    fn cond_inner(&mut self, ev: bool) -> ER {
         let c = self.binary(1, ev)?;
         if self.peek_punct() != Some("?") {
             return Ok(c);
@@ -2261,8 +2357,7 @@ impl<'e> Eval<'e> {
 
     fn binary(&mut self, min: u8, ev: bool) -> ER {
         let mut l = self.unary(ev)?;
-        loop {
-            let Some(op) = self.peek_punct() else { break };
+        while let Some(op) = self.peek_punct() {
             let p = prec(op);
             if p == 0 || p < min {
                 break;
@@ -2466,7 +2561,10 @@ fn parse_char(s: &str) -> Result<V, String> {
     let mut i = 0;
     while i < b.len() {
         if b[i] != b'\\' {
-            let c = inner[i..].chars().next().ok_or_else(bad)?;
+            let c = inner
+                .get(i..)
+                .and_then(|r| r.chars().next())
+                .ok_or_else(bad)?;
             vals.push(c as i64);
             i += c.len_utf8();
             continue;
@@ -2497,7 +2595,9 @@ fn parse_char(s: &str) -> Result<V, String> {
                 let mut v: i64 = 0;
                 let start = i;
                 while i < b.len() && b[i].is_ascii_hexdigit() {
-                    v = v.wrapping_mul(16) + (b[i] as char).to_digit(16).unwrap_or(0) as i64;
+                    v = v
+                        .wrapping_mul(16)
+                        .wrapping_add((b[i] as char).to_digit(16).unwrap_or(0) as i64);
                     i += 1;
                 }
                 if i == start {
@@ -2524,4 +2624,643 @@ fn parse_char(s: &str) -> Result<V, String> {
 }
 
 #[cfg(test)]
-mod tests {}
+mod tests {
+    use super::*;
+
+    struct Run {
+        pre: Preprocessed,
+        sources: SourceMap,
+        diags: Diagnostics,
+        main: u32,
+    }
+
+    fn run_with(src: &str, files: &[(&str, &str)], defines: &[(String, Option<String>)]) -> Run {
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let main = sources.add("main.sl", src);
+        let resolver = MapResolver {
+            files: files
+                .iter()
+                .map(|(n, t)| (n.to_string(), t.to_string()))
+                .collect(),
+        };
+        let pre = preprocess(main, None, &sources, defines, &resolver, &diags);
+        Run {
+            pre,
+            sources,
+            diags,
+            main,
+        }
+    }
+
+    fn run(src: &str) -> Run {
+        run_with(src, &[], &[])
+    }
+
+    /// The output with all whitespace removed (token content and order only).
+    fn squash(s: &str) -> String {
+        s.chars().filter(|c| !c.is_whitespace()).collect()
+    }
+
+    fn messages(r: &Run) -> Vec<String> {
+        r.diags
+            .snapshot()
+            .iter()
+            .map(|(d, _)| d.message.clone())
+            .collect()
+    }
+
+    fn clean_run(src: &str) -> String {
+        let r = run(src);
+        assert_eq!(messages(&r), Vec::<String>::new(), "unexpected diagnostics");
+        r.pre.text
+    }
+
+    #[test]
+    fn object_macros_keep_lines() {
+        let out = clean_run("#define N 3\nN + N\n#define E\nx E y\n");
+        assert_eq!(out, "\n3 + 3\n\nx y\n");
+    }
+
+    #[test]
+    fn function_macros_and_nested_arguments() {
+        let out = clean_run(
+            "#define sq(x) ((x)*(x))\n#define max2(a,b) ((a)>(b)?(a):(b))\nsq(a+1) max2(f(1,2), (3,4)) sq()\n",
+        );
+        assert_eq!(
+            squash(&out),
+            "((a+1)*(a+1))((f(1,2))>((3,4))?(f(1,2)):((3,4)))(()*())"
+        );
+    }
+
+    #[test]
+    fn function_macro_name_without_parens_is_plain() {
+        let out = clean_run("#define f(x) x+1\nf; f (2); g(f)\n");
+        assert_eq!(squash(&out), "f;2+1;g(f)");
+    }
+
+    #[test]
+    fn stringize_and_paste() {
+        let out = clean_run(
+            "#define str(x) #x\n#define cat(a,b) a##b\nstr( a  +  \"b\\n\" ) cat(foo, bar) cat(1,2) cat(,x) cat(y,) cat(,)\n",
+        );
+        assert_eq!(out.trim(), r#""a + \"b\\n\"" foobar 12 x y"#);
+    }
+
+    /// C11 6.10.3.5 EXAMPLE 3: rescanning, hide sets, empty arguments, pasting.
+    #[test]
+    fn c_standard_example_3() {
+        let src = r#"#define x 3
+#define f(a) f(x * (a))
+#undef x
+#define x 2
+#define g f
+#define z z[0]
+#define h g(~
+#define m(a) a(w)
+#define w 0,1
+#define t(a) a
+#define p() int
+#define q(x) x
+#define r(x,y) x ## y
+#define str(x) # x
+f(y+1) + f(f(z)) % t(t(g)(0) + t)(1);
+g(x+(3,4)-w) | h 5) & m
+(f)^m(m);
+p() i[q()] = { q(1), r(2,3), r(4,), r(,5), r(,) };
+char c[2][6] = { str(hello), str() };
+"#;
+        let want = r#"f(2 * (y+1)) + f(2 * (f(2 * (z[0])))) % f(2 * (0)) + t(1);
+f(2 * (2+(3,4)-0,1)) | f(2 * (~ 5)) & f(2 * (0,1))^m(0,1);
+int i[] = { 1, 23, 4, 5, };
+char c[2][6] = { "hello", "" };"#;
+        let out = clean_run(src);
+        assert_eq!(squash(&out), squash(want));
+        // The call spanning two lines keeps the line count.
+        assert_eq!(out.lines().count(), src.lines().count());
+    }
+
+    /// C11 6.10.3.5 EXAMPLE 4: `#` and `##` with string literals.
+    #[test]
+    fn c_standard_example_4() {
+        let src = r#"#define str(s) # s
+#define xstr(s) str(s)
+#define debug(s, t) printf("x" # s "= %d, x" # t "= %s", \
+ x ## s, x ## t)
+#define glue(a, b) a ## b
+#define xglue(a, b) glue(a, b)
+#define HIGHLOW "hello"
+#define LOW LOW ", world"
+debug(1, 2);
+fputs(str(strncmp("abc\0d", "abc", '\4') // this goes away
+ == 0) str(: @\n), s);
+glue(HIGH, LOW);
+xglue(HIGH, LOW)
+"#;
+        let out = clean_run(src);
+        assert!(
+            out.contains(r#"printf("x" "1" "= %d, x" "2" "= %s", x1, x2);"#),
+            "{out}"
+        );
+        assert!(
+            out.contains(r#""strncmp(\"abc\\0d\", \"abc\", '\\4') == 0" ": @\n""#),
+            "{out}"
+        );
+        assert!(out.contains("\"hello\";"), "{out}");
+        assert!(out.contains(r#""hello" ", world""#), "{out}");
+    }
+
+    /// C11 6.10.3.5 EXAMPLE 7: variadic macros; plus GNU `, ## __VA_ARGS__` and `args...`.
+    #[test]
+    fn variadic_macros() {
+        let src = r#"#define debug(...) fprintf(stderr, __VA_ARGS__)
+#define showlist(...) puts(#__VA_ARGS__)
+#define report(test, ...) ((test)?puts(#test): printf(__VA_ARGS__))
+#define e(fmt, ...) printf(fmt, ## __VA_ARGS__)
+#define named(f, args...) f(args)
+debug("Flag");
+debug("X = %d\n", x);
+showlist(The first, second, and third items.);
+report(x>y, "x is %d but y is %d", x, y);
+e("a") e("b", 1, 2) named(g, 1, 2)
+"#;
+        let out = clean_run(src);
+        let want = r#"fprintf(stderr, "Flag" );
+fprintf(stderr, "X = %d\n", x );
+puts( "The first, second, and third items." );
+((x>y)?puts("x>y"): printf("x is %d but y is %d", x, y));
+printf("a") printf("b", 1, 2) g(1, 2)"#;
+        assert_eq!(squash(&out), squash(want));
+        assert!(out.contains("\"The first, second, and third items.\""));
+    }
+
+    #[test]
+    fn self_reference_does_not_loop() {
+        let out = clean_run(
+            "#define foo foo + 1\n#define a b\n#define b a\n#define f(x) f(x) + g\n#define g f\nfoo; a; b; f(2)\n",
+        );
+        assert_eq!(squash(&out), "foo+1;a;b;f(2)+f");
+    }
+
+    #[test]
+    fn conditionals_with_expressions() {
+        let src = r#"#define FOO 3
+#if (1 << 4) == 16 && -1 < 0 && (0 ? 1/0 : 2) == 2 && ~0 == -1 && 0xff % 16 == 15 && !defined BAR && defined(FOO) && FOO*2 == 6
+yes1
+#else
+no1
+#endif
+#if -1 < 0u
+no2
+#elif UNDEFINED_NAME == 0 && 'a' == 97 && 010 == 8 && (2, 3) == 3 && (5 >> 1 | 1 ^ 3) == 2
+yes2
+#else
+no3
+#endif
+#ifdef FOO
+#ifndef FOO
+no4
+#else
+yes3
+#endif
+#endif
+#if 0
+#unknown directives are fine when skipped
+#if 1/0
+#endif
+no5
+#elif 1
+yes4
+#endif
+"#;
+        let out = clean_run(src);
+        let words: Vec<&str> = out.split_whitespace().collect();
+        assert_eq!(words, ["yes1", "yes2", "yes3", "yes4"]);
+        assert_eq!(out.lines().count(), src.lines().count());
+    }
+
+    #[test]
+    fn include_with_guard_and_pragma_once() {
+        let files = [
+            (
+                "guard.h",
+                "#ifndef GUARD_H\n#define GUARD_H\nint g;\n#endif\n",
+            ),
+            ("once.h", "#pragma once\nint o;\n"),
+        ];
+        let r = run_with(
+            "#include \"guard.h\"\n#include \"guard.h\"\n#include <once.h>\n#include \"once.h\"\nend\n",
+            &files,
+            &[],
+        );
+        assert!(messages(&r).is_empty(), "{:?}", messages(&r));
+        let words: Vec<&str> = r.pre.text.split_whitespace().collect();
+        assert_eq!(words, ["int", "g;", "int", "o;", "end"]);
+    }
+
+    #[test]
+    fn spans_point_into_included_files() {
+        let files = [("inc.h", "a\n// comment\nb OOPS c\n#error broken header\n")];
+        let r = run_with("x\n#include \"inc.h\"\ny\n", &files, &[]);
+        let pos = r.pre.text.find("OOPS").unwrap();
+        let span = r.pre.span(pos, pos + 4);
+        let inc = r.sources.get(span.file).unwrap();
+        assert_eq!(inc.name, "inc.h");
+        assert_eq!(r.sources.snippet(span), "OOPS");
+        assert_eq!(r.sources.line_col(span), (3, 3));
+        // The #error points into the header at line 4.
+        let snap = r.diags.snapshot();
+        assert_eq!(snap.len(), 1);
+        let d = &snap[0].0;
+        assert!(d.is_error() && d.message.contains("broken header"));
+        let s = d.primary_span().unwrap();
+        assert_eq!(s.file, span.file);
+        assert_eq!(r.sources.line_col(s), (4, 1));
+        let shown = r.diags.render_plain(&r.sources);
+        assert!(shown.contains("inc.h:4:1"), "{shown}");
+        // Text after the include maps back to the main file.
+        let y = r.pre.text.find('y').unwrap();
+        let sy = r.pre.span(y, y + 1);
+        assert_eq!((sy.file, r.sources.line_col(sy)), (r.main, (3, 1)));
+    }
+
+    #[test]
+    fn spans_of_macro_output_map_to_the_invocation() {
+        let r =
+            run("#define M (1 + bad)\n  x = M;\n/* a\n b */ z = sq(\n1);\n#define sq(v) v*v\nw\n");
+        let t = &r.pre.text;
+        let pos = t.find("bad").unwrap();
+        let s = r.pre.span(pos, pos + 3);
+        assert_eq!(r.sources.snippet(s), "M");
+        assert_eq!(r.sources.line_col(s), (2, 7));
+        let z = t.find('z').unwrap();
+        let sz = r.pre.span(z, z + 1);
+        assert_eq!(r.sources.line_col(sz), (4, 7));
+        // Lines stay aligned after a multi-line comment and a directive.
+        assert_eq!(t.lines().nth(6), Some("w"));
+        let w = t.find('w').unwrap();
+        assert_eq!(r.sources.line_col(r.pre.span(w, w + 1)), (7, 1));
+    }
+
+    #[test]
+    fn multi_line_call_keeps_line_count() {
+        let out = clean_run("#define f(a,b) a+b\nf(1,\n  2)\nz\n");
+        assert_eq!(out, "\n1+2\n\nz\n");
+    }
+
+    #[test]
+    fn gritz_filterwidth_and_noises_macros() {
+        let header = r#"/* filterwidth.h - after Larry Gritz, Advanced RenderMan */
+#ifndef FILTERWIDTH_H
+#define FILTERWIDTH_H 1
+#define MINFILTWIDTH 1.0e-6
+#define filterwidth(x)  max (abs(Du(x)*du) + abs(Dv(x)*dv), MINFILTWIDTH)
+#define filterwidthp(p) max (sqrt(area(p)), MINFILTWIDTH)
+#define fadeout(g,g_avg,featuresize,fwidth) \
+        mix (g, g_avg, smoothstep(.2,.6,fwidth/featuresize))
+#endif
+"#;
+        let noises = r#"#ifndef NOISES_H
+#define NOISES_H
+#include "filterwidth.h"
+#define snoise(x) (2*noise(x)-1)
+#define boxstep(a,b,x) clamp(((x)-(a))/((b)-(a)),0,1)
+#define filteredsnoise(p,width) (snoise(p) * (1-smoothstep (0.2,0.75,width)))
+#endif
+"#;
+        let src = r#"#include "noises.h"
+surface test(float freq = 4) {
+    float fw = filterwidthp(P);
+    float n = filteredsnoise(P*freq, filterwidth(s /* s, not t */));
+    float b = boxstep(0, /* lo */ 1, mix(a, b, 0.5));
+    Ci = fadeout(n, 0, 1, fw);
+}
+"#;
+        let r = run_with(src, &[("filterwidth.h", header), ("noises.h", noises)], &[]);
+        assert!(messages(&r).is_empty(), "{:?}", messages(&r));
+        let out = squash(&r.pre.text);
+        assert!(out.contains("floatfw=max(sqrt(area(P)),1.0e-6);"), "{out}");
+        assert!(
+            out.contains(
+                "floatn=((2*noise(P*freq)-1)*(1-smoothstep(0.2,0.75,max(abs(Du(s)*du)+abs(Dv(s)*dv),1.0e-6))));"
+            ),
+            "{out}"
+        );
+        assert!(
+            out.contains("floatb=clamp(((mix(a,b,0.5))-(0))/((1)-(0)),0,1);"),
+            "{out}"
+        );
+        assert!(out.contains("Ci=mix(n,0,smoothstep(.2,.6,fw/1));"), "{out}");
+        // A token of the shader itself still maps to the shader's own line 4.
+        let t = &r.pre.text;
+        let pos = t.find("float n").unwrap() + 6;
+        let s = r.pre.span(pos, pos + 1);
+        assert_eq!((s.file, r.sources.line_col(s)), (r.main, (4, 11)));
+    }
+
+    #[test]
+    fn strings_and_chars_are_not_expanded() {
+        let out = clean_run("#define X 1\n\"X // not a comment /* nor this */\" 'X' X\n");
+        assert_eq!(out, "\n\"X // not a comment /* nor this */\" 'X' 1\n");
+    }
+
+    #[test]
+    fn continuations_and_comments() {
+        let out =
+            clean_run("#define LONG a + \\\n  b\nLONG // end \\\n still comment\nc /* x */ d\n");
+        assert_eq!(out, "\n\na + b\n\nc d\n");
+    }
+
+    #[test]
+    fn predefined_and_command_line_macros() {
+        let r = run_with(
+            "#if ARBOR && FOO == 2 && defined BAR\nok __LINE__ __FILE__ BAR\n#endif\n#line 100 \"x.sl\"\n__LINE__ __FILE__\n",
+            &[],
+            &[("FOO".into(), Some("2".into())), ("BAR".into(), None)],
+        );
+        let words: Vec<&str> = r.pre.text.split_whitespace().collect();
+        assert_eq!(words, ["ok", "2", "\"main.sl\"", "1", "100", "\"x.sl\""]);
+        let m = messages(&r);
+        assert_eq!(m.len(), 1);
+        assert!(m[0].contains("#line"));
+    }
+
+    #[test]
+    fn errors_are_reported_with_spans() {
+        let r = run("#if 1\n#foo bar\n#ifdef X\n#warning careful\n#if 1 +\n#endif\n");
+        let snap = r.diags.snapshot();
+        let find = |s: &str| {
+            snap.iter()
+                .find(|(d, _)| d.message.contains(s))
+                .map(|(d, _)| (d.is_error(), r.sources.line_col(d.primary_span().unwrap())))
+        };
+        assert_eq!(
+            find("unknown preprocessor directive '#foo'"),
+            Some((true, (2, 1)))
+        );
+        assert_eq!(find("#warning careful"), None, "skipped by #ifdef X");
+        assert_eq!(find("expected a value"), None, "skipped by #ifdef X");
+        // Two #if groups are left open: each error points at its own #if.
+        let open: Vec<(usize, usize)> = snap
+            .iter()
+            .filter(|(d, _)| d.message.contains("unterminated conditional"))
+            .map(|(d, _)| r.sources.line_col(d.primary_span().unwrap()))
+            .collect();
+        assert_eq!(open, [(3, 1), (1, 1)]);
+
+        let r = run("#warning careful\n#if 1 +\n#endif\n#if\n#endif\n#endif\n");
+        let snap = r.diags.snapshot();
+        let find = |s: &str| {
+            snap.iter()
+                .find(|(d, _)| d.message.contains(s))
+                .map(|(d, _)| (d.is_error(), r.sources.line_col(d.primary_span().unwrap())))
+        };
+        assert_eq!(find("#warning careful"), Some((false, (1, 1))));
+        assert_eq!(find("expected a value"), Some((true, (2, 7))));
+        assert_eq!(find("#if with no expression"), Some((true, (4, 2))));
+        assert_eq!(find("#endif without #if"), Some((true, (6, 1))));
+    }
+
+    #[test]
+    fn macro_argument_errors() {
+        let r = run("#define f(a,b) a b\nf(1) f(1,2,3) g f(1,\n");
+        let m = messages(&r);
+        assert!(
+            m.iter()
+                .any(|s| s.contains("takes 2 arguments, but 1 was given")),
+            "{m:?}"
+        );
+        assert!(m.iter().any(|s| s.contains("but 3 were given")), "{m:?}");
+        assert!(
+            m.iter().any(|s| s.contains("unterminated argument list")),
+            "{m:?}"
+        );
+    }
+
+    #[test]
+    fn missing_and_recursive_includes() {
+        let r = run_with(
+            "#include \"nope.h\"\n#include \"self.h\"\nafter\n",
+            &[("self.h", "#include \"self.h\"\nx\n")],
+            &[],
+        );
+        let m = messages(&r);
+        assert_eq!(m.len(), 2, "{m:?}");
+        assert!(m[0].contains("cannot find include file \"nope.h\""));
+        assert!(m[1].contains("nested too deeply"));
+        assert!(r.pre.text.contains("after"));
+    }
+
+    #[test]
+    fn exponential_macros_stop_with_an_error() {
+        let mut src = String::from("#define m0 x x\n");
+        for k in 1..40 {
+            src.push_str(&format!("#define m{k} m{} m{}\n", k - 1, k - 1));
+        }
+        src.push_str("m39\n");
+        let r = run(&src);
+        assert!(messages(&r).iter().any(|m| m.contains("too large")));
+    }
+
+    #[test]
+    fn adjacent_tokens_are_kept_apart_only_when_needed() {
+        let out = clean_run(
+            "#define M -1\n#define P(x) x+\n#define I a\nx=-M; y=P(+); i++ +j; I.b é-é\n",
+        );
+        assert_eq!(out, "\n\n\nx=- -1; y=+ +; i++ +j; a.b é-é\n");
+    }
+
+    #[test]
+    fn deep_expressions_and_arguments_end_with_errors() {
+        let deep = |open: &str, mid: &str, close: &str, n: usize| {
+            format!("{}{}{}", open.repeat(n), mid, close.repeat(n))
+        };
+        let src = format!(
+            "#if {}\n#endif\n#if {}\n#endif\n#if {}\n#endif\n#if {}\n#endif\n",
+            deep("(", "1", ")", 100),
+            deep("(", "1", ")", 5000),
+            deep("- ", "1", "", 5000),
+            deep("1?1:", "1", "", 5000)
+        );
+        let r = run(&src);
+        let m = messages(&r);
+        assert_eq!(m.len(), 3, "{m:?}");
+        assert!(m.iter().all(|s| s.contains("nested too deeply")));
+        let src = format!("#define f(x) x\n{}\n", deep("f(", "1", ")", 2000));
+        let r = run(&src);
+        assert!(messages(&r).iter().any(|s| s.contains("nested more than")));
+    }
+
+    #[test]
+    fn odd_constants_do_not_panic() {
+        let r = run("#if '\\é' || '\\xfffffffffffffffffffff' || 0xffffffffffffffff > 0 || 99999999999999999999999\n#endif\n#line 9223372036854775807\n#line 9223372036854775807\n__LINE__\n");
+        let m = messages(&r);
+        assert!(
+            m.iter().any(|m| m.contains("invalid character constant")),
+            "{m:?}"
+        );
+        let r = run("#if 99999999999999999999999\n#endif\n");
+        assert!(messages(&r)
+            .iter()
+            .any(|m| m.contains("invalid integer constant")));
+    }
+
+    /// Resolves `"name"` next to the including file, as the shader compiler's resolver will.
+    struct DirResolver;
+
+    impl IncludeResolver for DirResolver {
+        fn resolve(
+            &self,
+            name: &str,
+            _system: bool,
+            from: Option<&Path>,
+        ) -> Option<(String, String)> {
+            let dir = from?.parent()?;
+            let p = dir.join(name);
+            let text = std::fs::read_to_string(&p).ok()?;
+            Some((p.to_string_lossy().into_owned(), text))
+        }
+    }
+
+    #[test]
+    fn includes_are_found_next_to_the_including_file() {
+        let dir = std::env::temp_dir().join(format!("arbor-pp-{}", std::process::id()));
+        let sub = dir.join("sub");
+        std::fs::create_dir_all(&sub).unwrap();
+        std::fs::write(sub.join("a.h"), "#include \"b.h\"\nA\n").unwrap();
+        std::fs::write(sub.join("b.h"), "B\n").unwrap();
+        let main_path = dir.join("main.sl");
+        let src = "#include \"sub/a.h\"\nM\n";
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let main = sources.add(main_path.to_string_lossy(), src);
+        let pre = preprocess(main, Some(&main_path), &sources, &[], &DirResolver, &diags);
+        let _ = std::fs::remove_dir_all(&dir);
+        assert!(diags.snapshot().is_empty());
+        let words: Vec<&str> = pre.text.split_whitespace().collect();
+        assert_eq!(words, ["B", "A", "M"]);
+        let b = pre.text.find('B').unwrap();
+        let name = sources.get(pre.span(b, b + 1).file).unwrap().name.clone();
+        assert!(name.ends_with("b.h"), "{name}");
+    }
+
+    /// A tiny deterministic generator for the fuzz test.
+    fn xorshift(state: &mut u64) -> u64 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        *state
+    }
+
+    #[test]
+    fn random_input_never_panics() {
+        let pieces = [
+            "#define ",
+            "#if ",
+            "#ifdef ",
+            "#elif ",
+            "#else",
+            "#endif",
+            "#undef ",
+            "#include \"r.h\"",
+            "#include <",
+            "#line ",
+            "#error x",
+            "#pragma once",
+            "#",
+            "##",
+            "(",
+            ")",
+            ",",
+            "...",
+            "\"",
+            "'",
+            "/*",
+            "*/",
+            "//",
+            "\\\n",
+            "\n",
+            "\n",
+            " ",
+            " ",
+            "a",
+            "b",
+            "f",
+            "f(",
+            "x",
+            "1",
+            "0x",
+            "defined",
+            "__VA_ARGS__",
+            "__LINE__",
+            "__FILE__",
+            "<",
+            ">",
+            "?",
+            ":",
+            "/",
+            "-",
+            "é",
+            "\t",
+            "\r\n",
+            "1/0",
+            "'\\",
+            "99999999999999999999",
+            "#line 9223372036854775807\n",
+            "#if '\\x",
+            "0xffffffffffffffff",
+            "<<",
+            "%",
+        ];
+        let mut st = 0x9e3779b97f4a7c15u64;
+        // ARBOR_PP_FUZZ=N runs more cases locally.
+        let cases: u64 = std::env::var("ARBOR_PP_FUZZ")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(300);
+        for case in 0..cases {
+            let n = (xorshift(&mut st) % 120) as usize;
+            let mut src = String::new();
+            for _ in 0..n {
+                src.push_str(pieces[(xorshift(&mut st) % pieces.len() as u64) as usize]);
+            }
+            let inc = if case % 2 == 0 {
+                src.clone()
+            } else {
+                "#include \"r.h\"\nf(".to_string()
+            };
+            let r = run_with(&src, &[("r.h", &inc)], &[]);
+            let len = r.pre.text.len();
+            for k in 0..8 {
+                let a = (xorshift(&mut st) as usize) % (len + 2);
+                let b = (xorshift(&mut st) as usize) % (len + 2);
+                let s = r.pre.span(a, b + k);
+                let _ = r.sources.line_col(s);
+            }
+        }
+    }
+
+    #[test]
+    fn large_macro_heavy_shader_is_fast() {
+        let mut src = String::from(
+            "#define MINFILTWIDTH 1.0e-6\n#define filterwidth(x) max(abs(Du(x)*du) + abs(Dv(x)*dv), MINFILTWIDTH)\n\
+             #define snoise(x) (2*noise(x)-1)\n#define boxstep(a,b,x) clamp(((x)-(a))/((b)-(a)),0,1)\n\
+             #define fsn(p,w) (snoise(p) * (1-smoothstep(0.2,0.75,w)))\n",
+        );
+        let mut k = 0;
+        while src.len() < 50_000 {
+            src.push_str(&format!(
+                "float v{k} = fsn(P*{k}, filterwidth(s)) + boxstep(0, 1, snoise(t)); /* c */\n"
+            ));
+            k += 1;
+        }
+        let t0 = std::time::Instant::now();
+        let r = run(&src);
+        let dt = t0.elapsed();
+        assert!(messages(&r).is_empty());
+        assert_eq!(r.pre.text.lines().count(), src.lines().count());
+        eprintln!("50 KB macro-heavy shader preprocessed in {dt:?}");
+        // Generous bound for a dev build on a shared CI machine.
+        assert!(dt.as_millis() < 1000, "took {dt:?}");
+    }
+}
