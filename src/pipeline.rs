@@ -231,3 +231,48 @@ fn progress_bar() -> indicatif::ProgressBar {
     );
     bar
 }
+
+/// Renders RIB text in memory and returns each frame's film (no files written): for tests,
+/// tools and benchmarks. Shaders are looked up in `settings.shader_paths` and the standard
+/// library.
+pub fn render_text(
+    text: &str,
+    settings: &Settings,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+) -> Vec<crate::film::Film> {
+    let requests = crate::rib::parse_bytes("<memory>", text.as_bytes(), sources, diags);
+    let ctx = BuildContext {
+        sources,
+        diags,
+        shader_paths: settings.shader_paths.clone(),
+        texture_paths: settings.texture_paths.clone(),
+        archive_paths: settings.archive_paths.clone(),
+        base_dir: None,
+        frames: settings.frames,
+    };
+    let scenes = build_scenes(requests, &ctx);
+    let mut films = Vec::new();
+    for scene in &scenes {
+        let library = library_for(scene, settings);
+        let aovs = aovs_for(scene);
+        let system = ShadeSystem {
+            library: &library,
+            sources,
+            diags,
+            textures: None,
+            aovs: aovs.iter().map(|a| a.name.clone()).collect(),
+        };
+        let opts = RenderOptions {
+            threads: settings.threads,
+            bucket_size: settings.bucket_size,
+            crop: settings.crop,
+            resolution: settings.resolution,
+            stats: None,
+            progress: None,
+            aovs,
+        };
+        films.push(render_frame(scene, &system, &opts, diags));
+    }
+    films
+}
