@@ -49,6 +49,39 @@ fn grid(n: usize) -> Grid {
     g
 }
 
+fn fixed_iterations(iters: usize) {
+    let (sources, diags) = (SourceMap::new(), Diagnostics::new());
+    let scene = build(&sources, &diags);
+    let camera = Camera::new(&scene);
+    let lib = ShaderLibrary::new(CompileOptions::default());
+    let sys = ShadeSystem {
+        library: &lib,
+        sources: &sources,
+        diags: &diags,
+        textures: None,
+        aovs: vec![],
+    };
+    let mut g = grid(32);
+    for _ in 0..iters {
+        sys.shade(&scene, &camera, 0, &mut g);
+    }
+    println!("{:?}", g.ci[500]);
+}
+
+fn build(sources: &SourceMap, diags: &Diagnostics) -> arbor::scene::Scene {
+    let reqs = arbor::rib::parse_bytes("bench.rib", SCENE.as_bytes(), sources, diags);
+    let ctx = BuildContext {
+        sources,
+        diags,
+        shader_paths: vec![],
+        texture_paths: vec![],
+        archive_paths: vec![],
+        base_dir: None,
+        frames: None,
+    };
+    build_scenes(reqs, &ctx).remove(0)
+}
+
 fn bench(c: &mut Criterion) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
@@ -87,4 +120,17 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+/// `ARBOR_SHADE_ITERS=N` runs N shades of a 32×32 grid and exits: a fixed amount of work
+/// for instruction counting under callgrind.
+fn main() {
+    if let Some(n) = std::env::var("ARBOR_SHADE_ITERS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        fixed_iterations(n);
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

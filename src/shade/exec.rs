@@ -145,14 +145,14 @@ struct Frame {
 }
 
 /// State of a light shader run: what illuminate/solar produced.
-#[derive(Default)]
+#[derive(Default, Clone)]
 pub struct LightState {
     pub ran: bool,
     pub lit: Vec<bool>,
-    /// P of the surface points being lit.
-    pub ps: Vec<Vec3>,
+    /// P of the surface points being lit (shared by every light of a grid).
+    pub ps: Arc<[Vec3]>,
     /// Normal of the surface being lit (for solar() without arguments).
-    pub ns: Vec<Vec3>,
+    pub ns: Arc<[Vec3]>,
 }
 
 pub struct Exec<'a> {

@@ -646,8 +646,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
     macro_rules! f1 {
         ($e:expr) => {{
             let a = arg(ex, args, 0).f();
-            let g = $e;
-            write_f(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+            map_ff(&mut out, n, a, $e);
         }};
     }
     macro_rules! f2 {
@@ -674,15 +673,13 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
     macro_rules! t1f {
         ($e:expr) => {{
             let a = arg(ex, args, 0).t();
-            let g = $e;
-            write_f(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+            map_tf(&mut out, n, a, $e);
         }};
     }
     macro_rules! t1t {
         ($e:expr) => {{
             let a = arg(ex, args, 0).t();
-            let g = $e;
-            write_t(&mut out, n, a.is_varying(), |i| g(a.at(i)));
+            map_tt(&mut out, n, a, $e);
         }};
     }
     macro_rules! varying_any {
@@ -1372,7 +1369,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             // Normalise N once; each light's direction once per point (once per grid when
             // the light is distant).
             let nn = arg(ex, args, 0).t();
-            let nv: Vec<Vec3> = (0..n).map(|i| normalize(nn.at(i))).collect();
+            let nv = to_vec_t(nn, n, normalize);
             let mut c = vec![Vec3::ZERO; n];
             for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nondiffuse) {
                 let lu = l.l_uniform.map(normalize);
@@ -1415,8 +1412,8 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).t(),
                 arg(ex, args, 2).f(),
             );
-            let nv: Vec<Vec3> = (0..n).map(|i| normalize(nn.at(i))).collect();
-            let vn: Vec<Vec3> = (0..n).map(|i| normalize(vv.at(i))).collect();
+            let nv = to_vec_t(nn, n, normalize);
+            let vn = to_vec_t(vv, n, normalize);
             let phong = f == Phong;
             // exponent per point: 1/roughness (specular) or size (phong)
             let expo: Vec<f32> = (0..n)

@@ -106,12 +106,12 @@ impl<'a> ShadeSystem<'a> {
         let ctx = self.ctx(scene, camera, prim);
         let n0 = grid.n.clone();
         let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None);
-        if let Some(regs) = regs {
+        if let Some(mut regs) = regs {
             if let Some(g) = prog.global("P") {
-                grid.p = slot_vt(&regs[g.reg as usize], grid.len());
+                grid.p = own_vt(&mut regs[g.reg as usize], grid.len());
             }
             if let Some(g) = prog.global("N") {
-                let nn = slot_vt(&regs[g.reg as usize], grid.len());
+                let nn = own_vt(&mut regs[g.reg as usize], grid.len());
                 grid.n = nn;
             }
             for (name, slot) in ["s", "t"]
@@ -183,17 +183,21 @@ impl<'a> ShadeSystem<'a> {
         } else {
             Vec::new()
         };
-        if let Some(regs) = self.run(&prog, &sref, grid, &ctx, &lights, None, None) {
+        if let Some(mut regs) = self.run(&prog, &sref, grid, &ctx, &lights, None, None) {
             let n = grid.len();
             if let Some(g) = prog.global("Ci") {
-                grid.ci = slot_vt(&regs[g.reg as usize], n);
+                grid.ci = own_vt(&mut regs[g.reg as usize], n);
             }
             if let Some(g) = prog.global("Oi") {
-                grid.oi = slot_vt(&regs[g.reg as usize], n);
+                grid.oi = own_vt(&mut regs[g.reg as usize], n);
             }
             // Output parameters become arbitrary output variables.
             grid.outputs.clear();
-            for par in prog.params.iter().filter(|p| p.output) {
+            for par in prog
+                .params
+                .iter()
+                .filter(|p| p.output && self.aovs.contains(&p.name))
+            {
                 grid.outputs.push(slot_to_gridvar(
                     &par.name,
                     par.ty,
@@ -201,12 +205,28 @@ impl<'a> ShadeSystem<'a> {
                     n,
                 ));
             }
-            for gname in ["N", "P", "s", "t", "Cs", "Os"] {
+            for gname in ["N", "P", "s", "t", "Cs", "Os", "Ci", "Oi"] {
+                if !self.aovs.iter().any(|a| a == gname) {
+                    continue;
+                }
+                if gname == "Ci" || gname == "Oi" {
+                    let v = if gname == "Ci" { &grid.ci } else { &grid.oi };
+                    let floats = v.iter().flat_map(|c| c.to_array()).collect();
+                    grid.outputs.push(GridVar {
+                        name: gname.to_string(),
+                        ty: ParamType::Color,
+                        array_len: 1,
+                        uniform: false,
+                        floats,
+                        strings: Vec::new(),
+                    });
+                    continue;
+                }
                 if let Some(g) = prog.global(gname) {
                     let ty = match gname {
                         "N" => BaseType::Normal,
                         "P" => BaseType::Point,
-                        "Cs" | "Os" | "Ci" | "Oi" => BaseType::Color,
+                        "Cs" | "Os" => BaseType::Color,
                         _ => BaseType::Float,
                     };
                     grid.outputs
@@ -221,15 +241,15 @@ impl<'a> ShadeSystem<'a> {
             if let Some(aprog) = self.program(&aref, ShaderKind::Volume) {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
-                if let Some(regs) =
+                if let Some(mut regs) =
                     self.run(&aprog, &aref, grid, &ctx, &lights, Some((&ci, &oi)), None)
                 {
                     let n = grid.len();
                     if let Some(g) = aprog.global("Ci") {
-                        grid.ci = slot_vt(&regs[g.reg as usize], n);
+                        grid.ci = own_vt(&mut regs[g.reg as usize], n);
                     }
                     if let Some(g) = aprog.global("Oi") {
-                        grid.oi = slot_vt(&regs[g.reg as usize], n);
+                        grid.oi = own_vt(&mut regs[g.reg as usize], n);
                     }
                 }
             }
@@ -256,6 +276,8 @@ impl<'a> ShadeSystem<'a> {
     fn eval_lights(&self, grid: &Grid, ctx: &RunCtx) -> Vec<LightResult> {
         let n = grid.len();
         let mut out = Vec::new();
+        let ns: Arc<[Vec3]> = grid.n.iter().map(|v| v.normalize_or_zero()).collect();
+        let ps: Arc<[Vec3]> = grid.p.as_slice().into();
         for &li in &ctx.attrs.lights_on {
             let Some(light) = ctx.scene.lights.get(li) else {
                 continue;
@@ -263,26 +285,27 @@ impl<'a> ShadeSystem<'a> {
             let Some(prog) = self.program(&light.shader, ShaderKind::Light) else {
                 continue;
             };
-            let ns: Vec<Vec3> = grid.n.iter().map(|v| v.normalize_or_zero()).collect();
             let state = LightState {
                 ran: false,
                 lit: vec![false; n],
-                ps: grid.p.clone(),
-                ns,
+                ps: ps.clone(),
+                ns: ns.clone(),
             };
             let mut st = Some(state);
-            let Some(regs) = self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st))
+            let Some(mut regs) =
+                self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st))
             else {
                 continue;
             };
             let state = st.unwrap_or_default();
             let ambient = !state.ran;
-            let get = |name: &str, def: Vec3| -> Vec<Vec3> {
+            let mut get = |name: &str, def: Vec3| -> Vec<Vec3> {
                 prog.global(name)
-                    .map(|g| slot_vt(&regs[g.reg as usize], n))
+                    .map(|g| own_vt(&mut regs[g.reg as usize], n))
                     .unwrap_or_else(|| vec![def; n])
             };
-            let l: Vec<Vec3> = get("L", Vec3::ZERO).into_iter().map(|v| -v).collect();
+            let mut l: Vec<Vec3> = get("L", Vec3::ZERO);
+            l.iter_mut().for_each(|v| *v = -*v);
             let mut cl = get("Cl", Vec3::ZERO);
             let ol = get("Ol", Vec3::ONE);
             let lit = if ambient { vec![true; n] } else { state.lit };
@@ -581,14 +604,34 @@ fn bind_gridvar(
     }
 }
 
+/// Moves a triple register's values out (the register file is discarded after a run).
+fn own_vt(s: &mut Slot, n: usize) -> Vec<Vec3> {
+    match std::mem::take(s) {
+        Slot::VT(v) if v.len() == n => v,
+        other => slot_vt(&other, n),
+    }
+}
+
 fn slot_vt(s: &Slot, n: usize) -> Vec<Vec3> {
-    let t = s.t();
-    (0..n).map(|i| t.at(i)).collect()
+    match s {
+        Slot::VT(v) if v.len() == n => v.clone(),
+        Slot::T(x) => vec![*x; n],
+        other => {
+            let t = other.t();
+            (0..n).map(|i| t.at(i)).collect()
+        }
+    }
 }
 
 fn slot_vf(s: &Slot, n: usize) -> Vec<f32> {
-    let f = s.f();
-    (0..n).map(|i| f.at(i)).collect()
+    match s {
+        Slot::VF(v) if v.len() == n => v.clone(),
+        Slot::F(x) => vec![*x; n],
+        other => {
+            let f = other.f();
+            (0..n).map(|i| f.at(i)).collect()
+        }
+    }
 }
 
 fn slot_to_gridvar(name: &str, ty: BaseType, s: &Slot, n: usize) -> GridVar {

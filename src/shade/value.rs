@@ -267,3 +267,54 @@ pub fn zip_tt_f(out: &mut Slot, n: usize, a: T, b: T, f: impl Fn(Vec3, Vec3) -> 
     let varying = a.is_varying() || b.is_varying();
     write_f(out, n, varying, |i| f(a.at(i), b.at(i)));
 }
+
+/// Unary maps specialised on uniform/varying so the varying loop runs over a slice.
+#[inline]
+pub fn map_ff(out: &mut Slot, n: usize, a: F, f: impl Fn(f32) -> f32) {
+    match a {
+        F::U(x) => *out = Slot::F(f(x)),
+        F::V(x) => {
+            let mut v = take_vf(out, n);
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi);
+            }
+            *out = Slot::VF(v);
+        }
+    }
+}
+
+#[inline]
+pub fn map_tt(out: &mut Slot, n: usize, a: T, f: impl Fn(Vec3) -> Vec3) {
+    match a {
+        T::U(x) => *out = Slot::T(f(x)),
+        T::V(x) => {
+            let mut v = take_vt(out, n);
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi);
+            }
+            *out = Slot::VT(v);
+        }
+    }
+}
+
+#[inline]
+pub fn map_tf(out: &mut Slot, n: usize, a: T, f: impl Fn(Vec3) -> f32) {
+    match a {
+        T::U(x) => *out = Slot::F(f(x)),
+        T::V(x) => {
+            let mut v = take_vf(out, n);
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi);
+            }
+            *out = Slot::VF(v);
+        }
+    }
+}
+
+/// The values of a triple operand at every point (a copy; uniform values repeated).
+pub fn to_vec_t(a: T, n: usize, f: impl Fn(Vec3) -> Vec3) -> Vec<Vec3> {
+    match a {
+        T::U(x) => vec![f(x); n],
+        T::V(x) => x.iter().map(|&v| f(v)).collect(),
+    }
+}
