@@ -24,13 +24,13 @@ use crate::scene::{Options, Primitive, Scene};
 
 use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
-use super::film_stub::{filter_into, DepthFilter as FilmDepthFilter, Film};
 use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
+use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
 pub const DEFAULT_BUCKET: u32 = 16;
@@ -848,6 +848,12 @@ mod tests {
             vec![a0, a1, a2],
         );
         s.options.pixel_samples = [3.0, 3.0];
+        // The default filter: its support reaches into neighbouring buckets.
+        s.options.pixel_filter = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 2.0,
+            ywidth: 2.0,
+        };
         let quads = vec![
             Quad::new(
                 Vec3::new(-3.0, -1.0, 2.0),
@@ -878,7 +884,13 @@ mod tests {
 
     #[test]
     fn output_is_identical_for_any_thread_count_and_bucket_size() {
-        let (s, quads) = busy_scene();
+        let (mut s, quads) = busy_scene();
+        // A wide filter: a margin of 2 pixels around every bucket.
+        s.options.pixel_filter = PixelFilter {
+            name: "catmull-rom".into(),
+            xwidth: 3.5,
+            ywidth: 3.0,
+        };
         let run = |threads, size| {
             let opts = RenderOptions {
                 threads,

@@ -7,14 +7,13 @@
 pub mod camera;
 pub mod dice;
 pub mod driver;
-mod film_stub;
 pub mod hider;
 pub mod sampler;
 pub mod stats;
 
+pub use crate::film::Film;
 pub use camera::{crop_region, Camera, PixelRect};
 pub use driver::{render_frame, render_surfaces, RenderOptions};
-pub use film_stub::Film;
 pub use hider::{Aov, Hider, ShadedGrid};
 pub use stats::Stats;
 
