@@ -8,7 +8,8 @@
 //! * buckets are processed row by row: first every surface whose bound first reaches the row
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open row;
+//!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
+//!   film, one writer) of row r runs alongside the hiding of row r + 1;
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
@@ -30,7 +31,7 @@ use super::hider::{
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
-use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film};
+use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
 pub const DEFAULT_BUCKET: u32 = 16;
@@ -582,7 +583,30 @@ fn render_inner(
 
     let total = buckets.rows * buckets.cols;
     let done = AtomicUsize::new(0);
+    let filter_row = |film: &mut Film, row: usize, bufs: &[SampleBuffer]| {
+        let t = Instant::now();
+        for (col, buf) in bufs.iter().enumerate() {
+            let r = buckets.rect(col, row);
+            filter_into(
+                film,
+                buf,
+                &options.pixel_filter,
+                r.x0 as usize,
+                r.y0 as usize,
+                r.width(),
+                r.height(),
+                depth_filter,
+            );
+            Stats::add(&stats.buckets, 1);
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Some(p) = opts.progress {
+                p(d, total);
+            }
+        }
+        stats.time(Stage::Filter, t);
+    };
     let mut kept: Vec<Kept> = Vec::new();
+    let mut hidden: Option<(usize, Vec<SampleBuffer>)> = None;
     for row in 0..buckets.rows {
         // Split, dice and shade everything that starts in this row.
         let mut frontier = std::mem::take(&mut pending[row]);
@@ -619,45 +643,35 @@ fn render_inner(
                 }
             }
         }
-        // Hide the row's buckets in parallel.
-        let bufs: Vec<_> = (0..buckets.cols)
-            .into_par_iter()
-            .map(|col| {
-                let t = Instant::now();
-                let grids: Vec<&ShadedGrid> = kept
-                    .iter()
-                    .filter(|k| {
-                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
-                    })
-                    .map(|k| k.grid.as_ref())
-                    .collect();
-                let buf = frame
-                    .hider
-                    .hide(buckets.sample_rect(col, row), &grids, stats);
-                stats.time(Stage::Hide, t);
-                buf
-            })
-            .collect();
-        let t = Instant::now();
-        for (col, buf) in bufs.iter().enumerate() {
-            let r = buckets.rect(col, row);
-            filter_into(
-                &mut film,
-                buf,
-                &options.pixel_filter,
-                r.x0 as usize,
-                r.y0 as usize,
-                r.width(),
-                r.height(),
-                depth_filter,
-            );
-            Stats::add(&stats.buckets, 1);
-            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if let Some(p) = opts.progress {
-                p(d, total);
+        // Hide this row's buckets in parallel while the previous row is filtered (filtering
+        // writes into the one film, so it runs on one thread).
+        let hide_row = || -> Vec<SampleBuffer> {
+            (0..buckets.cols)
+                .into_par_iter()
+                .map(|col| {
+                    let t = Instant::now();
+                    let grids: Vec<&ShadedGrid> = kept
+                        .iter()
+                        .filter(|k| {
+                            k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
+                        })
+                        .map(|k| k.grid.as_ref())
+                        .collect();
+                    let buf = frame
+                        .hider
+                        .hide(buckets.sample_rect(col, row), &grids, stats);
+                    stats.time(Stage::Hide, t);
+                    buf
+                })
+                .collect()
+        };
+        let previous = hidden.take();
+        let (bufs, ()) = rayon::join(hide_row, || {
+            if let Some((r, bufs)) = previous {
+                filter_row(&mut film, r, &bufs);
             }
-        }
-        stats.time(Stage::Filter, t);
+        });
+        hidden = Some((row, bufs));
         // Free the grids no later row needs.
         kept.retain(|k| {
             let keep = k.rows.1 > row;
@@ -666,6 +680,9 @@ fn render_inner(
             }
             keep
         });
+    }
+    if let Some((r, bufs)) = hidden.take() {
+        filter_row(&mut film, r, &bufs);
     }
     stats
         .wall_ns
