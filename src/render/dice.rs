@@ -44,6 +44,8 @@ pub enum Decision {
     Split { eye: bool },
     /// Dice into `nu × nv` micropolygons, i.e. `(nu + 1) × (nv + 1)` grid points.
     Dice { nu: usize, nv: usize },
+    /// The surface's points are not finite: drop it (and report it).
+    Broken,
 }
 
 impl View {
@@ -167,6 +169,9 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     }
     let mut r = [[0f32; 2]; TEST_DICE * TEST_DICE];
     for (k, p) in grid.p.iter().take(n * n).enumerate() {
+        if !p.is_finite() {
+            return Decision::Broken;
+        }
         if view.perspective && p.z < view.eye_epsilon {
             return Decision::Split { eye: true };
         }

@@ -40,7 +40,7 @@ pub const DEFAULT_GRID: usize = 1024;
 /// Default most eye-plane splits of one surface (`Option "limits" "eyesplits"` overrides).
 pub const DEFAULT_EYE_SPLITS: u32 = 10;
 /// Most splits of any kind along one path: a guard against surfaces that never shrink.
-pub const MAX_SPLIT_DEPTH: u32 = 48;
+pub const MAX_SPLIT_DEPTH: u32 = 32;
 
 /// How to run a frame (command-line overrides and hooks).
 #[derive(Clone, Default)]
@@ -262,8 +262,20 @@ struct Frame<'a> {
 
 impl Frame<'_> {
     fn widened_bound(&self, w: &Work) -> Option<Bound> {
-        let info = self.prims.get(w.surface.primitive())?;
+        let prim = w.surface.primitive();
+        let info = self.prims.get(prim)?;
         let b = w.surface.bound();
+        // An empty bound is culled later; a NaN or infinite one is a geometry bug.
+        if !b.is_empty() && !(b.min.is_finite() && b.max.is_finite()) {
+            self.diags.report(
+                Diag::error(
+                    "render::bound",
+                    "a surface has a bound that is not finite; it is skipped",
+                )
+                .label(self.scene.primitives[prim].span, "this primitive"),
+            );
+            return None;
+        }
         Some(if info.disp > 0.0 {
             b.grow(info.disp)
         } else {
@@ -302,6 +314,16 @@ impl Frame<'_> {
         };
         let decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
         match decision {
+            Decision::Broken => {
+                self.diags.report(
+                    Diag::error(
+                        "render::dice",
+                        "a surface has points that are not finite (NaN or infinite); it is skipped",
+                    )
+                    .label(self.scene.primitives[prim].span, "this primitive"),
+                );
+                (Outcome::Nothing, Vec::new())
+            }
             Decision::Cull => {
                 Stats::add(&self.stats.culled, 1);
                 self.stats.time(Stage::Dice, t0);
@@ -1179,5 +1201,35 @@ mod tests {
             .data
             .chunks(5)
             .all(|p| p[3] == 0.0 && p[4] == f32::INFINITY));
+    }
+
+    #[test]
+    fn broken_surfaces_are_reported_not_panicked_on() {
+        let s = scene(
+            8,
+            8,
+            Projection::Perspective { fov: 60.0 },
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        let mut bad = Quad::rect(-1.0, -1.0, 1.0, 1.0, 3.0, 0);
+        bad.p[3].x = f32::NAN;
+        let (film, diags) = render(&s, &[bad], &Constant, &RenderOptions::default());
+        assert!(diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.code == "render::dice"));
+        assert!(film.data.chunks(5).all(|p| p[3] == 0.0));
+        // A surface through the eye plane is split until it can be diced or culled.
+        let floor = Quad::new(
+            Vec3::new(-5.0, -1.0, -5.0),
+            Vec3::new(5.0, -1.0, -5.0),
+            Vec3::new(-5.0, -1.0, 50.0),
+            Vec3::new(5.0, -1.0, 50.0),
+            0,
+        );
+        let (film, diags) = render(&s, &[floor], &Constant, &RenderOptions::default());
+        assert!(!diags.has_errors());
+        assert_eq!(film.pixel(4, 7)[3], 1.0);
+        assert_eq!(film.pixel(4, 0)[3], 0.0);
     }
 }
