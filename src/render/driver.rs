@@ -266,7 +266,8 @@ impl Frame<'_> {
         let info = self.prims.get(prim)?;
         let b = w.surface.bound();
         // An empty bound is culled later; a NaN or infinite one is a geometry bug.
-        if !b.is_empty() && !(b.min.is_finite() && b.max.is_finite()) {
+        let finite = b.min.is_finite() && b.max.is_finite();
+        if !(b.is_empty() || finite) {
             self.diags.report(
                 Diag::error(
                     "render::bound",
