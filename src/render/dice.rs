@@ -161,7 +161,8 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     if bw * bh > 64.0 * view.max_grid as f32 && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt() {
         return Decision::Split { eye: false };
     }
-    // Trial dice: the longest u-line and v-line on screen set the dicing rates.
+    // Trial dice: the longest u-line and v-line on screen set the dicing rates. (Once the
+    // geometry's `Surface::raster_lengths` hook is available it can replace this when Some.)
     let n = TEST_DICE;
     let grid = surface.dice(n, n);
     if grid.p.len() < n * n {
