@@ -44,6 +44,8 @@ pub enum Decision {
     Split { eye: bool },
     /// Dice into `nu × nv` micropolygons, i.e. `(nu + 1) × (nv + 1)` grid points.
     Dice { nu: usize, nv: usize },
+    /// The surface's points are not finite: drop it (and report it).
+    Broken,
 }
 
 impl View {
@@ -159,7 +161,8 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     if bw * bh > 64.0 * view.max_grid as f32 && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt() {
         return Decision::Split { eye: false };
     }
-    // Trial dice: the longest u-line and v-line on screen set the dicing rates.
+    // Trial dice: the longest u-line and v-line on screen set the dicing rates. (Once the
+    // geometry's `Surface::raster_lengths` hook is available it can replace this when Some.)
     let n = TEST_DICE;
     let grid = surface.dice(n, n);
     if grid.p.len() < n * n {
@@ -167,6 +170,9 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     }
     let mut r = [[0f32; 2]; TEST_DICE * TEST_DICE];
     for (k, p) in grid.p.iter().take(n * n).enumerate() {
+        if !p.is_finite() {
+            return Decision::Broken;
+        }
         if view.perspective && p.z < view.eye_epsilon {
             return Decision::Split { eye: true };
         }

@@ -8,7 +8,8 @@
 //! * buckets are processed row by row: first every surface whose bound first reaches the row
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open row;
+//!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
+//!   film, one writer) of row r runs alongside the hiding of row r + 1;
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
@@ -30,7 +31,7 @@ use super::hider::{
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
-use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film};
+use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
 pub const DEFAULT_BUCKET: u32 = 16;
@@ -39,7 +40,7 @@ pub const DEFAULT_GRID: usize = 1024;
 /// Default most eye-plane splits of one surface (`Option "limits" "eyesplits"` overrides).
 pub const DEFAULT_EYE_SPLITS: u32 = 10;
 /// Most splits of any kind along one path: a guard against surfaces that never shrink.
-pub const MAX_SPLIT_DEPTH: u32 = 48;
+pub const MAX_SPLIT_DEPTH: u32 = 32;
 
 /// How to run a frame (command-line overrides and hooks).
 #[derive(Clone, Default)]
@@ -253,8 +254,21 @@ struct Frame<'a> {
 
 impl Frame<'_> {
     fn widened_bound(&self, w: &Work) -> Option<Bound> {
-        let info = self.prims.get(w.surface.primitive())?;
+        let prim = w.surface.primitive();
+        let info = self.prims.get(prim)?;
         let b = w.surface.bound();
+        // An empty bound is culled later; a NaN or infinite one is a geometry bug.
+        let finite = b.min.is_finite() && b.max.is_finite();
+        if !(b.is_empty() || finite) {
+            self.diags.report(
+                Diag::error(
+                    "render::bound",
+                    "a surface has a bound that is not finite; it is skipped",
+                )
+                .label(self.scene.primitives[prim].span, "this primitive"),
+            );
+            return None;
+        }
         Some(if info.disp > 0.0 {
             b.grow(info.disp)
         } else {
@@ -293,6 +307,16 @@ impl Frame<'_> {
         };
         let decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
         match decision {
+            Decision::Broken => {
+                self.diags.report(
+                    Diag::error(
+                        "render::dice",
+                        "a surface has points that are not finite (NaN or infinite); it is skipped",
+                    )
+                    .label(self.scene.primitives[prim].span, "this primitive"),
+                );
+                (Outcome::Nothing, Vec::new())
+            }
             Decision::Cull => {
                 Stats::add(&self.stats.culled, 1);
                 self.stats.time(Stage::Dice, t0);
@@ -574,7 +598,30 @@ fn render_inner(
 
     let total = buckets.rows * buckets.cols;
     let done = AtomicUsize::new(0);
+    let filter_row = |film: &mut Film, row: usize, bufs: &[SampleBuffer]| {
+        let t = Instant::now();
+        for (col, buf) in bufs.iter().enumerate() {
+            let r = buckets.rect(col, row);
+            filter_into(
+                film,
+                buf,
+                &options.pixel_filter,
+                r.x0 as usize,
+                r.y0 as usize,
+                r.width(),
+                r.height(),
+                depth_filter,
+            );
+            Stats::add(&stats.buckets, 1);
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Some(p) = opts.progress {
+                p(d, total);
+            }
+        }
+        stats.time(Stage::Filter, t);
+    };
     let mut kept: Vec<Kept> = Vec::new();
+    let mut hidden: Option<(usize, Vec<SampleBuffer>)> = None;
     for row in 0..buckets.rows {
         // Split, dice and shade everything that starts in this row.
         let mut frontier = std::mem::take(&mut pending[row]);
@@ -611,45 +658,35 @@ fn render_inner(
                 }
             }
         }
-        // Hide the row's buckets in parallel.
-        let bufs: Vec<_> = (0..buckets.cols)
-            .into_par_iter()
-            .map(|col| {
-                let t = Instant::now();
-                let grids: Vec<&ShadedGrid> = kept
-                    .iter()
-                    .filter(|k| {
-                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
-                    })
-                    .map(|k| k.grid.as_ref())
-                    .collect();
-                let buf = frame
-                    .hider
-                    .hide(buckets.sample_rect(col, row), &grids, stats);
-                stats.time(Stage::Hide, t);
-                buf
-            })
-            .collect();
-        let t = Instant::now();
-        for (col, buf) in bufs.iter().enumerate() {
-            let r = buckets.rect(col, row);
-            filter_into(
-                &mut film,
-                buf,
-                &options.pixel_filter,
-                r.x0 as usize,
-                r.y0 as usize,
-                r.width(),
-                r.height(),
-                depth_filter,
-            );
-            Stats::add(&stats.buckets, 1);
-            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if let Some(p) = opts.progress {
-                p(d, total);
+        // Hide this row's buckets in parallel while the previous row is filtered (filtering
+        // writes into the one film, so it runs on one thread).
+        let hide_row = || -> Vec<SampleBuffer> {
+            (0..buckets.cols)
+                .into_par_iter()
+                .map(|col| {
+                    let t = Instant::now();
+                    let grids: Vec<&ShadedGrid> = kept
+                        .iter()
+                        .filter(|k| {
+                            k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
+                        })
+                        .map(|k| k.grid.as_ref())
+                        .collect();
+                    let buf = frame
+                        .hider
+                        .hide(buckets.sample_rect(col, row), &grids, stats);
+                    stats.time(Stage::Hide, t);
+                    buf
+                })
+                .collect()
+        };
+        let previous = hidden.take();
+        let (bufs, ()) = rayon::join(hide_row, || {
+            if let Some((r, bufs)) = previous {
+                filter_row(&mut film, r, &bufs);
             }
-        }
-        stats.time(Stage::Filter, t);
+        });
+        hidden = Some((row, bufs));
         // Free the grids no later row needs.
         kept.retain(|k| {
             let keep = k.rows.1 > row;
@@ -658,6 +695,9 @@ fn render_inner(
             }
             keep
         });
+    }
+    if let Some((r, bufs)) = hidden.take() {
+        filter_row(&mut film, r, &bufs);
     }
     stats
         .wall_ns
@@ -840,6 +880,12 @@ mod tests {
             vec![a0, a1, a2],
         );
         s.options.pixel_samples = [3.0, 3.0];
+        // The default filter: its support reaches into neighbouring buckets.
+        s.options.pixel_filter = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 2.0,
+            ywidth: 2.0,
+        };
         let quads = vec![
             Quad::new(
                 Vec3::new(-3.0, -1.0, 2.0),
@@ -870,7 +916,13 @@ mod tests {
 
     #[test]
     fn output_is_identical_for_any_thread_count_and_bucket_size() {
-        let (s, quads) = busy_scene();
+        let (mut s, quads) = busy_scene();
+        // A wide filter: a margin of 2 pixels around every bucket.
+        s.options.pixel_filter = PixelFilter {
+            name: "catmull-rom".into(),
+            xwidth: 3.5,
+            ywidth: 3.0,
+        };
         let run = |threads, size| {
             let opts = RenderOptions {
                 threads,
@@ -1142,5 +1194,35 @@ mod tests {
             .data
             .chunks(5)
             .all(|p| p[3] == 0.0 && p[4] == f32::INFINITY));
+    }
+
+    #[test]
+    fn broken_surfaces_are_reported_not_panicked_on() {
+        let s = scene(
+            8,
+            8,
+            Projection::Perspective { fov: 60.0 },
+            vec![attrs(Vec3::ONE, Vec3::ONE)],
+        );
+        let mut bad = Quad::rect(-1.0, -1.0, 1.0, 1.0, 3.0, 0);
+        bad.p[3].x = f32::NAN;
+        let (film, diags) = render(&s, &[bad], &Constant, &RenderOptions::default());
+        assert!(diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.code == "render::dice"));
+        assert!(film.data.chunks(5).all(|p| p[3] == 0.0));
+        // A surface through the eye plane is split until it can be diced or culled.
+        let floor = Quad::new(
+            Vec3::new(-5.0, -1.0, -5.0),
+            Vec3::new(5.0, -1.0, -5.0),
+            Vec3::new(-5.0, -1.0, 50.0),
+            Vec3::new(5.0, -1.0, 50.0),
+            0,
+        );
+        let (film, diags) = render(&s, &[floor], &Constant, &RenderOptions::default());
+        assert!(!diags.has_errors());
+        assert_eq!(film.pixel(4, 7)[3], 1.0);
+        assert_eq!(film.pixel(4, 0)[3], 0.0);
     }
 }

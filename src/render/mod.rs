@@ -1,13 +1,17 @@
 //! The REYES renderer: camera, buckets, split/dice decisions, hiders, and the frame driver.
 //!
 //! Input: a built [`crate::scene::Scene`] and a [`GridShader`] (the shading-language runtime).
-//! Output: a filtered film. Invariants: see [`driver`] — the image does not depend on the
-//! bucket size or the thread count.
+//! Output: a filtered [`crate::film::Film`]. Invariants: see [`driver`] — the image does not
+//! depend on the bucket size or the thread count.
+//!
+//! Modules: [`camera`] (projection, crop, named spaces), [`dice`] (cull / split / dice
+//! decisions), [`driver`] (buckets, forwarding, shading, parallelism), [`hider`] (the shared
+//! `ShadedGrid` form and the hiders: [`hider::zbuffer`]; an A-buffer plugs in as another
+//! [`hider::Hider`]), [`sampler`] (hashed jittered sample positions), [`stats`] (`--stats`).
 
 pub mod camera;
 pub mod dice;
 pub mod driver;
-
 pub mod hider;
 pub mod sampler;
 pub mod stats;
