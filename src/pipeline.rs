@@ -189,6 +189,18 @@ pub fn render_paths(
                 b.finish_and_clear();
             }
             let options = crate::render::driver::effective_options(&scene.options, &opts);
+            // A cropped render writes only the crop region.
+            let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
+            let film = if r.width() < film.width || r.height() < film.height {
+                film.cropped(
+                    r.x0.max(0) as usize,
+                    r.y0.max(0) as usize,
+                    r.x1.max(0) as usize,
+                    r.y1.max(0) as usize,
+                )
+            } else {
+                film
+            };
             // -o replaces the first display of the first frame only.
             let override_path = if first_display {
                 settings.output.clone()

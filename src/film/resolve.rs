@@ -25,6 +25,25 @@ pub struct Film {
 }
 
 impl Film {
+    /// The pixels `x0..x1`, `y0..y1` as a film of their own (a CropWindow render's image is
+    /// the size of the crop region, RISpec §4.1.1).
+    pub fn cropped(&self, x0: usize, y0: usize, x1: usize, y1: usize) -> Film {
+        let (x1, y1) = (x1.min(self.width), y1.min(self.height));
+        let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+        let nch = self.channel_names.len();
+        let mut data = Vec::with_capacity(w * h * nch);
+        for y in y0..y0 + h {
+            let row = (y * self.width + x0) * nch;
+            data.extend_from_slice(&self.data[row..row + w * nch]);
+        }
+        Film {
+            width: w,
+            height: h,
+            channel_names: self.channel_names.clone(),
+            data,
+        }
+    }
+
     /// A black, transparent film with depth = +∞.
     pub fn new(width: usize, height: usize, channel_names: Vec<String>) -> Film {
         let nch = channel_names.len();

@@ -223,8 +223,9 @@ impl Buckets {
             return None;
         }
         let (s, m) = (self.size[axis] as i64, self.margin[axis] as i64);
-        let p0 = lo.floor() as i64;
-        let p1 = hi.floor() as i64;
+        // Clamp first: huge or non-finite raster bounds must not overflow the arithmetic.
+        let p0 = lo.clamp(-1e9, 1e9).floor() as i64;
+        let p1 = hi.clamp(-1e9, 1e9).floor() as i64;
         if p1 < origin as i64 - m || p0 >= end as i64 + m {
             return None;
         }
