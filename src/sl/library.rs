@@ -205,8 +205,11 @@ impl ShaderLibrary {
             return pick(progs, &base, name, diags);
         }
         diags.report(
-            Diag::error("shade::missing", format!("shader `{name}` not found"))
-                .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
+            Diag::warning(
+                "shade::missing",
+                format!("shader `{name}` not found: surfaces use the default surface, lights and other shaders are left out"),
+            )
+            .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
         );
         None
     }

@@ -1,0 +1,176 @@
+//! The `arbor` command as a user runs it: exit codes, diagnostics on stderr, files written
+//! (or not) — through the real binary.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+fn arbor() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_arbor"))
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("arbor-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run_stdin(args: &[&str], input: &str, dir: &PathBuf) -> (i32, String) {
+    let mut child = arbor()
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
+const SCENE: &str = r#"Format 32 24 1
+Display "out.png" "png" "rgba"
+Projection "perspective" "fov" [40]
+Translate 0 0 4
+WorldBegin
+LightSource "distantlight" 1
+Surface "plastic"
+Sphere 1 -1 1 360
+WorldEnd
+"#;
+
+#[test]
+fn render_from_stdin_writes_the_display_file() {
+    let dir = tmpdir("stdin");
+    let (code, err) = run_stdin(&["render", "-q"], SCENE, &dir);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(dir.join("out.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (32, 24));
+}
+
+#[test]
+fn output_override_picks_the_format_from_the_extension() {
+    let dir = tmpdir("override");
+    let (code, err) = run_stdin(&["render", "-q", "-o", "x.tif"], SCENE, &dir);
+    assert_eq!(code, 0, "{err}");
+    assert!(dir.join("x.tif").exists());
+    assert!(
+        !dir.join("out.png").exists(),
+        "-o replaces the first display"
+    );
+}
+
+#[test]
+fn an_unknown_request_is_an_error_with_a_suggestion_and_exit_1() {
+    let dir = tmpdir("unknown");
+    let (code, err) = run_stdin(
+        &["check", "-"],
+        "WorldBegin\nSphre 1 -1 1 360\nWorldEnd\n",
+        &dir,
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("unknown request `Sphre`"), "{err}");
+    assert!(err.contains("did you mean `Sphere`"), "{err}");
+    assert!(err.contains("-:2:1"), "line and column: {err}");
+}
+
+#[test]
+fn shader_errors_are_reported_with_their_location() {
+    let dir = tmpdir("slerr");
+    std::fs::write(
+        dir.join("bad.sl"),
+        "surface bad() {\n  Ci = undefinedthing;\n}\n",
+    )
+    .unwrap();
+    let out = arbor()
+        .args(["check", "bad.sl"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("unknown variable `undefinedthing`"), "{err}");
+    assert!(err.contains("bad.sl:2:8"), "{err}");
+}
+
+#[test]
+fn a_missing_shader_warns_and_renders_with_the_default_surface() {
+    let dir = tmpdir("missing");
+    let scene = SCENE.replace("Surface \"plastic\"", "Surface \"no_such_shader\"");
+    let (code, err) = run_stdin(&["render"], &scene, &dir);
+    assert!(err.contains("no_such_shader"), "{err}");
+    assert!(
+        dir.join("out.png").exists(),
+        "a missing shader must not stop the render: {err}"
+    );
+    assert_eq!(code, 0, "a missing shader is a warning: {err}");
+    assert!(err.contains("warning"), "{err}");
+}
+
+#[test]
+fn info_lists_a_standard_shaders_parameters() {
+    let out = arbor().args(["info", "spotlight"]).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(text.starts_with("light \"spotlight\""), "{text}");
+    for p in [
+        "intensity",
+        "lightcolor",
+        "from",
+        "to",
+        "coneangle",
+        "conedeltaangle",
+        "beamdistribution",
+    ] {
+        assert!(text.contains(&format!("\"{p}\"")), "{p} missing: {text}");
+    }
+}
+
+#[test]
+fn format_output_parses_back_to_the_same_requests() {
+    let dir = tmpdir("format");
+    std::fs::write(dir.join("s.rib"), SCENE).unwrap();
+    let out = arbor()
+        .args(["format", "s.rib"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        text.contains("WorldBegin\n  LightSource \"distantlight\" 1"),
+        "{text}"
+    );
+    std::fs::write(dir.join("t.rib"), &text).unwrap();
+    let again = arbor()
+        .args(["format", "t.rib"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(String::from_utf8_lossy(&again.stdout), text);
+}
+
+#[test]
+fn garbage_input_never_panics() {
+    let dir = tmpdir("garbage");
+    for input in [
+        "\u{0}\u{1}\u{2}[[[[",
+        "WorldBegin ]]] \"unterminated",
+        "Sphere [",
+        "\u{ff}\u{fe}binary\u{80}\u{81}",
+    ] {
+        let (code, err) = run_stdin(&["render", "-q"], input, &dir);
+        assert!(!err.contains("panicked"), "{input:?}: {err}");
+        assert!(code == 0 || code == 1, "{input:?}: exit {code}");
+    }
+}
