@@ -15,15 +15,22 @@
 //! "N" values are transformed by the inverse transpose and are not flipped.
 //!
 //! Files: `quadric` (the seven quadrics), `polygon` (meshes), `triangulate` (ear clipping),
-//! `patch` (the parametric patch both dice through), `primvar` (primitive variables).
+//! `patch` (the parametric patch both dice through), `primvar` (primitive variables),
+//! `patches` (Patch/PatchMesh/NuPatch/teapot into `bezier` pieces), `spline` (basis and knot
+//! mathematics), `trim` (trim curves), `teapot` (Newell's data).
 
+mod bezier;
 mod patch;
+mod patches;
 mod polygon;
 mod primvar;
 mod quadric;
+pub mod spline;
+mod teapot;
 #[cfg(test)]
 mod tests;
 mod triangulate;
+mod trim;
 
 use std::sync::Arc;
 
@@ -33,7 +40,9 @@ use crate::diag::{Diag, Diagnostics};
 use crate::scene::{Geometry, Primitive};
 use crate::shade::Grid;
 
+pub use bezier::BezierPatch;
 pub use patch::ParamPatch;
+pub use patches::teapot_patches;
 pub use polygon::Mesh;
 pub use triangulate::triangulate;
 
@@ -154,6 +163,10 @@ pub fn surfaces_for(
         );
     }
     let flip = (m.determinant() < 0.0) != prim.attributes.reverse_orientation;
+    // Patch, PatchMesh, NuPatch (with trim curves) and Geometry "teapot": Bézier pieces.
+    if let Some(s) = patches::surfaces(index, prim, m, flip, diags) {
+        return s;
+    }
     use quadric::Profile;
     let deg = |a: f32| a.to_radians();
     let (profile, thetamax) = match &*prim.geometry {
