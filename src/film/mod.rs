@@ -18,7 +18,7 @@ pub mod zfile;
 pub use filter::{Filter, FilterKind};
 pub use output::{write_atomically, write_displays, Format};
 pub use quantize::{apply_background, apply_exposure};
-pub use resolve::{filter_into, filter_region, DepthFilter, Film};
+pub use resolve::{filter_into, filter_region, filter_tile, DepthFilter, Film, Tile};
 pub use zfile::ZFile;
 
 /// Samples of one bucket (plus its filter margin), as the hider leaves them.

@@ -25,6 +25,16 @@ pub struct Film {
 }
 
 impl Film {
+    /// Writes a filtered tile into the film.
+    pub fn put_tile(&mut self, t: &Tile) {
+        let nch = self.channels();
+        for j in 0..t.h {
+            let dst = ((t.y0 + j) * self.width + t.x0) * nch;
+            let src = j * t.w * nch;
+            self.data[dst..dst + t.w * nch].copy_from_slice(&t.data[src..src + t.w * nch]);
+        }
+    }
+
     /// The pixels `x0..x1`, `y0..y1` as a film of their own (a CropWindow render's image is
     /// the size of the crop region, RISpec §4.1.1).
     pub fn cropped(&self, x0: usize, y0: usize, x1: usize, y1: usize) -> Film {
@@ -200,25 +210,69 @@ pub fn filter_region(
     h: usize,
     depth_filter: DepthFilter,
 ) {
+    let tile = filter_tile(film, buf, filter, x0, y0, w, h, depth_filter);
+    film.put_tile(&tile);
+}
+
+/// Filtered pixels of one region, computed without touching the film so regions can be
+/// filtered in parallel and written afterwards ([`Film::put_tile`]).
+#[derive(Clone, Debug, Default)]
+pub struct Tile {
+    pub x0: usize,
+    pub y0: usize,
+    pub w: usize,
+    pub h: usize,
+    /// `w * h` pixels of the film's channels.
+    pub data: Vec<f32>,
+}
+
+/// Like [`filter_region`], into a [`Tile`] (the film is only read for its size, channels and
+/// the region's current values).
+#[allow(clippy::too_many_arguments)]
+pub fn filter_tile(
+    film: &Film,
+    buf: &SampleBuffer,
+    filter: &Filter,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    depth_filter: DepthFilter,
+) -> Tile {
+    let mut tile = Tile {
+        x0,
+        y0,
+        w: 0,
+        h: 0,
+        data: Vec::new(),
+    };
     // Clip the region to the film.
     let x1 = (x0 + w).min(film.width);
     let y1 = (y0 + h).min(film.height);
     if x0 >= x1 || y0 >= y1 {
-        return;
+        return tile;
     }
     let (w, h) = (x1 - x0, y1 - y0);
     let nch_film = film.channels();
+    tile.w = w;
+    tile.h = h;
+    tile.data.reserve(w * h * nch_film);
+    for y in y0..y1 {
+        let row = (y * film.width + x0) * nch_film;
+        tile.data
+            .extend_from_slice(&film.data[row..row + w * nch_film]);
+    }
     let nch = nch_film.min(buf.channels);
     let zc = film.channel("z").filter(|&z| z < nch);
     let spp = buf.samples_per_pixel();
     if spp == 0 || nch == 0 {
-        return;
+        return tile;
     }
     // A buffer shorter than its own dimensions is a hider bug; never index past it.
     let nsamples = buf.width * buf.height * spp;
     debug_assert!(buf.positions.len() >= nsamples && buf.values.len() >= nsamples * buf.channels);
     if buf.positions.len() < nsamples || buf.values.len() < nsamples * buf.channels {
-        return;
+        return tile;
     }
     let (hx, hy) = filter.radius();
     let separable = filter.is_separable();
@@ -317,8 +371,8 @@ pub fn filter_region(
             for i in 0..w {
                 let rx = x0 + i;
                 let p = j * w + i;
-                let out_base = (ry * film.width + rx) * nch_film;
-                let out = &mut film.data[out_base..out_base + nch];
+                let out_base = (j * w + i) * nch_film;
+                let out = &mut tile.data[out_base..out_base + nch];
                 let ws = acc.wsum[p];
                 if ws.abs() > 1e-12 {
                     let inv = 1.0 / ws;
@@ -336,6 +390,7 @@ pub fn filter_region(
             }
         }
     });
+    tile
 }
 
 #[inline]

@@ -31,7 +31,7 @@ use super::hider::{
 use super::sampler::mix64;
 use super::stats::{Stage, Stats};
 use super::GridShader;
-use crate::film::{filter_into, DepthFilter as FilmDepthFilter, Film, SampleBuffer};
+use crate::film::{DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
 pub const DEFAULT_BUCKET: u32 = 16;
@@ -599,20 +599,30 @@ fn render_inner(
 
     let total = buckets.rows * buckets.cols;
     let done = AtomicUsize::new(0);
+    let pixel_filter = crate::film::Filter::from_scene(&options.pixel_filter);
+    // Buckets of a row are filtered in parallel into tiles, then written into the film.
     let filter_row = |film: &mut Film, row: usize, bufs: &[SampleBuffer]| {
         let t = Instant::now();
-        for (col, buf) in bufs.iter().enumerate() {
-            let r = buckets.rect(col, row);
-            filter_into(
-                film,
-                buf,
-                &options.pixel_filter,
-                r.x0 as usize,
-                r.y0 as usize,
-                r.width(),
-                r.height(),
-                depth_filter,
-            );
+        let shared: &Film = film;
+        let tiles: Vec<crate::film::Tile> = bufs
+            .par_iter()
+            .enumerate()
+            .map(|(col, buf)| {
+                let r = buckets.rect(col, row);
+                crate::film::filter_tile(
+                    shared,
+                    buf,
+                    &pixel_filter,
+                    r.x0 as usize,
+                    r.y0 as usize,
+                    r.width(),
+                    r.height(),
+                    depth_filter,
+                )
+            })
+            .collect();
+        for tile in &tiles {
+            film.put_tile(tile);
             Stats::add(&stats.buckets, 1);
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             if let Some(p) = opts.progress {
