@@ -188,7 +188,12 @@ pub fn render_paths(
             if let Some(b) = &bar {
                 b.finish_and_clear();
             }
-            let options = crate::render::driver::effective_options(&scene.options, &opts);
+            let mut options = crate::render::driver::effective_options(&scene.options, &opts);
+            // Imager shaders (the film applies the standard `background` itself).
+            let mut film = film;
+            if system.run_imager(scene, &crate::render::Camera::new(scene), &mut film) {
+                options.imager = None;
+            }
             // A cropped render writes only the crop region.
             let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
             let film = if r.width() < film.width || r.height() < film.height {
@@ -284,7 +289,9 @@ pub fn render_text(
             progress: None,
             aovs,
         };
-        films.push(render_frame(scene, &system, &opts, diags));
+        let mut film = render_frame(scene, &system, &opts, diags);
+        system.run_imager(scene, &crate::render::Camera::new(scene), &mut film);
+        films.push(film);
     }
     films
 }

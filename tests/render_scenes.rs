@@ -304,3 +304,40 @@ fn golden_quadrics_and_polygons() {
     );
     check_golden("quadrics", &f);
 }
+
+#[test]
+fn a_user_imager_shader_runs_over_the_image() {
+    let dir = std::env::temp_dir().join(format!("arbor-imager-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("fill.sl"),
+        "imager fill(color bg = color(0, 0.5, 1);) { Ci += (1 - alpha) * bg; alpha = 1; }",
+    )
+    .unwrap();
+    let settings = Settings {
+        shader_paths: vec![dir.display().to_string()],
+        ..Settings::default()
+    };
+    let (films, report, errors) = render(
+        r#"Format 16 16 1
+        Imager "fill"
+        Projection "orthographic"
+        ScreenWindow -1 1 -1 1
+        WorldBegin
+        Surface "constant"
+        Color [1 0 0]
+        Polygon "P" [0 -5 1  5 -5 1  5 5 1  0 5 1]
+        WorldEnd"#,
+        &settings,
+    );
+    assert!(!errors, "{report}");
+    let f = &films[0];
+    // left half: empty, filled by the imager; right half: the red polygon.
+    let l = px(f, 2, 8);
+    let r = px(f, 13, 8);
+    assert!(
+        (l[1] - 0.5).abs() < 1e-5 && (l[2] - 1.0).abs() < 1e-5 && (l[3] - 1.0).abs() < 1e-6,
+        "{l:?}"
+    );
+    assert!((r[0] - 1.0).abs() < 1e-5 && r[1].abs() < 1e-5, "{r:?}");
+}

@@ -61,6 +61,8 @@ struct RunCtx<'s> {
     attrs: &'s Attributes,
     camera_from_object: Mat4,
     seed: u32,
+    /// Per-point alpha for imager shaders (1 elsewhere).
+    alpha: Option<&'s [f32]>,
 }
 
 impl<'a> ShadeSystem<'a> {
@@ -148,7 +150,83 @@ impl<'a> ShadeSystem<'a> {
             attrs: &p.attributes,
             camera_from_object: camera.camera_from_world * p.world_from_object,
             seed: crate::pattern::hash::hash_u32(prim as u32 ^ 0x9e37_79b9),
+            alpha: None,
         }
+    }
+
+    /// Runs the scene's Imager shader (other than the standard `background`, which the film
+    /// applies itself) over the filtered image: Ci and alpha per pixel, P at the pixel centre
+    /// in raster space. Returns false when there is no such imager.
+    pub fn run_imager(&self, scene: &Scene, camera: &Camera, film: &mut crate::film::Film) -> bool {
+        let Some(iref) = scene.options.imager.clone() else {
+            return false;
+        };
+        if iref.name == "background" {
+            return false;
+        }
+        let Some(prog) = self.program(&iref, ShaderKind::Imager) else {
+            return false;
+        };
+        let (Some(r), Some(a)) = (film.channel("r"), film.channel("a")) else {
+            return false;
+        };
+        let nch = film.channels();
+        let attrs = Attributes::default();
+        // Rows in bands so the register file stays small.
+        let band = 32usize;
+        let mut y0 = 0;
+        while y0 < film.height {
+            let rows = band.min(film.height - y0);
+            let (nu, nv) = (film.width, rows);
+            let mut grid = Grid::with_size(nu, nv);
+            let mut alpha = vec![0f32; nu * nv];
+            for j in 0..nv {
+                for i in 0..nu {
+                    let k = j * nu + i;
+                    let px = film.pixel(i, y0 + j);
+                    grid.p[k] = Vec3::new(i as f32 + 0.5, (y0 + j) as f32 + 0.5, 0.0);
+                    grid.ci[k] = Vec3::new(px[r], px[r + 1], px[r + 2]);
+                    grid.oi[k] = Vec3::splat(px[a]);
+                    alpha[k] = px[a];
+                }
+            }
+            let ci = grid.ci.clone();
+            let oi = grid.oi.clone();
+            let ctx = RunCtx {
+                scene,
+                camera,
+                attrs: &attrs,
+                camera_from_object: Mat4::IDENTITY,
+                seed: 0x1a6e,
+                alpha: Some(&alpha),
+            };
+            if let Some(mut regs) = self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None)
+            {
+                let n = grid.len();
+                let ci = prog
+                    .global("Ci")
+                    .map(|g| own_vt(&mut regs[g.reg as usize], n));
+                let al = prog
+                    .global("alpha")
+                    .map(|g| slot_vf(&regs[g.reg as usize], n));
+                for j in 0..nv {
+                    for i in 0..nu {
+                        let k = j * nu + i;
+                        let base = ((y0 + j) * film.width + i) * nch;
+                        if let Some(c) = &ci {
+                            film.data[base + r] = c[k].x;
+                            film.data[base + r + 1] = c[k].y;
+                            film.data[base + r + 2] = c[k].z;
+                        }
+                        if let Some(al) = &al {
+                            film.data[base + a] = al[k];
+                        }
+                    }
+                }
+            }
+            y0 += rows;
+        }
+        true
     }
 
     /// Runs surface (with lights) and atmosphere shaders; fills ci/oi.
@@ -434,7 +512,10 @@ impl<'a> ShadeSystem<'a> {
                 "ncomps" => Slot::F(3.0),
                 "time" | "dtime" => Slot::F(0.0),
                 "dPdtime" => Slot::VT(vec![Vec3::ZERO; n]),
-                "alpha" => Slot::F(1.0),
+                "alpha" => match ctx.alpha {
+                    Some(a) => Slot::VF(a.to_vec()),
+                    None => Slot::F(1.0),
+                },
                 _ => continue,
             };
             ex.set(g.reg, fit(v, prog.regs[g.reg as usize].varying, n));

@@ -70,7 +70,7 @@ const GLOBALS: &[(&str, BaseType, bool)] = &[
     ("time", BaseType::Float, false),
     ("dtime", BaseType::Float, false),
     ("dPdtime", BaseType::Vector, true),
-    ("alpha", BaseType::Float, false),
+    ("alpha", BaseType::Float, true),
 ];
 
 /// Which globals a shader type may read and write (RISpec Tables 12.1–12.5).
