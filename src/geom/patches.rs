@@ -190,6 +190,7 @@ pub(crate) fn patch_mesh(
         err(format!("a {nu}×{nv} mesh has no sub-patches"));
         return Vec::new();
     }
+    let rational = prim.primvars.get("P").is_none() && prim.primvars.get("Pw").is_some();
     let pts = match control_points(&prim.primvars, nu * nv, nu, nv, (uper, vper)) {
         Ok(p) => p,
         Err(e) => {
@@ -268,6 +269,11 @@ pub(crate) fn patch_mesh(
                             }
                         }
                     }
+                }
+                if !rational {
+                    // Tangent-carrying bases (Hermite, power) have rows that do not sum to 1;
+                    // positional data stays affine, so only homogeneous input converts w.
+                    bez.chunks_exact_mut(dim).for_each(|c| c[3] = 1.0);
                 }
                 bez
             } else {

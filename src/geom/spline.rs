@@ -223,8 +223,9 @@ pub fn refine(
     pts
 }
 
-/// Evaluates a rational B-spline curve in the plane (trim curves): homogeneous (u, v, w) rows,
-/// de Boor's algorithm. `x` is clamped into the span range.
+/// Evaluates a rational B-spline curve in the plane (trim curves): homogeneous control points
+/// (u, v, w), the point being (u/w, v/w) (RISpec: a curve "in homogeneous parameter space"),
+/// by de Boor's algorithm. `x` is clamped into the span range.
 pub fn eval_curve2(
     knots: &[f32],
     order: usize,
@@ -246,8 +247,7 @@ pub fn eval_curve2(
     let mut d: Vec<[f32; 3]> = (0..=p)
         .map(|r| {
             let i = j - p + r;
-            let wi = w[i];
-            [u[i] * wi, v[i] * wi, wi]
+            [u[i], v[i], w[i]]
         })
         .collect();
     for r in 1..=p {
