@@ -17,10 +17,13 @@
 //! Files: `quadric` (the seven quadrics), `polygon` (meshes), `triangulate` (ear clipping),
 //! `patch` (the parametric patch both dice through), `primvar` (primitive variables).
 
+mod curves;
 mod patch;
+mod points;
 mod polygon;
 mod primvar;
 mod quadric;
+mod subdiv;
 #[cfg(test)]
 mod tests;
 mod triangulate;
@@ -244,6 +247,41 @@ pub fn surfaces_for(
                 (nloops, nverts, verts, *nvertices),
                 diags,
             )
+        }
+        Geometry::SubdivisionMesh {
+            scheme,
+            nverts,
+            verts,
+            tags,
+            nargs,
+            intargs,
+            floatargs,
+        } => {
+            let args = subdiv::SubdivArgs {
+                scheme,
+                nverts,
+                verts,
+                tags,
+                nargs,
+                intargs,
+                floatargs,
+            };
+            return subdiv::subdivision(index, prim, m, flip, args, diags);
+        }
+        Geometry::Points { npoints } => return points::points(index, prim, m, *npoints, diags),
+        Geometry::Curves {
+            cubic,
+            nverts,
+            periodic,
+            v_basis,
+        } => {
+            let args = curves::CurveArgs {
+                cubic: *cubic,
+                nverts,
+                periodic: *periodic,
+                basis: *v_basis,
+            };
+            return curves::curves(index, prim, m, flip, args, diags);
         }
         other => {
             let name = match other {
