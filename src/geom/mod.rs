@@ -20,12 +20,15 @@
 //! mathematics), `trim` (trim curves), `teapot` (Newell's data).
 
 mod bezier;
+mod curves;
 mod patch;
 mod patches;
+mod points;
 mod polygon;
 mod primvar;
 mod quadric;
 pub mod spline;
+mod subdiv;
 mod teapot;
 #[cfg(test)]
 mod tests;
@@ -257,6 +260,41 @@ pub fn surfaces_for(
                 (nloops, nverts, verts, *nvertices),
                 diags,
             )
+        }
+        Geometry::SubdivisionMesh {
+            scheme,
+            nverts,
+            verts,
+            tags,
+            nargs,
+            intargs,
+            floatargs,
+        } => {
+            let args = subdiv::SubdivArgs {
+                scheme,
+                nverts,
+                verts,
+                tags,
+                nargs,
+                intargs,
+                floatargs,
+            };
+            return subdiv::subdivision(index, prim, m, flip, args, diags);
+        }
+        Geometry::Points { npoints } => return points::points(index, prim, m, *npoints, diags),
+        Geometry::Curves {
+            cubic,
+            nverts,
+            periodic,
+            v_basis,
+        } => {
+            let args = curves::CurveArgs {
+                cubic: *cubic,
+                nverts,
+                periodic: *periodic,
+                basis: *v_basis,
+            };
+            return curves::curves(index, prim, m, flip, args, diags);
         }
         other => {
             let name = match other {
