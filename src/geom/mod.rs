@@ -21,6 +21,7 @@ mod patch;
 mod polygon;
 mod primvar;
 mod quadric;
+mod terrain;
 #[cfg(test)]
 mod tests;
 mod triangulate;
@@ -244,6 +245,9 @@ pub fn surfaces_for(
                 (nloops, nverts, verts, *nvertices),
                 diags,
             )
+        }
+        Geometry::Named { name } if name == "fractalterrain" => {
+            return terrain::surfaces(index, prim, m, flip, diags);
         }
         other => {
             let name = match other {

@@ -2,7 +2,7 @@
  * Watt & Watt chapter 2 with the errata of notes/shading.md §0 applied.
  *
  * Conventions (notes/shading.md): N is the unit normal, L the unit vector from the surface to
- * the light, V the unit vector from the surface to the eye, H = normalize(L + V) (E1).
+ * the light, V the unit vector from the surface to the eye, H = halfvector(L, V) (E1).
  * Every *_brdf function returns the BRDF f(L, V) itself (per steradian), so the light a
  * model reflects from one light is Cl · f · (N·L); the LocIllum* functions do that sum over
  * the lights with illuminance().  The white-furnace property ∫ f (N·L) dω ≤ 1 is tested for
@@ -21,6 +21,13 @@
 #ifndef PI
 #define PI 3.14159265358979323846
 #endif
+
+/* H = (L + V)/|L + V| (E1), 0 when L = −V (no division by zero). */
+vector halfvector(vector L, V)
+{
+    vector h = L + V;
+    return h / max(length(h), 1.0e-8);
+}
 
 /* ---- Fresnel ------------------------------------------------------------------------------ */
 
@@ -195,15 +202,15 @@ float geometric_attenuation(normal Nn; vector L, V, H)
 /* Microfacet specular BRDF without Fresnel: D·G / (4 (N·L)(N·V)) (the book: π). */
 float microfacet_DG(normal Nn; vector L, V; float D)
 {
-    vector H = normalize(L + V);
+    vector H = halfvector(L, V);
     float nl = Nn . L;
     float nv = Nn . V;
     float f = 0;
     if (nl > 0 && nv > 0) {
 #ifdef ARBOR_BOOK_COOKTORRANCE
-        f = D * geometric_attenuation(Nn, L, V, H) / (PI * nl * nv);
+        f = D * geometric_attenuation(Nn, L, V, H) / max(PI * nl * nv, 1.0e-8);
 #else
-        f = D * geometric_attenuation(Nn, L, V, H) / (4 * nl * nv);
+        f = D * geometric_attenuation(Nn, L, V, H) / max(4 * nl * nv, 1.0e-8);
 #endif
     }
     return f;
@@ -213,7 +220,7 @@ float microfacet_DG(normal Nn; vector L, V; float D)
  * the normal reflectance F0. */
 color cooktorrance_brdf(normal Nn; vector L, V; float m; color F0)
 {
-    vector H = normalize(L + V);
+    vector H = halfvector(L, V);
     float DG = microfacet_DG(Nn, L, V, beckmann(Nn . H, m));
     return DG * fresnel_rgb(V . H, F0);
 }
@@ -221,7 +228,7 @@ color cooktorrance_brdf(normal Nn; vector L, V; float m; color F0)
 /* Cook–Torrance for a conductor of complex index n + ik (exact conductor Fresnel). */
 color cooktorrance_nk_brdf(normal Nn; vector L, V; float m; color n, k)
 {
-    vector H = normalize(L + V);
+    vector H = halfvector(L, V);
     float DG = microfacet_DG(Nn, L, V, beckmann(Nn . H, m));
     return DG * fresnel_conductor_rgb(V . H, n, k);
 }
@@ -230,13 +237,13 @@ color cooktorrance_nk_brdf(normal Nn; vector L, V; float m; color n, k)
  * index eta. */
 float torrancesparrow_brdf(normal Nn; vector L, V; float m, eta)
 {
-    vector H = normalize(L + V);
+    vector H = halfvector(L, V);
     float DG = microfacet_DG(Nn, L, V, gaussian_facets(Nn . H, m));
     return DG * fresnel_dielectric(V . H, eta);
 }
 
-/* Phong lobe (R·V)^n with R = 2(N·L)N − L, energy-normalised by (n+2)/(2π) so that it
- * reflects at most all the light (the classical model is ks·(R·V)^n, see phong_term). */
+/* Phong lobe (R·V)^n with R = 2(N·L)N − L, 0 when N·L ≤ 0: the classical specular term
+ * ks·(R·V)^n of the book's equation (2.5). */
 float phong_term(normal Nn; vector L, V; float exponent)
 {
     vector R = 2 * (Nn . L) * Nn - L;
@@ -246,32 +253,33 @@ float phong_term(normal Nn; vector L, V; float exponent)
     return r;
 }
 
+/* Phong as a BRDF, energy normalised (Lewis 1994): (n+2)/(2π) (R·V)^n, whose albedo is at
+ * most 1 (reached at normal incidence). */
 float phong_brdf(normal Nn; vector L, V; float exponent)
 {
-    float nl = Nn . L;
-    float f = 0;
-    if (nl > 0)
-        f = (exponent + 2) / (2 * PI) * phong_term(Nn, L, V, exponent) / nl;
-    return f;
+    return (exponent + 2) / (2 * PI) * phong_term(Nn, L, V, exponent);
 }
 
 /* Blinn's half-vector lobe (N·H)^n (E1: H normalised).  n_Blinn ≈ 4 n_Phong gives the same
  * highlight width. */
 float blinn_term(normal Nn; vector L, V; float exponent)
 {
-    vector H = normalize(L + V);
+    vector H = halfvector(L, V);
     float r = 0;
     if (Nn . L > 0)
         r = pow(max(Nn . H, 0), exponent);
     return r;
 }
 
-/* Blinn–Phong as a normalised BRDF: (n+8)/(8π) (N·H)^n — bounded albedo. */
+/* Blinn–Phong as a normalised BRDF c·(N·H)^n with c = (n+2)(n+4) / (8π(2^(−n/2) + n)), the
+ * constant that makes the albedo exactly 1 at normal view (its maximum), so it never
+ * reflects more than it receives (the popular (n+8)/(8π) overshoots by a few percent). */
 float blinn_brdf(normal Nn; vector L, V; float exponent)
 {
     float f = 0;
     if (Nn . L > 0 && Nn . V > 0)
-        f = (exponent + 8) / (8 * PI) * blinn_term(Nn, L, V, exponent);
+        f = (exponent + 2) * (exponent + 4) / (8 * PI * (pow(2, -exponent / 2) + exponent)) *
+            blinn_term(Nn, L, V, exponent);
     return f;
 }
 
@@ -286,7 +294,7 @@ float ward_brdf(normal Nn; vector L, V; vector xdir; float ax, ay)
     if (nl > 0 && nv > 0) {
         vector X = normalize(xdir - (xdir . Nn) * Nn);
         vector Y = Nn ^ X;
-        vector H = normalize(L + V);
+        vector H = halfvector(L, V);
         float nh = max(Nn . H, 1.0e-6);
         float lh = max(L . H, 1.0e-6);
         float hx = (H . X) / max(ax, 1.0e-4);
