@@ -111,7 +111,7 @@ fn fractal_terrain_renders_as_a_landscape() {
     let rib = r#"Format 64 48 1
 PixelSamples 2 2
 Projection "perspective" "fov" [40]
-Rotate 25 1 0 0
+Rotate -15 1 0 0
 Translate 0 -0.6 2.2
 Display "t" "file" "rgb"
 WorldBegin

@@ -6,7 +6,7 @@
 #include "noises.h"
 
 surface planet(float Ka = 1; float Kd = 1; float Ks = 0.5; float roughness = 0.15;
-               float sealevel = 0.05; float icelatitude = 0.78; float cloudcover = 0.5;
+               float sealevel = 0.05; float icelatitude = 0.86; float cloudcover = 0.5;
                float landfreq = 1.6; float seed = 0;
                color ocean = color(0.02, 0.10, 0.32);
                color shallows = color(0.05, 0.28, 0.48);
