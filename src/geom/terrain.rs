@@ -307,16 +307,18 @@ mod tests {
             &mut quiet(),
         )
         .unwrap();
-        assert_eq!(m.positions.len(), 9 * 9);
-        assert_eq!(m.triangles.len(), 2 * 64);
-        assert_eq!(m.s.len(), 81);
+        // Miller's square-square puts 2^levels samples per side at cell centres.
+        let n = 8;
+        assert_eq!(m.positions.len(), n * n);
+        assert_eq!(m.triangles.len(), 2 * (n - 1) * (n - 1));
+        assert_eq!(m.s.len(), n * n);
         // Heights go along +y, so the mean normal points up.
         let mean: Vec3 = m.normals.iter().copied().sum::<Vec3>() / m.normals.len() as f32;
         assert!(mean.y > 0.7, "mean normal {mean}");
-        // s, t cover the unit square.
-        assert_eq!(m.s[0], 0.0);
-        assert_eq!(*m.s.last().unwrap(), 1.0);
-        // x, z stay on the unit square of side 1.
+        // s, t run across the unit square, s along a row, t down the rows.
+        assert!(m.s.iter().chain(&m.t).all(|&v| v > 0.0 && v < 1.0));
+        assert!(m.s[1] > m.s[0] && m.t[n] > m.t[0]);
+        // x, z stay on the square of side 1.
         for p in &m.positions {
             assert!(p.x.abs() <= 0.5 + 1e-6 && p.z.abs() <= 0.5 + 1e-6);
         }
@@ -377,7 +379,8 @@ mod tests {
                 &mut quiet(),
             )
             .unwrap();
-            let n = 65;
+            let n = (m.positions.len() as f64).sqrt() as usize;
+            assert_eq!(n * n, m.positions.len());
             let mut sum = 0.0;
             for j in 0..n {
                 for i in 0..n - 1 {
