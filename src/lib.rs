@@ -14,4 +14,5 @@ pub mod rib;
 pub mod scene;
 pub mod shade;
 pub mod sl;
+pub mod swatch;
 pub mod texture;

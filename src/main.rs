@@ -36,6 +36,31 @@ enum Cmd {
     Info(InfoArgs),
     /// Pretty-print a RIB file in canonical form on stdout.
     Format { file: PathBuf },
+    /// Render a shader on a swatch (sphere, plane or teapot) under a three-light rig.
+    Shade(ShadeArgs),
+}
+
+#[derive(Args)]
+struct ShadeArgs {
+    /// A shader name (search path or standard library) or a .sl file.
+    shader: String,
+    /// Set a shader parameter: -p Ks=0.8 -p "specularcolor=1 0.5 0" (repeatable).
+    #[arg(short = 'p', value_name = "NAME=VALUE")]
+    param: Vec<String>,
+    /// The swatch object: sphere, plane or teapot.
+    #[arg(long, default_value = "sphere")]
+    object: String,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Pixel samples per side.
+    #[arg(long, default_value_t = 3)]
+    samples: u32,
+    /// Output image (format from the extension: .png .tif .exr); default SHADER.png.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    #[command(flatten)]
+    paths: PathArgs,
 }
 
 #[derive(Args)]
@@ -349,6 +374,53 @@ fn main() -> ExitCode {
                     }
                 }
                 None => ExitCode::from(1),
+            }
+        }
+        Cmd::Shade(a) => {
+            let s = settings_from(&a.paths);
+            let Some(object) = arbor::swatch::SwatchObject::parse(&a.object) else {
+                eprintln!(
+                    "error: --object takes sphere, plane or teapot, found `{}`",
+                    a.object
+                );
+                return ExitCode::from(2);
+            };
+            let stem = std::path::Path::new(&a.shader)
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_else(|| "swatch".into());
+            let req = arbor::swatch::SwatchRequest {
+                shader: a.shader.clone(),
+                params: a.param.clone(),
+                object,
+                size: a.size,
+                samples: a.samples,
+                output: a
+                    .output
+                    .clone()
+                    .unwrap_or_else(|| PathBuf::from(format!("{stem}.png"))),
+                compile: CompileOptions {
+                    include_dirs: s.include_dirs.clone(),
+                    defines: s.defines.clone(),
+                    search_paths: s.shader_paths.iter().map(PathBuf::from).collect(),
+                },
+            };
+            let start = std::time::Instant::now();
+            let written = arbor::swatch::render_swatch(&req, &sources, &diags);
+            let failed = report(&diags, &sources, cli.quiet);
+            if !cli.quiet {
+                for w in &written {
+                    eprintln!(
+                        "wrote {} ({:.2} s)",
+                        w.display(),
+                        start.elapsed().as_secs_f64()
+                    );
+                }
+            }
+            if failed || written.is_empty() {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
             }
         }
         Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {

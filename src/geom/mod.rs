@@ -30,6 +30,7 @@ mod quadric;
 pub mod spline;
 mod subdiv;
 mod teapot;
+mod terrain;
 #[cfg(test)]
 mod tests;
 mod triangulate;
@@ -295,6 +296,9 @@ pub fn surfaces_for(
                 basis: *v_basis,
             };
             return curves::curves(index, prim, m, flip, args, diags);
+        }
+        Geometry::Named { name } if name == "fractalterrain" => {
+            return terrain::surfaces(index, prim, m, flip, diags);
         }
         other => {
             let name = match other {
