@@ -1484,6 +1484,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         }
         ShaderName => out = Slot::S(Arc::from(ex.env.shader_name)),
         ArrayLength => out = Slot::F(0.0),
+        RayLevel => out = Slot::F(0.0),
     }
     let varying = ex.prog.regs[dst as usize].varying;
     if varying && !out.is_varying() {

@@ -144,6 +144,8 @@ pub enum Builtin {
     ShaderName,
     ArrayLength,
     IsNan,
+    /// BMRT/PRMan `raylevel()` and `isshadowray()`: arbor shades camera rays only, so 0.
+    RayLevel,
 }
 
 /// One overload of a built-in.
@@ -299,6 +301,8 @@ pub static SIGS: &[Sig] = sigs! {
     "trace" 'c' "pv" Trace;
     "trace" 'f' "pv" Trace;
     "isnan" 'f' "f" IsNan;
+    "raylevel" 'f' "" RayLevel;
+    "isshadowray" 'f' "" RayLevel;
 };
 
 /// Names lowered by hand because their arguments are free-form.

@@ -41,6 +41,10 @@ struct Var {
     /// Declared without an explicit detail: may be promoted to varying by a restart.
     candidate: Option<Span>,
     decl_span: Span,
+    /// Varying-control depth at the declaration: stores at the same depth are unmasked
+    /// for this variable's whole lifetime, so a uniform declared inside varying control
+    /// flow (e.g. a loop counter of a function inlined in a varying loop) stays uniform.
+    decl_ctx: u32,
 }
 
 /// The globals of the language: name, type, varying.
@@ -81,7 +85,9 @@ fn global_access(kind: ShaderKind, name: &str) -> (bool, bool) {
     let none = (false, false);
     match kind {
         Surface => match name {
-            "Ci" | "Oi" | "N" | "s" | "t" | "Cs" | "Os" => rw,
+            // P is writable too: PRMan and BMRT let surface shaders displace P for bump
+            // and `calculatenormal` (e.g. Advanced RenderMan's `Displace`).
+            "Ci" | "Oi" | "N" | "P" | "s" | "t" | "Cs" | "Os" => rw,
             "Ps" | "alpha" => none,
             "L" | "Cl" | "Ol" => r,
             _ => r,
@@ -98,7 +104,8 @@ fn global_access(kind: ShaderKind, name: &str) -> (bool, bool) {
         },
         Volume => match name {
             "Ci" | "Oi" => rw,
-            "P" | "I" | "E" | "ncomps" | "time" | "dtime" => r,
+            // L and Cl inside `illuminance` (atmosphere shaders gather in-scattered light).
+            "P" | "I" | "E" | "ncomps" | "time" | "dtime" | "L" | "Cl" | "Ol" => r,
             _ => none,
         },
         Imager => match name {
@@ -388,6 +395,7 @@ impl<'a> Lowerer<'a> {
                     writable,
                     candidate: None,
                     decl_span: def.span,
+                    decl_ctx: self.varying_ctx,
                 },
             );
         }
@@ -434,6 +442,7 @@ impl<'a> Lowerer<'a> {
                     writable: true,
                     candidate: None,
                     decl_span: p.span,
+                    decl_ctx: 0,
                 };
                 let mut default_text = String::from("(computed)");
                 match &p.default {
@@ -630,7 +639,29 @@ impl<'a> Lowerer<'a> {
                     };
                     let (varying, candidate) = match ty.detail {
                         Some(Detail::Varying) => (true, None),
-                        Some(Detail::Uniform) => (false, None),
+                        // An explicitly uniform local that is assigned a varying value or
+                        // under deeper varying control flow is demoted to varying with a
+                        // warning (PRMan/BMRT-era shaders rely on this), not rejected.
+                        Some(Detail::Uniform) => {
+                            let demoted = self.forced.contains(&v.span);
+                            if demoted {
+                                self.diags.push(
+                                    Diag::warning(
+                                        "sl::detail",
+                                        format!(
+                                            "uniform `{}` is assigned a varying value or under \
+                                             varying control flow; it is treated as varying",
+                                            v.name
+                                        ),
+                                    )
+                                    .label(v.span, "declared uniform here")
+                                    .help(
+                                        "declare the variable `varying` (or leave the detail out)",
+                                    ),
+                                );
+                            }
+                            (demoted, Some(v.span))
+                        }
                         None => (self.forced.contains(&v.span), Some(v.span)),
                     };
                     let reg = self.alloc_var_regs(ty.base, array, varying);
@@ -642,6 +673,7 @@ impl<'a> Lowerer<'a> {
                         writable: true,
                         candidate,
                         decl_span: v.span,
+                        decl_ctx: self.varying_ctx,
                     };
                     // Declared inside varying control flow: the variable is set under a mask.
                     if let Some(init) = &v.init {
@@ -964,7 +996,7 @@ impl<'a> Lowerer<'a> {
     }
 
     fn store_reg(&mut self, var: &Var, reg: Reg, v: Val, span: Span) {
-        if !var.varying && (v.varying || self.varying_ctx > 0) {
+        if !var.varying && (v.varying || self.varying_ctx > var.decl_ctx) {
             if let Some(c) = var.candidate {
                 self.newly_forced.insert(c);
                 return;
@@ -1201,7 +1233,7 @@ impl<'a> Lowerer<'a> {
                     && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg)
                 {
                     if matches!(name, "L" | "Cl" | "Ol")
-                        && self.kind == ShaderKind::Surface
+                        && matches!(self.kind, ShaderKind::Surface | ShaderKind::Volume)
                         && self.in_illuminance == 0
                     {
                         self.diags.push(
@@ -1717,7 +1749,8 @@ impl<'a> Lowerer<'a> {
                     }
                     self.store_reg(&var, var.reg + i as Reg, v, span);
                 } else {
-                    if !var.varying && (v.varying || idx.varying || self.varying_ctx > 0) {
+                    if !var.varying && (v.varying || idx.varying || self.varying_ctx > var.decl_ctx)
+                    {
                         if let Some(c) = var.candidate {
                             self.newly_forced.insert(c);
                             return v;
@@ -2225,6 +2258,7 @@ impl<'a> Lowerer<'a> {
                                 writable: true,
                                 candidate: None,
                                 decl_span: f.span,
+                                decl_ctx: self.varying_ctx,
                             },
                         );
                     }
@@ -2258,6 +2292,7 @@ impl<'a> Lowerer<'a> {
                         writable: false,
                         candidate: None,
                         decl_span: f.span,
+                        decl_ctx: self.varying_ctx,
                     },
                 );
             }
@@ -2283,6 +2318,7 @@ impl<'a> Lowerer<'a> {
                     None
                 },
                 decl_span: def.name_span,
+                decl_ctx: self.varying_ctx,
             })
         };
         let fctx = self.varying_ctx;
