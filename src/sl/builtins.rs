@@ -144,6 +144,9 @@ pub enum Builtin {
     ShaderName,
     ArrayLength,
     IsNan,
+    // horizon mapping (Max): src/texture/horizon.rs
+    Horizon,
+    HorizonHeight,
 }
 
 /// One overload of a built-in.
@@ -299,6 +302,12 @@ pub static SIGS: &[Sig] = sigs! {
     "trace" 'c' "pv" Trace;
     "trace" 'f' "pv" Trace;
     "isnan" 'f' "f" IsNan;
+    "horizon" 'f' "sffv" Horizon;
+    "horizon" 'f' "sffvsf" Horizon;
+    "horizon" 'f' "sffvsfsf" Horizon;
+    "horizon" 'f' "sffvsfsfsf" Horizon;
+    "horizonheight" 'f' "sff" HorizonHeight;
+    "horizonheight" 'f' "sffsf" HorizonHeight;
 };
 
 /// Names lowered by hand because their arguments are free-form.

@@ -2782,6 +2782,8 @@ fn always_varying(f: Builtin) -> bool {
             | Phong
             | Trace
             | Depth
+            | Horizon
+            | HorizonHeight
     )
 }
 
