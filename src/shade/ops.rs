@@ -2023,9 +2023,17 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
             .map(|g| vec_t(&ex.regs[g.reg as usize], n))
     };
     let p = global_t("P").unwrap_or_else(|| vec![Vec3::ZERO; n]);
-    let up = global_t("N")
+    // The bumps stand on the side facing the eye, like faceforward(N, I).
+    let mut up = global_t("N")
         .or_else(|| global_t("Ng"))
         .unwrap_or_else(|| vec![Vec3::Z; n]);
+    if let Some(eye) = global_t("I") {
+        for (u, i) in up.iter_mut().zip(&eye) {
+            if u.dot(*i) > 0.0 {
+                *u = -*u;
+            }
+        }
+    }
     let (dsdu, dsdv) = (deriv_f(&s, nu, nv, 0, 1.0), deriv_f(&s, nu, nv, 1, 1.0));
     let (dtdu, dtdv) = (deriv_f(&t, nu, nv, 0, 1.0), deriv_f(&t, nu, nv, 1, 1.0));
     let (dpdu, dpdv) = (deriv_t(&p, nu, nv, 0, 1.0), deriv_t(&p, nu, nv, 1, 1.0));
