@@ -38,6 +38,16 @@ enum Cmd {
     Format { file: PathBuf },
     /// Render a shader on a swatch (sphere, plane or teapot) under a three-light rig.
     Shade(ShadeArgs),
+    /// Build Max horizon tables (bump shadows) from a periodic height map (PNG/TIFF/EXR…).
+    Horizon {
+        /// Height map image (luminance is the height, the map spans the unit (s,t) patch).
+        input: PathBuf,
+        /// Output table file (.hzn).
+        output: PathBuf,
+        /// Azimuth directions: 8 or 16.
+        #[arg(long, default_value_t = 8)]
+        directions: usize,
+    },
 }
 
 #[derive(Args)]
@@ -421,6 +431,39 @@ fn main() -> ExitCode {
                 ExitCode::from(1)
             } else {
                 ExitCode::SUCCESS
+            }
+        }
+        Cmd::Horizon {
+            input,
+            output,
+            directions,
+        } => {
+            use arbor::texture::horizon::{read_height_image, HorizonTable};
+            let start = std::time::Instant::now();
+            let built = read_height_image(&input).and_then(|(f, w, h)| {
+                HorizonTable::build(&f, w, h, directions).map(|t| (t, start.elapsed()))
+            });
+            match built.and_then(|(t, dt)| t.write(&output).map(|_| (t, dt))) {
+                Ok((t, dt)) => {
+                    if !cli.quiet {
+                        eprintln!(
+                            "{}: {}x{} texels, {} directions, built in {:.2} s",
+                            output.display(),
+                            t.width,
+                            t.height,
+                            t.ndirs(),
+                            dt.as_secs_f64()
+                        );
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    diags.report(Diag::error("texture::horizon", e).help(
+                        "the input must be a readable height image; --directions is 8 or 16",
+                    ));
+                    report(&diags, &sources, cli.quiet);
+                    ExitCode::from(1)
+                }
             }
         }
         Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {

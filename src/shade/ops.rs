@@ -1485,6 +1485,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         ShaderName => out = Slot::S(Arc::from(ex.env.shader_name)),
         ArrayLength => out = Slot::F(0.0),
         RayLevel => out = Slot::F(0.0),
+        Horizon | HorizonHeight => out = horizon_call(ex, f, args, span),
     }
     let varying = ex.prog.regs[dst as usize].varying;
     if varying && !out.is_varying() {
@@ -1972,4 +1973,83 @@ mod tests {
         let d = deriv_f(&x, 4, 3, 0, 0.5);
         assert!(d.iter().all(|&v| (v - 1.0).abs() < 1e-6));
     }
+}
+
+/// `horizon(map, s, t, L, …)` / `horizonheight(map, s, t, …)`: gathers the grid's s, t, P
+/// differences and hands them to `texture::horizon` (Max's horizon mapping).
+fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span) -> Slot {
+    use crate::texture::horizon as hz;
+    let n = ex.n;
+    let (nu, nv) = (ex.env.nu, ex.env.nv);
+    let map = arg(ex, args, 0).s();
+    let first_param = if f == Builtin::Horizon { 4 } else { 3 };
+    let mut prm = hz::HorizonParams::default();
+    let mut k = first_param;
+    while k + 1 < args.len() {
+        let v = arg(ex, args, k + 1).f().first();
+        match &*arg(ex, args, k).s() {
+            "scale" => prm.scale = v,
+            "penumbra" => prm.penumbra = v.max(0.0).to_radians(),
+            "width" => prm.width = v,
+            other => ex.warn(
+                span,
+                format!("horizon: unknown parameter \"{other}\" ignored"),
+            ),
+        }
+        k += 2;
+    }
+    let fallback = if f == Builtin::Horizon { 1.0 } else { 0.0 };
+    let table = match hz::cached(&map) {
+        Ok(t) => t,
+        Err(e) => {
+            ex.warn(
+                span,
+                format!("horizon map unavailable ({e}); no bump shadows"),
+            );
+            return Slot::VF(vec![fallback; n]);
+        }
+    };
+    let (s, t) = (vec_f(arg(ex, args, 1), n), vec_f(arg(ex, args, 2), n));
+    let l = if f == Builtin::Horizon {
+        vec_t(arg(ex, args, 3), n)
+    } else {
+        vec![Vec3::ZERO; n]
+    };
+    let global_t = |name: &str| {
+        ex.prog
+            .global(name)
+            .map(|g| vec_t(&ex.regs[g.reg as usize], n))
+    };
+    let p = global_t("P").unwrap_or_else(|| vec![Vec3::ZERO; n]);
+    // The bumps stand on the side facing the eye, like faceforward(N, I).
+    let mut up = global_t("N")
+        .or_else(|| global_t("Ng"))
+        .unwrap_or_else(|| vec![Vec3::Z; n]);
+    if let Some(eye) = global_t("I") {
+        for (u, i) in up.iter_mut().zip(&eye) {
+            if u.dot(*i) > 0.0 {
+                *u = -*u;
+            }
+        }
+    }
+    let (dsdu, dsdv) = (deriv_f(&s, nu, nv, 0, 1.0), deriv_f(&s, nu, nv, 1, 1.0));
+    let (dtdu, dtdv) = (deriv_f(&t, nu, nv, 0, 1.0), deriv_f(&t, nu, nv, 1, 1.0));
+    let (dpdu, dpdv) = (deriv_t(&p, nu, nv, 0, 1.0), deriv_t(&p, nu, nv, 1, 1.0));
+    let g = hz::GridInputs {
+        s: &s,
+        t: &t,
+        l: &l,
+        up: &up,
+        dsdu: &dsdu,
+        dsdv: &dsdv,
+        dtdu: &dtdu,
+        dtdv: &dtdv,
+        dpdu: &dpdu,
+        dpdv: &dpdv,
+    };
+    Slot::VF(if f == Builtin::Horizon {
+        hz::grid_visibility(&table, &g, &prm)
+    } else {
+        hz::grid_height(&table, &g, prm.scale)
+    })
 }

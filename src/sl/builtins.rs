@@ -146,6 +146,9 @@ pub enum Builtin {
     IsNan,
     /// BMRT/PRMan `raylevel()` and `isshadowray()`: arbor shades camera rays only, so 0.
     RayLevel,
+    // horizon mapping (Max): src/texture/horizon.rs
+    Horizon,
+    HorizonHeight,
 }
 
 /// One overload of a built-in.
@@ -303,6 +306,12 @@ pub static SIGS: &[Sig] = sigs! {
     "isnan" 'f' "f" IsNan;
     "raylevel" 'f' "" RayLevel;
     "isshadowray" 'f' "" RayLevel;
+    "horizon" 'f' "sffv" Horizon;
+    "horizon" 'f' "sffvsf" Horizon;
+    "horizon" 'f' "sffvsfsf" Horizon;
+    "horizon" 'f' "sffvsfsfsf" Horizon;
+    "horizonheight" 'f' "sff" HorizonHeight;
+    "horizonheight" 'f' "sffsf" HorizonHeight;
 };
 
 /// Names lowered by hand because their arguments are free-form.

@@ -2818,6 +2818,8 @@ fn always_varying(f: Builtin) -> bool {
             | Phong
             | Trace
             | Depth
+            | Horizon
+            | HorizonHeight
     )
 }
 

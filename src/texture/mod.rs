@@ -1,1 +1,3 @@
 //! texture (see DESIGN.md §2).
+
+pub mod horizon;

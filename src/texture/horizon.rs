@@ -1,0 +1,708 @@
+//! Horizon mapping (N. Max, "Horizon mapping: shadows for bump-mapped surfaces"; notes
+//! shading.md §4): shadows cast by bumps on their own surface.
+//!
+//! Input: a periodic height map F(s,t) (values in map units; the map spans the unit (s,t)
+//! patch, so a texel is 1/W by 1/H). Output: a [`HorizonTable`] holding, for every texel and
+//! each of 8 or 16 azimuths, `tan(horizon elevation)` = max over points ahead of
+//! `(F(q) − F(p)) / |q − p|`, clamped at 0. Storing the tangent (not the angle) makes a run-time
+//! bump scale exact: scaling every height by k scales every tangent by k.
+//!
+//! Build: per direction, the texels fall into wrap-around orbits `p, p+d, p+2d, …`; each orbit is
+//! a periodic height profile, swept once from far to near over two periods while a stack keeps
+//! the upper convex hull of the points ahead (O(texels) per direction). Directions are integer
+//! texel steps (rows, columns, diagonals, and the (2,1) knight steps for 16), so every texel
+//! lies exactly on its line; knight steps also sample the interpolated midpoints between
+//! texels. Their true (s,t) azimuths are stored, so the θ interpolation stays exact for
+//! non-square maps.
+//!
+//! Lookup: the light is moved into the standard patch's frame by `C⁻¹` (C's columns are
+//! dP/ds, dP/dt and n̂·|dP/ds × dP/dt|^{1/2}, Max §5), the horizon elevation is bilinear in
+//! (s,t) and linear in azimuth, and the visible fraction is Max's disc-sun penumbra function.
+//!
+//! File format (`.hzn`, little-endian): magic `b"ARBHZN1\0"`, u32 width, u32 height,
+//! u32 ndirs, u32 flags (bit 0: periodic, always set), ndirs × f32 azimuth (radians, in
+//! [0, 2π), increasing), W·H f32 heights (row-major, row = t), W·H·ndirs f32 tangents
+//! (texel-major: the ndirs tangents of one texel are contiguous).
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use glam::{Mat3, Vec3};
+
+const MAGIC: &[u8; 8] = b"ARBHZN1\0";
+
+/// Integer texel steps of the 8 tabulated directions (E, NE, N, NW, W, SW, S, SE).
+pub const DIRS8: [(i32, i32); 8] = [
+    (1, 0),
+    (1, 1),
+    (0, 1),
+    (-1, 1),
+    (-1, 0),
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+];
+
+/// The 16-direction set: the 8 above plus the knight steps between them.
+pub const DIRS16: [(i32, i32); 16] = [
+    (1, 0),
+    (2, 1),
+    (1, 1),
+    (1, 2),
+    (0, 1),
+    (-1, 2),
+    (-1, 1),
+    (-2, 1),
+    (-1, 0),
+    (-2, -1),
+    (-1, -1),
+    (-1, -2),
+    (0, -1),
+    (1, -2),
+    (1, -1),
+    (2, -1),
+];
+
+/// Horizon tables of one height map (see the module header).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HorizonTable {
+    pub width: usize,
+    pub height: usize,
+    /// Azimuth of each direction in the (s,t) plane, radians in [0, 2π), increasing.
+    pub azimuths: Vec<f32>,
+    /// Height per texel, row-major (row index follows t).
+    pub heights: Vec<f32>,
+    /// tan(horizon elevation) per texel and direction: `tans[texel * ndirs + k]`, ≥ 0.
+    pub tans: Vec<f32>,
+}
+
+/// Direction steps for a direction count (8 or 16).
+pub fn directions(n: usize) -> Option<&'static [(i32, i32)]> {
+    match n {
+        8 => Some(&DIRS8),
+        16 => Some(&DIRS16),
+        _ => None,
+    }
+}
+
+impl HorizonTable {
+    /// Builds the tables of a periodic `w`×`h` height map for 8 or 16 directions.
+    pub fn build(heights: &[f32], w: usize, h: usize, ndirs: usize) -> Result<Self, String> {
+        let dirs = directions(ndirs)
+            .ok_or_else(|| format!("horizon maps have 8 or 16 directions, not {ndirs}"))?;
+        if w == 0 || h == 0 || heights.len() != w * h {
+            return Err(format!(
+                "height map of {w}x{h} texels needs {} values, got {}",
+                w * h,
+                heights.len()
+            ));
+        }
+        if heights.iter().any(|v| !v.is_finite()) {
+            return Err("height map holds a non-finite value".into());
+        }
+        let mut tans = vec![0f32; w * h * ndirs];
+        let mut sweep = Sweep::default();
+        for (k, &(a, b)) in dirs.iter().enumerate() {
+            sweep.direction(heights, w, h, a, b, |texel, tan| {
+                tans[texel * ndirs + k] = tan.max(0.0)
+            });
+        }
+        let azimuths = dirs
+            .iter()
+            .map(|&(a, b)| {
+                let az = (b as f32 / h as f32).atan2(a as f32 / w as f32);
+                az.rem_euclid(std::f32::consts::TAU)
+            })
+            .collect();
+        Ok(HorizonTable {
+            width: w,
+            height: h,
+            azimuths,
+            heights: heights.to_vec(),
+            tans,
+        })
+    }
+
+    pub fn ndirs(&self) -> usize {
+        self.azimuths.len()
+    }
+
+    /// The stored tangent of texel (x, y) (wrapped) in direction k.
+    #[inline]
+    pub fn tan_at(&self, x: i64, y: i64, k: usize) -> f32 {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let i = (y.rem_euclid(h) * w + x.rem_euclid(w)) as usize;
+        self.tans[i * self.ndirs() + k]
+    }
+
+    /// Bilinear weights and the four wrapped texel indices around (s, t).
+    #[inline]
+    fn corners(&self, s: f32, t: f32) -> ([usize; 4], [f32; 4]) {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let x = if s.is_finite() { s } else { 0.0 } * self.width as f32 - 0.5;
+        let y = if t.is_finite() { t } else { 0.0 } * self.height as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (xi, yi) = (x0 as i64, y0 as i64);
+        let ix =
+            |dx: i64, dy: i64| ((yi + dy).rem_euclid(h) * w + (xi + dx).rem_euclid(w)) as usize;
+        (
+            [ix(0, 0), ix(1, 0), ix(0, 1), ix(1, 1)],
+            [
+                (1.0 - fx) * (1.0 - fy),
+                fx * (1.0 - fy),
+                (1.0 - fx) * fy,
+                fx * fy,
+            ],
+        )
+    }
+
+    /// Height at (s, t), bilinear with periodic wrap (texel centres at (i+½)/W).
+    pub fn height_at(&self, s: f32, t: f32) -> f32 {
+        let (ix, wt) = self.corners(s, t);
+        (0..4).map(|c| self.heights[ix[c]] * wt[c]).sum()
+    }
+
+    /// Horizon elevation (radians) at (s, t) towards azimuth `theta` (radians, from +s towards
+    /// +t), for bump heights multiplied by `scale`: bilinear in (s,t) per direction, then
+    /// linear in azimuth between the two nearest tabulated directions.
+    pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+        let nd = self.ndirs();
+        let th = if theta.is_finite() {
+            theta.rem_euclid(std::f32::consts::TAU)
+        } else {
+            0.0
+        };
+        // k0: last azimuth ≤ θ (wrapping below the first one to the last).
+        let mut k0 = nd - 1;
+        for (k, &a) in self.azimuths.iter().enumerate() {
+            if a <= th {
+                k0 = k;
+            }
+        }
+        let k1 = (k0 + 1) % nd;
+        let (a0, mut a1) = (self.azimuths[k0], self.azimuths[k1]);
+        let mut x = th;
+        if a1 <= a0 {
+            a1 += std::f32::consts::TAU;
+        }
+        if x < a0 {
+            x += std::f32::consts::TAU;
+        }
+        let f = ((x - a0) / (a1 - a0)).clamp(0.0, 1.0);
+        let (ix, wt) = self.corners(s, t);
+        let (mut t0, mut t1) = (0.0, 0.0);
+        for c in 0..4 {
+            t0 += self.tans[ix[c] * nd + k0] * wt[c];
+            t1 += self.tans[ix[c] * nd + k1] * wt[c];
+        }
+        let sc = scale.max(0.0);
+        (1.0 - f) * (sc * t0).atan() + f * (sc * t1).atan()
+    }
+
+    /// Serialises to the `.hzn` format (module header).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(24 + 4 * (self.heights.len() + self.tans.len() + 16));
+        out.extend_from_slice(MAGIC);
+        for v in [self.width, self.height, self.ndirs(), 1] {
+            out.extend_from_slice(&(v as u32).to_le_bytes());
+        }
+        for v in self.azimuths.iter().chain(&self.heights).chain(&self.tans) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out
+    }
+
+    /// Parses the `.hzn` format, checking sizes and values.
+    pub fn from_bytes(b: &[u8]) -> Result<Self, String> {
+        if b.len() < 24 || &b[..8] != MAGIC {
+            return Err("not an arbor horizon table (bad magic)".into());
+        }
+        let u = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as usize;
+        let (w, h, nd) = (u(8), u(12), u(16));
+        if w == 0 || h == 0 || directions(nd).is_none() {
+            return Err(format!(
+                "bad horizon table header ({w}x{h}, {nd} directions)"
+            ));
+        }
+        let n = w
+            .checked_mul(h)
+            .and_then(|t| t.checked_mul(nd + 1))
+            .and_then(|t| t.checked_add(nd))
+            .ok_or("horizon table too large")?;
+        if b.len() != 24 + 4 * n {
+            return Err(format!(
+                "horizon table truncated: {} bytes, expected {}",
+                b.len(),
+                24 + 4 * n
+            ));
+        }
+        let f: Vec<f32> = b[24..]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        if f.iter().any(|v| !v.is_finite()) {
+            return Err("horizon table holds a non-finite value".into());
+        }
+        Ok(HorizonTable {
+            width: w,
+            height: h,
+            azimuths: f[..nd].to_vec(),
+            heights: f[nd..nd + w * h].to_vec(),
+            tans: f[nd + w * h..].to_vec(),
+        })
+    }
+
+    pub fn write(&self, path: &Path) -> Result<(), String> {
+        std::fs::write(path, self.to_bytes()).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let b = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        Self::from_bytes(&b).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// Reusable buffers of the per-orbit hull sweep.
+#[derive(Default)]
+struct Sweep {
+    z: Vec<f32>,
+    texel: Vec<u32>,
+    stack: Vec<u32>,
+    visited: Vec<bool>,
+}
+
+impl Sweep {
+    /// Calls `emit(texel, tan)` once per texel with the max slope ahead along step (a, b).
+    fn direction(
+        &mut self,
+        f: &[f32],
+        w: usize,
+        h: usize,
+        a: i32,
+        b: i32,
+        mut emit: impl FnMut(usize, f32),
+    ) {
+        // Knight steps sample the midpoint between texels too (sub = 2 samples per step).
+        let sub = if a.abs() > 1 || b.abs() > 1 { 2 } else { 1 };
+        let (dx, dy) = (a as f32 / w as f32, b as f32 / h as f32);
+        let ds = (dx * dx + dy * dy).sqrt() / sub as f32;
+        let (wi, hi) = (w as i64, h as i64);
+        let at = |x: i64, y: i64| f[(y.rem_euclid(hi) * wi + x.rem_euclid(wi)) as usize];
+        // Midpoint of a step as the mean of the two texels straddling it.
+        let (ha0, ha1) = (
+            (a as f32 / 2.0).floor() as i64,
+            (a as f32 / 2.0).ceil() as i64,
+        );
+        let (hb0, hb1) = (
+            (b as f32 / 2.0).floor() as i64,
+            (b as f32 / 2.0).ceil() as i64,
+        );
+        self.visited.clear();
+        self.visited.resize(w * h, false);
+        for start in 0..w * h {
+            if self.visited[start] {
+                continue;
+            }
+            // Collect the orbit start, start+d, … until it wraps back.
+            self.z.clear();
+            self.texel.clear();
+            let (mut x, mut y) = ((start % w) as i64, (start / w) as i64);
+            loop {
+                let i = (y * wi + x) as usize;
+                if self.visited[i] {
+                    break;
+                }
+                self.visited[i] = true;
+                self.texel.push(i as u32);
+                self.z.push(f[i]);
+                if sub == 2 {
+                    self.z
+                        .push(0.5 * (at(x + ha0, y + hb0) + at(x + ha1, y + hb1)));
+                }
+                x = (x + a as i64).rem_euclid(wi);
+                y = (y + b as i64).rem_euclid(hi);
+            }
+            let m = self.z.len();
+            // Two periods: every point of the first sees the whole orbit ahead of it.
+            self.stack.clear();
+            for j in (0..2 * m).rev() {
+                let zj = self.z[j % m];
+                let xj = j as f32 * ds;
+                let slope = |q: u32| (self.z[q as usize % m] - zj) / (q as f32 * ds - xj);
+                while self.stack.len() >= 2 {
+                    let top = self.stack[self.stack.len() - 1];
+                    let sec = self.stack[self.stack.len() - 2];
+                    if slope(top) <= slope(sec) {
+                        self.stack.pop();
+                    } else {
+                        break;
+                    }
+                }
+                if j < m && j % sub == 0 {
+                    let tan = self.stack.last().map_or(0.0, |&q| slope(q));
+                    emit(self.texel[j / sub] as usize, tan);
+                }
+                self.stack.push(j as u32);
+            }
+        }
+    }
+}
+
+/// Max's visible fraction of a disc light whose centre is `alpha` half-diameters above the
+/// horizon (§4.7): 0 below −1, 1 above 1, `½ + (asin α + α√(1−α²))/π` between.
+pub fn penumbra_fraction(alpha: f32) -> f32 {
+    if alpha.is_nan() {
+        return 0.0;
+    }
+    if alpha <= -1.0 {
+        0.0
+    } else if alpha >= 1.0 {
+        1.0
+    } else {
+        0.5 + (alpha.asin() + alpha * (1.0 - alpha * alpha).sqrt()) / std::f32::consts::PI
+    }
+}
+
+/// Light direction on the standard patch: `C⁻¹ L` with C's columns `ps` (dP/ds), `pt`
+/// (dP/dt) and `n̂·|ps × pt|^{1/2}`, n̂ the unit normal on the side `up` points to (the bumps
+/// stand on that side). None when the frame is degenerate.
+pub fn standard_light(ps: Vec3, pt: Vec3, up: Vec3, l: Vec3) -> Option<Vec3> {
+    let n = ps.cross(pt);
+    let len = n.length();
+    if !(len > 1e-20) || !l.is_finite() {
+        return None;
+    }
+    let side = if n.dot(up) < 0.0 { -1.0 } else { 1.0 };
+    let c = Mat3::from_cols(ps, pt, n * (side / len.sqrt()));
+    let det = c.determinant();
+    if !det.is_finite() || det.abs() < 1e-30 {
+        return None;
+    }
+    let r = c.inverse() * l;
+    r.is_finite().then_some(r)
+}
+
+/// Visible fraction of the light along `lp` (a standard-patch direction) at (s, t).
+/// `penumbra` is the light's angular diameter (radians; 0: a hard test `elevation ≥ horizon`).
+pub fn visibility(
+    table: &HorizonTable,
+    s: f32,
+    t: f32,
+    lp: Vec3,
+    scale: f32,
+    penumbra: f32,
+) -> f32 {
+    let horiz = (lp.x * lp.x + lp.y * lp.y).sqrt();
+    let el = lp.z.atan2(horiz);
+    let theta = lp.y.atan2(lp.x);
+    let hz = table.elevation(s, t, theta, scale);
+    if penumbra > 0.0 {
+        penumbra_fraction((el - hz) / (0.5 * penumbra))
+    } else if el >= hz {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// Run-time options of the `horizon` shading built-in.
+#[derive(Clone, Copy, Debug)]
+pub struct HorizonParams {
+    /// Bump height multiplier relative to the unit (s,t) patch.
+    pub scale: f32,
+    /// Light's angular diameter in radians (soft edge).
+    pub penumbra: f32,
+    /// Filter footprint multiplier (like texture's "width").
+    pub width: f32,
+}
+
+impl Default for HorizonParams {
+    fn default() -> Self {
+        HorizonParams {
+            scale: 1.0,
+            penumbra: 0.5f32.to_radians(),
+            width: 1.0,
+        }
+    }
+}
+
+/// One grid's inputs: per point s, t, P, the outward normal and the light vector, plus the
+/// per-grid-step differences of s, t and P along u and v (from the diced grid).
+pub struct GridInputs<'a> {
+    pub s: &'a [f32],
+    pub t: &'a [f32],
+    pub l: &'a [Vec3],
+    pub up: &'a [Vec3],
+    pub dsdu: &'a [f32],
+    pub dsdv: &'a [f32],
+    pub dtdu: &'a [f32],
+    pub dtdv: &'a [f32],
+    pub dpdu: &'a [Vec3],
+    pub dpdv: &'a [Vec3],
+}
+
+/// dP/ds and dP/dt from grid differences: solves `[Pu Pv] = [Ps Pt]·J`, J = ∂(s,t)/∂(u,v).
+pub fn st_tangents(pu: Vec3, pv: Vec3, su: f32, sv: f32, tu: f32, tv: f32) -> Option<(Vec3, Vec3)> {
+    let det = su * tv - sv * tu;
+    if !(det.abs() > 1e-20) {
+        return None;
+    }
+    // J⁻¹ = [[tv, −sv], [−tu, su]] / det.
+    let ps = (pu * tv - pv * tu) / det;
+    let pt = (pv * su - pu * sv) / det;
+    (ps.is_finite() && pt.is_finite()).then_some((ps, pt))
+}
+
+/// Visible fraction per grid point. Points whose (s,t) frame is degenerate fall back to the
+/// smooth surface's own test (lit iff the light is above it). Filtering: when a grid step
+/// covers more than a texel, the fraction is averaged over up to 4×4 samples of the footprint.
+pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) -> Vec<f32> {
+    let n = g.s.len();
+    let (w, h) = (table.width as f32, table.height as f32);
+    (0..n)
+        .map(|i| {
+            let (su, sv, tu, tv) = (g.dsdu[i], g.dsdv[i], g.dtdu[i], g.dtdv[i]);
+            let Some((ps, pt)) = st_tangents(g.dpdu[i], g.dpdv[i], su, sv, tu, tv) else {
+                return if g.l[i].dot(g.up[i]) > 0.0 { 1.0 } else { 0.0 };
+            };
+            let Some(lp) = standard_light(ps, pt, g.up[i], g.l[i]) else {
+                return if g.l[i].dot(g.up[i]) > 0.0 { 1.0 } else { 0.0 };
+            };
+            let fw = p.width.max(0.0);
+            let ext = ((su.abs() + sv.abs()) * w).max((tu.abs() + tv.abs()) * h) * fw;
+            let k = if ext.is_finite() {
+                (ext.ceil() as usize).clamp(1, 4)
+            } else {
+                1
+            };
+            if k == 1 {
+                return visibility(table, g.s[i], g.t[i], lp, p.scale, p.penumbra);
+            }
+            let mut acc = 0.0;
+            for a in 0..k {
+                let fu = ((a as f32 + 0.5) / k as f32 - 0.5) * fw;
+                for b in 0..k {
+                    let fv = ((b as f32 + 0.5) / k as f32 - 0.5) * fw;
+                    let s = g.s[i] + fu * su + fv * sv;
+                    let t = g.t[i] + fu * tu + fv * tv;
+                    acc += visibility(table, s, t, lp, p.scale, p.penumbra);
+                }
+            }
+            acc / (k * k) as f32
+        })
+        .collect()
+}
+
+/// Max-scaled displacement distance per grid point: `scale · F(s,t) · |dP/ds × dP/dt|^{1/2}`
+/// (Max §3: P'' = P + F·N/|N|^{1/2}), in the units of P. Degenerate frames give 0.
+pub fn grid_height(table: &HorizonTable, g: &GridInputs, scale: f32) -> Vec<f32> {
+    (0..g.s.len())
+        .map(|i| {
+            let f = table.height_at(g.s[i], g.t[i]);
+            match st_tangents(
+                g.dpdu[i], g.dpdv[i], g.dsdu[i], g.dsdv[i], g.dtdu[i], g.dtdv[i],
+            ) {
+                Some((ps, pt)) => scale * f * ps.cross(pt).length().sqrt(),
+                None => 0.0,
+            }
+        })
+        .collect()
+}
+
+/// Reads a height map image (PNG, TIFF, JPEG, HDR via `image`; OpenEXR via `exr`) as
+/// luminance (Rec. 709 weights; 8/16-bit images normalised to [0,1]).
+pub fn read_height_image(path: &Path) -> Result<(Vec<f32>, usize, usize), String> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let lum = |r: f32, g: f32, b: f32| 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    if ext == "exr" {
+        use exr::prelude::*;
+        let img = read_first_rgba_layer_from_file(
+            path,
+            |res, _| {
+                (
+                    vec![0f32; res.width() * res.height()],
+                    res.width(),
+                    res.height(),
+                )
+            },
+            move |px: &mut (Vec<f32>, usize, usize), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px.0[pos.y() * px.1 + pos.x()] = lum(r, g, b)
+            },
+        )
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+        let (v, w, h) = img.layer_data.channel_data.pixels;
+        return Ok((v, w, h));
+    }
+    let img = image::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let rgb = img.to_rgb32f();
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    let v = rgb.pixels().map(|p| lum(p.0[0], p.0[1], p.0[2])).collect();
+    Ok((v, w, h))
+}
+
+/// Tables by path, loaded once and shared by every thread (failures are remembered too).
+pub fn cached(path: &str) -> Result<Arc<HorizonTable>, String> {
+    type Cache = Mutex<HashMap<String, Result<Arc<HorizonTable>, String>>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    let mut m = cache.lock().unwrap_or_else(|e| e.into_inner());
+    m.entry(path.to_string())
+        .or_insert_with(|| HorizonTable::read(Path::new(path)).map(Arc::new))
+        .clone()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ridge_map(n: usize, x: usize, h: f32) -> Vec<f32> {
+        let mut f = vec![0.0; n * n];
+        for y in 0..n {
+            f[y * n + x] = h;
+        }
+        f
+    }
+
+    /// Brute force reference: max slope over one period ahead (plus midpoints for knights).
+    fn brute(f: &[f32], w: usize, h: usize, a: i32, b: i32, x: usize, y: usize) -> f32 {
+        let (dx, dy) = (a as f32 / w as f32, b as f32 / h as f32);
+        let step = (dx * dx + dy * dy).sqrt();
+        let at = |x: i64, y: i64| {
+            f[(y.rem_euclid(h as i64) * w as i64 + x.rem_euclid(w as i64)) as usize]
+        };
+        let z0 = f[y * w + x];
+        let mut best = 0f32;
+        for m in 1..=(2 * w * h) as i64 {
+            let (qx, qy) = (x as i64 + m * a as i64, y as i64 + m * b as i64);
+            best = best.max((at(qx, qy) - z0) / (m as f32 * step));
+        }
+        best
+    }
+
+    #[test]
+    fn single_ridge_gives_atan_h_over_d() {
+        // Notes §7.4 H2: N = 64, ridge height 0.05, 8 texels east: β_E = 68.20°.
+        let t = HorizonTable::build(&ridge_map(64, 18, 0.05), 64, 64, 8).unwrap();
+        let tan = t.tan_at(10, 5, 0);
+        assert!((tan - 0.4).abs() < 1e-5, "{tan}");
+        let beta = 90.0 - tan.atan().to_degrees();
+        assert!((beta - 68.20).abs() < 0.01, "{beta}");
+        // Looking west the ridge is 64-8 = 56 texels away (periodic wrap).
+        let west = t.tan_at(10, 5, 4);
+        assert!((west - 0.05 / (56.0 / 64.0)).abs() < 1e-5, "{west}");
+        // Along the ridge (north) nothing rises.
+        assert_eq!(t.tan_at(10, 5, 2), 0.0);
+    }
+
+    #[test]
+    fn hull_sweep_matches_brute_force() {
+        let (w, h) = (12, 8);
+        let f: Vec<f32> = (0..w * h)
+            .map(|i| ((i * 7919 % 31) as f32 / 31.0) * 0.1)
+            .collect();
+        for nd in [8, 16] {
+            let t = HorizonTable::build(&f, w, h, nd).unwrap();
+            for (k, &(a, b)) in directions(nd).unwrap().iter().enumerate() {
+                if a.abs() > 1 || b.abs() > 1 {
+                    continue; // brute() has no midpoints
+                }
+                for y in 0..h {
+                    for x in 0..w {
+                        let want = brute(&f, w, h, a, b, x, y);
+                        let got = t.tan_at(x as i64, y as i64, k);
+                        assert!(
+                            (want - got).abs() < 1e-5,
+                            "dir {k} ({x},{y}): {want} vs {got}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn flat_map_and_azimuths() {
+        let t = HorizonTable::build(&vec![0.3; 16 * 16], 16, 16, 16).unwrap();
+        assert!(t.tans.iter().all(|&v| v == 0.0));
+        assert!((t.azimuths[1] - 0.5f32.atan()).abs() < 1e-6);
+        assert!(t.azimuths.windows(2).all(|p| p[0] < p[1]));
+        assert!(HorizonTable::build(&[0.0; 4], 2, 2, 7).is_err());
+        assert!(HorizonTable::build(&[0.0; 3], 2, 2, 8).is_err());
+    }
+
+    #[test]
+    fn theta_interpolation() {
+        // H4: exact at tabulated azimuths, the mean of neighbours halfway (angles, scale 1).
+        let t = HorizonTable::build(&ridge_map(32, 20, 0.1), 32, 32, 8).unwrap();
+        let (s, tt) = (10.5 / 32.0, 3.5 / 32.0);
+        let e0 = t.tan_at(10, 3, 0).atan();
+        let e1 = t.tan_at(10, 3, 1).atan();
+        let e7 = t.tan_at(10, 3, 7).atan();
+        let d = std::f32::consts::PI / 8.0;
+        assert!((t.elevation(s, tt, 0.0, 1.0) - e0).abs() < 1e-6);
+        assert!((t.elevation(s, tt, d, 1.0) - 0.5 * (e0 + e1)).abs() < 1e-6);
+        assert!((t.elevation(s, tt, -d, 1.0) - 0.5 * (e7 + e0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn round_trip_and_bad_files() {
+        let t = HorizonTable::build(&ridge_map(8, 3, 0.2), 8, 8, 16).unwrap();
+        let b = t.to_bytes();
+        assert_eq!(HorizonTable::from_bytes(&b).unwrap(), t);
+        assert!(HorizonTable::from_bytes(&b[..b.len() - 1]).is_err());
+        assert!(HorizonTable::from_bytes(b"nonsense").is_err());
+    }
+
+    #[test]
+    fn penumbra_values() {
+        // Notes H12.
+        for (a, f) in [
+            (-1.0, 0.0),
+            (-0.5, 0.19550),
+            (0.0, 0.5),
+            (0.5, 0.80450),
+            (1.0, 1.0),
+        ] {
+            assert!((penumbra_fraction(a) - f).abs() < 1e-4, "{a}");
+        }
+        assert_eq!(penumbra_fraction(f32::NAN), 0.0);
+    }
+
+    #[test]
+    fn light_transform_h9_h10() {
+        // H9: P = (2u, v, 0), L = (1,0,1)/√2 → θ = 0, φ = 35.26°.
+        let lp = standard_light(Vec3::X * 2.0, Vec3::Y, Vec3::Z, Vec3::new(1.0, 0.0, 1.0)).unwrap();
+        let phi = (lp.z / lp.length()).acos().to_degrees();
+        assert!((phi - 35.26).abs() < 0.01, "{phi}");
+        assert!(lp.y.abs() < 1e-6);
+        // H10: matches the closed form and C·(C⁻¹L) = L.
+        let (pu, pv, l) = (
+            Vec3::new(2.0, 0.3, 0.1),
+            Vec3::new(0.2, 1.0, 0.4),
+            Vec3::new(0.3, 0.5, 0.8),
+        );
+        let n = pu.cross(pv);
+        let lp = standard_light(pu, pv, n, l).unwrap();
+        let want = Vec3::new(0.078858, 0.684704, 0.386281);
+        assert!((lp - want).length() < 1e-4, "{lp}");
+        let back = pu * lp.x + pv * lp.y + n / n.length().sqrt() * lp.z;
+        assert!((back - l).length() < 1e-5);
+        // H11: a back-facing light lands below the standard patch.
+        assert!(standard_light(pu, pv, n, -n).unwrap().z < 0.0);
+        assert!(standard_light(pu, pu, n, l).is_none());
+    }
+
+    #[test]
+    fn st_tangents_invert_the_jacobian() {
+        // s = u + v, t = v on P = (u, v, 0): dP/ds = (1,0,0), dP/dt = (-1,1,0).
+        let (ps, pt) = st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 0.0, 1.0).unwrap();
+        assert!((ps - Vec3::X).length() < 1e-6 && (pt - Vec3::new(-1.0, 1.0, 0.0)).length() < 1e-6);
+        assert!(st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 1.0, 1.0).is_none());
+    }
+}

@@ -1,0 +1,270 @@
+//! Horizon mapping (Max) known answers through the public API: notes shading.md §7.4.
+
+use arbor::texture::horizon::{standard_light, visibility, HorizonTable};
+use glam::Vec3;
+
+const N: usize = 64;
+
+fn ridge(n: usize, x: usize, h: f32) -> Vec<f32> {
+    let mut f = vec![0.0; n * n];
+    for y in 0..n {
+        f[y * n + x] = h;
+    }
+    f
+}
+
+/// Light on the standard patch from zenith angle φ (degrees) and azimuth θ (degrees).
+fn light(phi: f32, theta: f32) -> Vec3 {
+    let (p, t) = (phi.to_radians(), theta.to_radians());
+    Vec3::new(p.sin() * t.cos(), p.sin() * t.sin(), p.cos())
+}
+
+fn centre(x: usize, y: usize) -> (f32, f32) {
+    ((x as f32 + 0.5) / N as f32, (y as f32 + 0.5) / N as f32)
+}
+
+#[test]
+fn ridge_64_texels_gives_68_20_degrees_through_a_file() {
+    let t = HorizonTable::build(&ridge(N, 18, 0.05), N, N, 8).unwrap();
+    let path = std::env::temp_dir().join(format!("arbor_ridge_{}.hzn", std::process::id()));
+    t.write(&path).unwrap();
+    let t = HorizonTable::read(&path).unwrap();
+    let _ = std::fs::remove_file(&path);
+    let (s, tt) = centre(10, 7);
+    let beta = 90.0 - t.elevation(s, tt, 0.0, 1.0).to_degrees();
+    assert!((beta - 68.20).abs() < 0.01, "β_E = {beta}");
+    // A light at φ = 68° (east) is lit, at 69° shadowed (hard test).
+    assert_eq!(visibility(&t, s, tt, light(68.0, 0.0), 1.0, 0.0), 1.0);
+    assert_eq!(visibility(&t, s, tt, light(69.0, 0.0), 1.0, 0.0), 0.0);
+    // Well below the ridge's horizon the disc light is fully hidden, at the horizon half.
+    let pen = 2f32.to_radians();
+    assert_eq!(visibility(&t, s, tt, light(75.0, 0.0), 1.0, pen), 0.0);
+    let half = visibility(&t, s, tt, light(beta, 0.0), 1.0, pen);
+    assert!((half - 0.5).abs() < 0.01, "{half}");
+    // Diagonal case of H2: a ridge 8 texels east is 8√2 away along NE? No: along NE the
+    // ridge column is reached after 8 steps of length √2/64.
+    let ne = 90.0 - t.elevation(s, tt, 45f32.to_radians(), 1.0).to_degrees();
+    assert!((ne - 74.21).abs() < 0.01, "β_NE = {ne}");
+    // "scale" doubles the heights exactly: tan doubles.
+    let e2 = t.elevation(s, tt, 0.0, 2.0).tan();
+    assert!((e2 - 0.8).abs() < 1e-4);
+}
+
+#[test]
+fn flat_map_and_zenith_light_shadow_nothing() {
+    let flat = HorizonTable::build(&vec![0.5; N * N], N, N, 16).unwrap();
+    let bumpy: Vec<f32> = (0..N * N)
+        .map(|i| ((i * 7919 % 97) as f32 / 97.0) * 0.2)
+        .collect();
+    let bumpy = HorizonTable::build(&bumpy, N, N, 8).unwrap();
+    for y in (0..N).step_by(5) {
+        for x in (0..N).step_by(3) {
+            let (s, t) = centre(x, y);
+            for th in (0..360).step_by(15) {
+                for phi in [0.0, 30.0, 60.0, 89.0] {
+                    assert_eq!(
+                        visibility(&flat, s, t, light(phi, th as f32), 1.0, 0.0),
+                        1.0
+                    );
+                }
+                // Zenith never shadowed, whatever the bumps.
+                assert_eq!(
+                    visibility(&bumpy, s, t, light(0.0, th as f32), 1.0, 0.0),
+                    1.0
+                );
+            }
+            // Below the surface: always shadowed (H11).
+            assert_eq!(visibility(&flat, s, t, light(100.0, 10.0), 1.0, 0.0), 0.0);
+        }
+    }
+}
+
+#[test]
+fn rotating_the_map_rotates_the_directions() {
+    let f: Vec<f32> = (0..N * N)
+        .map(|i| ((i * 104729 % 113) as f32 / 113.0).powi(3) * 0.3)
+        .collect();
+    // r(x', y') with (x', y') = (−y, x): a +90° rotation of the texel grid.
+    let mut r = vec![0.0; N * N];
+    for y in 0..N {
+        for x in 0..N {
+            let (xr, yr) = ((N - y) % N, x);
+            r[yr * N + xr] = f[y * N + x];
+        }
+    }
+    for (nd, shift) in [(8usize, 2usize), (16, 4)] {
+        let a = HorizonTable::build(&f, N, N, nd).unwrap();
+        let b = HorizonTable::build(&r, N, N, nd).unwrap();
+        for y in 0..N {
+            for x in 0..N {
+                let (xr, yr) = (((N - y) % N) as i64, x as i64);
+                for k in 0..nd {
+                    let (ta, tb) = (
+                        a.tan_at(x as i64, y as i64, k),
+                        b.tan_at(xr, yr, (k + shift) % nd),
+                    );
+                    assert!(
+                        (ta - tb).abs() <= 1e-4 * ta.abs().max(1.0),
+                        "{nd} dirs, k {k} at ({x},{y}): {ta} vs {tb}"
+                    );
+                }
+            }
+        }
+        // And so do the shadows: a light rotated by 90° sees the same visibility.
+        let (s, t) = centre(20, 9);
+        let (sr, tr) = centre((N - 9) % N, 20);
+        for th in [10.0f32, 100.0, 200.0, 333.0] {
+            for phi in [50.0, 70.0, 80.0] {
+                let va = visibility(&a, s, t, light(phi, th), 1.0, 1f32.to_radians());
+                let vb = visibility(&b, sr, tr, light(phi, th + 90.0), 1.0, 1f32.to_radians());
+                assert!((va - vb).abs() < 1e-4, "θ {th} φ {phi}: {va} vs {vb}");
+            }
+        }
+    }
+}
+
+/// Smooth periodic bumps: sum of wrapped Gaussians.
+fn bumps(n: usize) -> Vec<f32> {
+    let centres = [
+        (0.2, 0.3, 0.06, 0.05),
+        (0.7, 0.2, 0.05, 0.04),
+        (0.5, 0.6, 0.08, 0.06),
+        (0.1, 0.8, 0.04, 0.03),
+        (0.85, 0.75, 0.06, 0.05),
+        (0.35, 0.05, 0.03, 0.02),
+    ];
+    let mut f = vec![0.0; n * n];
+    for y in 0..n {
+        for x in 0..n {
+            let (s, t) = ((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+            let mut h: f32 = 0.0;
+            for &(cs, ct, r, a) in &centres {
+                let ds = (s - cs + 0.5).rem_euclid(1.0) - 0.5;
+                let dt = (t - ct + 0.5).rem_euclid(1.0) - 0.5;
+                h += 3.0 * a * (-(ds * ds + dt * dt) / (r * r)).exp();
+            }
+            f[y * n + x] = h;
+        }
+    }
+    f
+}
+
+fn bilinear(f: &[f32], n: usize, x: f32, y: f32) -> f32 {
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let at =
+        |i: i64, j: i64| f[(j.rem_euclid(n as i64) * n as i64 + i.rem_euclid(n as i64)) as usize];
+    let (i, j) = (x0 as i64, y0 as i64);
+    at(i, j) * (1.0 - fx) * (1.0 - fy)
+        + at(i + 1, j) * fx * (1.0 - fy)
+        + at(i, j + 1) * (1.0 - fx) * fy
+        + at(i + 1, j + 1) * fx * fy
+}
+
+/// Ground truth: march the true height field from each texel centre towards the light.
+fn marched_mask(f: &[f32], n: usize, theta: f32, elev: f32) -> Vec<bool> {
+    let (c, s, tn) = (theta.cos(), theta.sin(), elev.tan());
+    let mut m = vec![false; n * n];
+    for y in 0..n {
+        for x in 0..n {
+            let z0 = f[y * n + x];
+            let mut d = 0.25f32;
+            while d < n as f32 {
+                let (qx, qy) = (x as f32 + c * d, y as f32 + s * d);
+                if bilinear(f, n, qx, qy) > z0 + tn * d / n as f32 {
+                    m[y * n + x] = true;
+                    break;
+                }
+                d += 0.25;
+            }
+        }
+    }
+    m
+}
+
+fn iou(a: &[bool], b: &[bool]) -> f32 {
+    let inter = a.iter().zip(b).filter(|(p, q)| **p && **q).count();
+    let union = a.iter().zip(b).filter(|(p, q)| **p || **q).count();
+    if union == 0 {
+        1.0
+    } else {
+        inter as f32 / union as f32
+    }
+}
+
+#[test]
+fn shadow_masks_agree_with_ray_marched_height_field() {
+    let f = bumps(N);
+    let mut report = Vec::new();
+    for nd in [8usize, 16] {
+        let t = HorizonTable::build(&f, N, N, nd).unwrap();
+        let (mut worst_tab, mut worst_mid) = (1.0f32, 1.0f32);
+        for (theta_deg, elev_deg) in [
+            (0.0f32, 15.0f32),
+            (45.0, 20.0),
+            (180.0, 12.0),
+            (30.0, 20.0),
+            (200.0, 12.0),
+            (112.5, 25.0),
+        ] {
+            let (th, el) = (theta_deg.to_radians(), elev_deg.to_radians());
+            let truth = marched_mask(&f, N, th, el);
+            let lp = Vec3::new(el.cos() * th.cos(), el.cos() * th.sin(), el.sin());
+            let ours: Vec<bool> = (0..N * N)
+                .map(|i| {
+                    let (s, tt) = centre(i % N, i / N);
+                    visibility(&t, s, tt, lp, 1.0, 0.0) < 0.5
+                })
+                .collect();
+            let shadowed = truth.iter().filter(|b| **b).count();
+            assert!(
+                shadowed > N * N / 50,
+                "scene must cast shadows ({shadowed})"
+            );
+            let q = iou(&truth, &ours);
+            report.push(format!("{nd} dirs θ={theta_deg} el={elev_deg}: IoU {q:.3}"));
+            // Tabulated azimuths (multiples of 45°) against those interpolated between them.
+            if theta_deg % 45.0 == 0.0 {
+                worst_tab = worst_tab.min(q);
+            } else {
+                worst_mid = worst_mid.min(q);
+            }
+        }
+        assert!(worst_tab > 0.8, "{report:?}");
+        assert!(worst_mid > 0.3, "{report:?}");
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(report.len() == 12);
+}
+
+#[test]
+fn standard_light_is_scale_invariant_for_uniform_patches() {
+    // Max's |N|^{1/2} scaling: doubling the patch leaves the standard-patch light direction.
+    let l = Vec3::new(0.3, -0.2, 0.9);
+    let a = standard_light(Vec3::X, Vec3::Y, Vec3::Z, l)
+        .unwrap()
+        .normalize();
+    let b = standard_light(Vec3::X * 2.0, Vec3::Y * 2.0, Vec3::Z, l)
+        .unwrap()
+        .normalize();
+    assert!((a - b).length() < 1e-6);
+}
+
+/// Build time of 1024² tables (run with `--ignored --nocapture`).
+#[test]
+#[ignore]
+fn time_1024() {
+    let n = 1024;
+    let f: Vec<f32> = (0..n * n)
+        .map(|i| (((i % n) as f32 * 0.05).sin() * ((i / n) as f32 * 0.03).cos()).abs())
+        .collect();
+    for nd in [8, 16] {
+        let t0 = std::time::Instant::now();
+        let t = HorizonTable::build(&f, n, n, nd).unwrap();
+        eprintln!(
+            "1024² × {nd} directions: {:.2} s",
+            t0.elapsed().as_secs_f64()
+        );
+        assert_eq!(t.tans.len(), n * n * nd);
+    }
+}
