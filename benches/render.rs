@@ -7,13 +7,22 @@ use arbor::diag::{Diagnostics, SourceMap};
 use arbor::pipeline::{render_text, Settings};
 
 fn bench(c: &mut Criterion) {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/showcase.rib"))
-        .expect("examples/showcase.rib");
-    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/showcase.rib"
+    ))
+    .expect("examples/showcase.rib");
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
     let mut group = c.benchmark_group("showcase_640x480");
     group.sample_size(10);
     for threads in [1, cores] {
-        let settings = Settings { resolution: Some((640, 480)), threads, ..Settings::default() };
+        let settings = Settings {
+            resolution: Some((640, 480)),
+            threads,
+            ..Settings::default()
+        };
         group.bench_function(format!("{threads}_threads"), |b| {
             b.iter(|| {
                 let (sources, diags) = (SourceMap::new(), Diagnostics::new());
