@@ -6,6 +6,7 @@
 //! `ShadedGrid`) is shared by all hiders; a hider's output for a sample depends only on the
 //! grids covering it and on (pixel, sample, seed), never on the bucket or thread.
 
+pub mod abuffer;
 pub mod zbuffer;
 
 use glam::{Mat4, Vec3, Vec4};
@@ -423,13 +424,14 @@ pub fn make_hider(options: &Options, config: HiderConfig, diags: &Diagnostics) -
     match options.hider.name.as_str() {
         "hidden" | "" => Box::new(zbuffer::ZBuffer::new(config)),
         "null" => Box::new(NullHider(config)),
+        "abuffer" => Box::new(abuffer::ABuffer::new(config, &options.hider.params, diags)),
         other => {
             diags.report(
                 Diag::warning(
                     "render::hider",
                     format!("Hider \"{other}\" is not implemented; using \"hidden\""),
                 )
-                .help("the implemented hiders are \"hidden\" (stochastic Z-buffer) and \"null\""),
+                .help("the implemented hiders are \"hidden\" (stochastic Z-buffer), \"abuffer\" and \"null\""),
             );
             Box::new(zbuffer::ZBuffer::new(config))
         }
