@@ -848,7 +848,8 @@ fn bad_input_reports_instead_of_panicking() {
     assert!(surfaces_for(0, &pts, Mat4::IDENTITY, &d).is_empty());
     let s = d.snapshot();
     assert_eq!(s.len(), 2);
-    assert_eq!(s[1].0.code, "geom::unsupported");
+    // Points without "P" are invalid input (Points render since the subdiv/points work).
+    assert_eq!(s[1].0.code, "geom::invalid");
 }
 
 #[test]
