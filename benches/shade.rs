@@ -66,18 +66,27 @@ fn bench(c: &mut Criterion) {
     let scene = &scenes[0];
     let camera = Camera::new(scene);
     let lib = ShaderLibrary::new(CompileOptions::default());
-    let sys = ShadeSystem { library: &lib, sources: &sources, diags: &diags, textures: None };
+    let sys = ShadeSystem {
+        library: &lib,
+        sources: &sources,
+        diags: &diags,
+        textures: None,
+    };
     let mut group = c.benchmark_group("plastic_3_lights");
     for n in [16usize, 32, 64] {
         let g0 = grid(n);
         group.throughput(Throughput::Elements((n * n) as u64));
-        group.bench_with_input(BenchmarkId::from_parameter(format!("{n}x{n}")), &n, |b, _| {
-            b.iter(|| {
-                let mut g = g0.clone();
-                sys.shade(scene, &camera, 0, &mut g);
-                g
-            })
-        });
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{n}x{n}")),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut g = g0.clone();
+                    sys.shade(scene, &camera, 0, &mut g);
+                    g
+                })
+            },
+        );
     }
     group.finish();
 }
