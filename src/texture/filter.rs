@@ -177,6 +177,10 @@ fn trilinear(
 
 const EWA_CUT: f32 = 6.0;
 const MAX_ANISO: f32 = 16.0;
+/// Variance of the pixel Gaussian per unit footprint axis (σ ≈ 0.35 of a micropolygon).
+const PIXEL_VAR: f32 = 0.125;
+/// Variance of the reconstruction Gaussian, in texels² of the level used.
+const RECON_VAR: f32 = 0.15;
 
 /// Inverse-covariance coefficients (A, B, C) of the Greene–Heckbert quadratic
 /// Q = A u² + B uv + C v² for axis vectors (u_x, v_x), (u_y, v_y), and F = (u_x v_y − u_y v_x)².
@@ -215,9 +219,9 @@ pub fn ewa_setup(
     let (ax, ay) = (fp.ds1 * w, fp.dt1 * h);
     let (bx, by) = (fp.ds2 * w, fp.dt2 * h);
     let (bsx, bsy) = (0.5 * sblur * w, 0.5 * tblur * h);
-    let mut sxx = 0.25 * (ax * ax + bx * bx) + bsx * bsx;
-    let mut syy = 0.25 * (ay * ay + by * by) + bsy * bsy;
-    let mut sxy = 0.25 * (ax * ay + bx * by);
+    let mut sxx = PIXEL_VAR * (ax * ax + bx * bx) + bsx * bsx;
+    let mut syy = PIXEL_VAR * (ay * ay + by * by) + bsy * bsy;
+    let mut sxy = PIXEL_VAR * (ax * ay + bx * by);
     if !(sxx.is_finite() && syy.is_finite() && sxy.is_finite()) {
         (sxx, syy, sxy) = (0.0, 0.0, 0.0);
     }
@@ -256,7 +260,11 @@ pub fn ewa_setup(
     let ll = levels[level];
     let (kx, ky) = (ll.width as f32 / w, ll.height as f32 / h);
     // Scale to the level, add the reconstruction term (σ = ½ texel).
-    let (sxx, syy, sxy) = (sxx * kx * kx + 0.25, syy * ky * ky + 0.25, sxy * kx * ky);
+    let (sxx, syy, sxy) = (
+        sxx * kx * kx + RECON_VAR,
+        syy * ky * ky + RECON_VAR,
+        sxy * kx * ky,
+    );
     let det = sxx * syy - sxy * sxy;
     let (qa, qb, qc) = (syy / det, -2.0 * sxy / det, sxx / det);
     let rx = (EWA_CUT * sxx).sqrt().min(4.0 * ll.width as f32);
