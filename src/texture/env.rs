@@ -14,7 +14,7 @@
 use glam::Vec3;
 
 use super::cache::Fetcher;
-use super::filter::{ewa_setup, lookup, FilterKind, Footprint};
+use super::filter::{bilinear, lookup, FilterKind, Footprint};
 
 /// (F, R, U) per cube face, in file order px nx py ny pz nz.
 pub const CUBE_FRAMES: [(Vec3, Vec3, Vec3); 6] = [
@@ -103,44 +103,96 @@ pub fn latlong_lookup(
 }
 
 /// Filtered cube lookup, seamless across faces. Returns false for a zero direction.
+///
+/// The Gaussian lives on the sphere: directions are projected onto the plane tangent at the
+/// centre direction (so the kernel does not depend on which face the centre falls on), and
+/// each texel weighs by its solid angle. Texels are walked on the centre's face plane,
+/// extended past its edges; those past an edge are read bilinearly from the neighbouring face.
 pub fn cube_lookup(f: &mut Fetcher, dirs: &[Vec3; 5], blur: f32, out: &mut [f32]) -> bool {
-    if dirs[0].length_squared() == 0.0 || !dirs[0].is_finite() {
+    let c = dirs[0].normalize_or_zero();
+    if c.length_squared() == 0.0 || !c.is_finite() {
         return false;
     }
-    let (face, sc, tc) = cube_face(dirs[0]);
-    let mut c = [0f32; 8];
+    let (face, sc, tc) = cube_face(c);
+    // Tangent frame at c.
+    let e1 = if c.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+    let e1 = (e1 - c * c.dot(e1)).normalize();
+    let e2 = c.cross(e1);
+    let tangent = |d: Vec3| -> Option<(f32, f32)> {
+        let dc = d.dot(c);
+        if dc <= 1e-4 {
+            return None;
+        }
+        let p = d / dc;
+        Some((p.dot(e1), p.dot(e2)))
+    };
+    let mut corners = [0f32; 8];
     for k in 0..4 {
-        let d = dirs[k + 1];
-        // Corners behind the face plane: pull them onto the plane's far side, bounded.
-        let (s, t) = on_face(face, d);
-        c[2 * k] = s.clamp(sc - 2.0, sc + 2.0);
-        c[2 * k + 1] = t.clamp(tc - 2.0, tc + 2.0);
+        let (u, v) = tangent(dirs[k + 1]).unwrap_or((0.0, 0.0));
+        corners[2 * k] = u.clamp(-2.0, 2.0);
+        corners[2 * k + 1] = v.clamp(-2.0, 2.0);
     }
-    let mut fp = Footprint::from_corners(&c, 1.0, 1.0);
-    fp.s = sc;
-    fp.t = tc;
-    // A face spans 90°: blur (a fraction of the full circle's map) is 4× in face units.
-    let b = blur * 2.0;
+    let fp = Footprint::from_corners(&corners, 1.0, 1.0);
+    // Covariance in tangent units (a face spans 2 units at its centre).
+    let pv = 0.125;
+    let bl = blur * blur;
+    let sxx = pv * (fp.ds1 * fp.ds1 + fp.ds2 * fp.ds2) + bl;
+    let syy = pv * (fp.dt1 * fp.dt1 + fp.dt2 * fp.dt2) + bl;
+    let sxy = pv * (fp.ds1 * fp.dt1 + fp.ds2 * fp.dt2);
+    let tr = 0.5 * (sxx + syy);
+    let det = sxx * syy - sxy * sxy;
+    let disc = (tr * tr - det).max(0.0).sqrt();
+    let (lmax, lmin) = (tr + disc, (tr - disc).max(0.0));
+    let levels = &f.tex.header.levels[face];
+    let w0 = levels[0].width as f32;
+    // Level where the minor σ spans 1–2 texels (texel = 2/w tangent units).
+    let sig_min_texels = lmin.max(lmax / 256.0).sqrt() * w0 * 0.5;
+    let level = if sig_min_texels > 1.0 {
+        (sig_min_texels.log2().floor() as usize).min(levels.len() - 1)
+    } else {
+        0
+    };
+    let ll = levels[level];
+    let (w, h) = (ll.width, ll.height);
+    let texel = 2.0 / w as f32;
+    let recon = 0.15 * texel * texel;
+    let (sxx, syy) = (sxx + recon, syy + recon);
+    let det = (sxx * syy - sxy * sxy).max(1e-20);
+    let (qa, qb, qc) = (syy / det, -2.0 * sxy / det, sxx / det);
+    // Bounding box on the face plane (generous: the plane stretches away from the centre).
+    let r = (6.0 * sxx.max(syy)).sqrt() * 3.0 / texel;
+    let r = r.min(3.0 * w as f32);
+    let (cx, cy) = (sc * w as f32 - 0.5, tc * h as f32 - 0.5);
     let n = f.nchan;
     let mut acc = [0f32; 16];
     let acc = &mut acc[..n.min(16)];
-    let levels = f.tex.header.levels[face].clone();
-    let setup = ewa_setup(&levels, &fp, b, b);
-    let ll = levels[setup.level];
-    let (w, h) = (ll.width, ll.height);
-    let wsum = setup.run(f, acc, |x, y| {
-        if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
-            return Some((face, x as usize, y as usize));
+    let mut wsum = 0.0;
+    for y in (cy - r).ceil() as i64..=(cy + r).floor() as i64 {
+        for x in (cx - r).ceil() as i64..=(cx + r).floor() as i64 {
+            let s = (x as f32 + 0.5) / w as f32;
+            let t = (y as f32 + 0.5) / h as f32;
+            let d = face_dir(face, s, t);
+            let Some((u, v)) = tangent(d) else { continue };
+            let q = qa * u * u + qb * u * v + qc * v * v;
+            if q >= 6.0 {
+                continue;
+            }
+            // Solid angle of a texel of the face plane at distance |d|: dA/|d|³.
+            let l2 = d.length_squared();
+            let wt = (-0.5 * q).exp() / (l2 * l2.sqrt());
+            wsum += wt;
+            if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+                f.accum(face, level, x as usize, y as usize, wt, acc);
+            } else {
+                let (f2, s2, t2) = cube_face(d);
+                bilinear(f, f2, level, s2, t2, wt, acc);
+            }
         }
-        // Past the edge: the texel's direction on the neighbouring face.
-        let s = (x as f32 + 0.5) / w as f32;
-        let t = (y as f32 + 0.5) / h as f32;
-        let (f2, s2, t2) = cube_face(face_dir(face, s, t));
-        let x2 = ((s2 * w as f32) as i64).clamp(0, w as i64 - 1) as usize;
-        let y2 = ((t2 * h as f32) as i64).clamp(0, h as i64 - 1) as usize;
-        Some((f2, x2, y2))
-    });
-    let inv = if wsum > 0.0 { 1.0 / wsum } else { 0.0 };
+    }
+    if wsum <= 0.0 {
+        wsum = bilinear(f, face, level, sc, tc, 1.0, acc);
+    }
+    let inv = 1.0 / wsum;
     let have = f.tex.header.nchan.saturating_sub(f.first).min(n);
     for k in 0..have.min(acc.len()) {
         out[k] = acc[k] * inv;

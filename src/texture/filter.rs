@@ -295,6 +295,22 @@ impl EwaSetup {
         acc: &mut [f32],
         mut resolve: impl FnMut(i64, i64) -> Option<(usize, usize, usize)>,
     ) -> f32 {
+        let level = self.level;
+        self.run_with(f, acc, |f, x, y, wt, acc| {
+            if let Some((face, xx, yy)) = resolve(x, y) {
+                f.accum(face, level, xx, yy, wt, acc);
+            }
+        })
+    }
+
+    /// Runs the filter, handing each weighted texel (x, y) to `add` to accumulate.
+    #[inline]
+    pub fn run_with(
+        &self,
+        f: &mut Fetcher,
+        acc: &mut [f32],
+        mut add: impl FnMut(&mut Fetcher, i64, i64, f32, &mut [f32]),
+    ) -> f32 {
         let mut wsum = 0.0;
         for y in self.y0..=self.y1 {
             let dy = y as f32 - self.cy;
@@ -306,9 +322,7 @@ impl EwaSetup {
                 }
                 let wt = gauss(q);
                 wsum += wt;
-                if let Some((face, xx, yy)) = resolve(x, y) {
-                    f.accum(face, self.level, xx, yy, wt, acc);
-                }
+                add(f, x, y, wt, acc);
             }
         }
         wsum
