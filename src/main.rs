@@ -48,6 +48,8 @@ enum Cmd {
         #[arg(long, default_value_t = 8)]
         directions: usize,
     },
+    /// Make a mip-mapped texture, environment or shadow map (arbor's tiled .tex format).
+    Texture(TextureArgs),
 }
 
 #[derive(Args)]
@@ -71,6 +73,29 @@ struct ShadeArgs {
     output: Option<PathBuf>,
     #[command(flatten)]
     paths: PathArgs,
+}
+
+#[derive(Args)]
+struct TextureArgs {
+    /// Input picture (PNG, TIFF, JPEG, HDR, EXR; a zfile with --shadow). Unused with --envcube.
+    input: Option<PathBuf>,
+    /// Output texture file.
+    output: PathBuf,
+    /// Wrap mode for s and t: periodic, clamp or black.
+    #[arg(long, default_value = "periodic")]
+    wrap: String,
+    /// Pyramid filter: box or gaussian (also: triangle, catmull-rom, sinc, …).
+    #[arg(long, default_value = "box")]
+    filter: String,
+    /// Make a lat-long environment map.
+    #[arg(long)]
+    envlatl: bool,
+    /// Make a cube environment map from six faces: px nx py ny pz nz.
+    #[arg(long, num_args = 6, value_names = ["PX", "NX", "PY", "NY", "PZ", "NZ"])]
+    envcube: Option<Vec<PathBuf>>,
+    /// Make a shadow map from a zfile.
+    #[arg(long)]
+    shadow: bool,
 }
 
 #[derive(Args)]
@@ -466,6 +491,7 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Cmd::Texture(a) => texture_cmd(a),
         Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {
             Ok(reqs) => {
                 print!("{}", arbor::rib::format::format_requests(&reqs));
@@ -481,5 +507,58 @@ fn main() -> ExitCode {
                 ExitCode::from(1)
             }
         },
+    }
+}
+
+/// `arbor texture`: one conversion, errors on stderr.
+fn texture_cmd(a: TextureArgs) -> ExitCode {
+    use arbor::texture::make;
+    use arbor::texture::mipmap::Wrap;
+    let Some(wrap) = Wrap::parse(&a.wrap) else {
+        eprintln!(
+            "error: --wrap takes periodic, clamp or black, found `{}`",
+            a.wrap
+        );
+        return ExitCode::from(2);
+    };
+    let Some(filter) = make::downsample_for(&a.filter) else {
+        eprintln!(
+            "error: --filter `{}` is not known (box, gaussian, triangle, catmull-rom, sinc)",
+            a.filter
+        );
+        return ExitCode::from(2);
+    };
+    let o = make::MakeOptions {
+        swrap: wrap,
+        twrap: wrap,
+        filter,
+    };
+    // With --envcube the six faces are the inputs and the one positional is the output.
+    let r = if let Some(faces) = &a.envcube {
+        let out = a
+            .input
+            .clone()
+            .map(|_| a.output.clone())
+            .unwrap_or(a.output.clone());
+        make::make_cube(faces, &out, &o)
+    } else {
+        let Some(input) = &a.input else {
+            eprintln!("error: arbor texture IN OUT needs an input picture");
+            return ExitCode::from(2);
+        };
+        if a.shadow {
+            make::make_shadow(input, &a.output)
+        } else if a.envlatl {
+            make::make_latlong(input, &a.output, &o)
+        } else {
+            make::make_texture(input, &a.output, &o)
+        }
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
     }
 }

@@ -153,13 +153,29 @@ pub fn render_paths(
             ));
         }
         for scene in &scenes {
+            // Make* jobs first: a shadow pass's zfile from an earlier frame is there now.
+            let tex_search = texture_search_for(scene, settings);
+            for job in &scene.texture_jobs {
+                crate::texture::make::run_job(job, &tex_search, diags);
+            }
+            if scene.jobs_only {
+                continue;
+            }
+            let mem_kb = scene
+                .options
+                .user_floats("limits:texturememory")
+                .and_then(|v| v.first().copied())
+                .filter(|k| *k >= 1.0)
+                .map(|k| k as usize)
+                .unwrap_or(crate::texture::DEFAULT_MEMORY_KB);
+            let textures = crate::texture::TextureSystem::new(tex_search, mem_kb, diags);
             let library = library_for(scene, settings);
             let aovs = aovs_for(scene);
             let system = ShadeSystem {
                 library: &library,
                 sources,
                 diags,
-                textures: None,
+                textures: Some(&textures),
                 aovs: aovs.iter().map(|a| a.name.clone()).collect(),
             };
             let stats = Stats::default();
@@ -213,11 +229,12 @@ pub fn render_paths(
                 None
             };
             first_display = false;
-            match crate::film::output::write_displays(
+            match crate::film::output::write_displays_with_matrices(
                 &film,
                 &options,
                 diags,
                 override_path.as_deref(),
+                Some(depth_matrices(scene, &options)),
             ) {
                 Ok(files) => written.extend(files),
                 Err(d) => diags.report(d),
@@ -236,6 +253,49 @@ pub fn render_paths(
         }
     }
     written
+}
+
+/// Texture search path of a scene: CLI paths, `Option "searchpath" "texture"` (relative to
+/// the scene's folder), then the scene's folder.
+pub fn texture_search_for(scene: &Scene, settings: &Settings) -> Vec<PathBuf> {
+    let mut search: Vec<PathBuf> = settings.texture_paths.iter().map(PathBuf::from).collect();
+    for p in &scene.options.search_paths.texture {
+        let pb = PathBuf::from(p);
+        let pb = match (&scene.source_dir, pb.is_relative()) {
+            (Some(d), true) if !pb.exists() => d.join(pb),
+            _ => pb,
+        };
+        if !search.contains(&pb) {
+            search.push(pb);
+        }
+    }
+    if let Some(d) = &scene.source_dir {
+        if !search.contains(d) {
+            search.push(d.clone());
+        }
+    }
+    search
+}
+
+/// (camera_from_world, screen_from_world) row-major for zfile/shadow displays; "screen" is
+/// normalised so the screen window spans [-1,1]² (x right, y up), whatever its real extent.
+pub fn depth_matrices(scene: &Scene, options: &crate::scene::Options) -> ([f32; 16], [f32; 16]) {
+    use glam::{Mat4, Vec4};
+    let cam = crate::render::Camera::from_options(
+        options,
+        scene.camera_from_world,
+        &scene.coordinate_systems,
+    );
+    let ndc_from_world = cam.ndc_from_screen * cam.screen_from_camera * cam.camera_from_world;
+    // NDC (0..1, y down) → [-1,1] with y up.
+    let unit = Mat4::from_cols(
+        Vec4::new(2.0, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, -2.0, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, 1.0, 0.0),
+        Vec4::new(-1.0, 1.0, 0.0, 1.0),
+    );
+    let rows = |m: Mat4| m.transpose().to_cols_array();
+    (rows(cam.camera_from_world), rows(unit * ndc_from_world))
 }
 
 fn progress_bar() -> indicatif::ProgressBar {

@@ -71,12 +71,25 @@ pub fn write_displays(
     diags: &Diagnostics,
     output_override: Option<&Path>,
 ) -> Result<Vec<PathBuf>, Diag> {
+    write_displays_with_matrices(film, opts, diags, output_override, None)
+}
+
+/// [`write_displays`] with the camera's (camera_from_world, screen_from_world) matrices,
+/// row-major, for zfile and shadow displays (screen normalised so the screen window is
+/// [-1,1]²). With matrices a `"shadow"` display writes an arbor shadow texture.
+pub fn write_displays_with_matrices(
+    film: &Film,
+    opts: &Options,
+    diags: &Diagnostics,
+    output_override: Option<&Path>,
+    matrices: Option<([f32; 16], [f32; 16])>,
+) -> Result<Vec<PathBuf>, Diag> {
     let img = prepare(film, opts, diags);
-    let targets = plan(opts, diags, output_override)?;
+    let targets = plan(opts, diags, output_override, matrices.is_some())?;
     let mut written = Vec::new();
     let mut first_err = None;
     for t in &targets {
-        match write_target(&img, t, opts, diags) {
+        match write_target(&img, t, opts, diags, matrices) {
             Ok(()) => written.push(t.path.clone()),
             Err(e) => {
                 if first_err.is_none() {
@@ -144,6 +157,7 @@ fn plan(
     opts: &Options,
     diags: &Diagnostics,
     output_override: Option<&Path>,
+    has_matrices: bool,
 ) -> Result<Vec<Target>, Diag> {
     let mut displays: Vec<Display> = opts.displays.clone();
     if displays.is_empty() {
@@ -188,6 +202,7 @@ fn plan(
             "png" => Format::Png,
             "exr" | "openexr" => Format::Exr,
             "zfile" => Format::ZFile,
+            "shadow" if has_matrices => Format::ZFile,
             "shadow" => {
                 diags.report(
                     Diag::warning(
@@ -426,7 +441,13 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
     (qc, qz)
 }
 
-fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) -> Result<(), Diag> {
+fn write_target(
+    film: &Film,
+    t: &Target,
+    opts: &Options,
+    diags: &Diagnostics,
+    matrices: Option<([f32; 16], [f32; 16])>,
+) -> Result<(), Diag> {
     let (qc, qz) = display_quantizers(t, opts, diags);
     let warn = |msg: String| {
         diags.report(Diag::warning("film::display", msg).maybe_label(t.span, "this Display"));
@@ -441,8 +462,30 @@ fn write_target(film: &Film, t: &Target, opts: &Options, diags: &Diagnostics) ->
                 t.path.display()
             ));
         }
-        // Camera matrices are not known here yet: the header's slot stays empty (flag 0).
-        let z = ZFile::from_film(film, None);
+        let z = ZFile::from_film(film, matrices);
+        if t.kind.eq_ignore_ascii_case("shadow") {
+            if let Some(m) = matrices {
+                let im = crate::texture::image_in::Image {
+                    width: z.width as usize,
+                    height: z.height as usize,
+                    nchan: 1,
+                    data: z.depths,
+                };
+                use crate::texture::{format, mipmap::Wrap};
+                return format::write(
+                    &t.path,
+                    format::Kind::Shadow,
+                    &[vec![im]],
+                    Wrap::Black,
+                    Wrap::Black,
+                    Some(m),
+                )
+                .map_err(|e| {
+                    Diag::error("film::display", format!("cannot write shadow map: {e}"))
+                        .maybe_label(t.span, "this Display")
+                });
+            }
+        }
         let bytes = z.to_bytes();
         return write_atomically(&t.path, |f| f.write_all(&bytes).map_err(|e| e.to_string()))
             .map_err(|d| d.maybe_label(t.span, "this Display"));
@@ -1091,7 +1134,7 @@ mod tests {
     #[test]
     fn no_display_defaults_to_ri_png() {
         let d = Diagnostics::new();
-        let t = plan(&Options::default(), &d, None).unwrap();
+        let t = plan(&Options::default(), &d, None, false).unwrap();
         assert_eq!(t.len(), 1);
         assert_eq!(t[0].path, PathBuf::from("ri.png"));
         assert_eq!(t[0].format, Format::Png);

@@ -189,6 +189,8 @@ pub struct Builder<'a> {
     pub(super) conds: Vec<Cond>,
     pub(super) error_mode: ErrorMode,
     pub(super) aborted: bool,
+    /// Texture-making requests waiting for the next world block.
+    pub(super) pending_texture_jobs: Vec<TextureJob>,
 }
 
 impl<'a> Builder<'a> {
@@ -222,6 +224,7 @@ impl<'a> Builder<'a> {
             conds: Vec::new(),
             error_mode: ErrorMode::Print,
             aborted: false,
+            pending_texture_jobs: Vec::new(),
         }
     }
 
@@ -355,6 +358,24 @@ impl<'a> Builder<'a> {
             } else {
                 self.gs = b.saved;
             }
+        }
+        if !self.pending_texture_jobs.is_empty() {
+            // Texture jobs after the last world block: a scene that only runs them.
+            let mut options = self.options.clone();
+            options.search_paths.texture = self
+                .ctx
+                .texture_paths
+                .iter()
+                .chain(&self.option_paths.texture)
+                .cloned()
+                .collect();
+            self.scenes.push(Scene {
+                options,
+                source_dir: self.ctx.base_dir.clone(),
+                texture_jobs: std::mem::take(&mut self.pending_texture_jobs),
+                jobs_only: true,
+                ..Scene::default()
+            });
         }
         self.scenes
     }
@@ -609,6 +630,8 @@ impl<'a> Builder<'a> {
             primitives: Vec::new(),
             coordinate_systems: HashMap::new(),
             source_dir: self.ctx.base_dir.clone(),
+            texture_jobs: std::mem::take(&mut self.pending_texture_jobs),
+            jobs_only: false,
         });
         self.light_handles.clear();
         self.gs.ctm = Mat4::IDENTITY;
@@ -631,6 +654,11 @@ impl<'a> Builder<'a> {
                 .collect();
             if self.frame_active {
                 self.scenes.push(scene);
+            } else {
+                // A skipped frame's texture jobs still run, before the next frame.
+                let mut jobs = std::mem::take(&mut scene.texture_jobs);
+                jobs.append(&mut self.pending_texture_jobs);
+                self.pending_texture_jobs = jobs;
             }
         }
         self.frame_active = true;

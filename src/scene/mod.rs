@@ -16,6 +16,7 @@ mod geometry;
 mod options;
 pub mod params;
 pub mod table;
+mod texjobs;
 mod transforms;
 pub mod types;
 

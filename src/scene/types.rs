@@ -530,4 +530,36 @@ pub struct Scene {
     pub coordinate_systems: HashMap<String, Mat4>,
     /// The file the scene came from (for relative search paths).
     pub source_dir: Option<std::path::PathBuf>,
+    /// MakeTexture/MakeShadow/… requests given before this frame's WorldEnd (and after the
+    /// previous one): the pipeline runs them, in order, before rendering the frame.
+    pub texture_jobs: Vec<TextureJob>,
+    /// True for the scene that only carries texture jobs given after the last world block
+    /// (nothing to render).
+    pub jobs_only: bool,
+}
+
+/// Which texture-making request a [`TextureJob`] came from (RISpec §8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TextureJobKind {
+    Texture,
+    LatLongEnvironment,
+    CubeFaceEnvironment,
+    Shadow,
+}
+
+/// One MakeTexture/MakeLatLongEnvironment/MakeCubeFaceEnvironment/MakeShadow request.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureJob {
+    pub kind: TextureJobKind,
+    /// Picture names (6 for cube faces: px nx py ny pz nz).
+    pub inputs: Vec<String>,
+    pub output: String,
+    pub swrap: String,
+    pub twrap: String,
+    pub filter: String,
+    pub swidth: f32,
+    pub twidth: f32,
+    /// Cube-face field of view in degrees.
+    pub fov: f32,
+    pub span: Span,
 }

@@ -100,11 +100,46 @@ pub trait TextureLookup: Sync {
         params: &TextureParams,
         out: &mut [f32],
     ) -> bool;
+
+    /// Filtered environment lookup: per point the centre direction then 4 corner
+    /// directions (the map's space). Returns `nchan` channels per point.
+    #[allow(clippy::too_many_arguments)]
+    fn environment(
+        &self,
+        _name: &str,
+        _first_chan: usize,
+        _nchan: usize,
+        _dirs: &[[Vec3; 5]],
+        _params: &TextureParams,
+        _out: &mut [f32],
+    ) -> bool {
+        false
+    }
+
+    /// Fraction in shadow per point: the centre then the 4 footprint corners, world space.
+    fn shadow(
+        &self,
+        _name: &str,
+        _pts: &[[Vec3; 5]],
+        _params: &TextureParams,
+        _out: &mut [f32],
+    ) -> bool {
+        false
+    }
+
+    /// textureinfo(): "resolution", "type", "channels", "viewingmatrix", "projectionmatrix".
+    fn info(&self, _name: &str, _query: &str) -> Option<InfoValue> {
+        None
+    }
 }
 
 #[derive(Clone, Debug, Default)]
 pub struct TextureParams {
+    /// The larger of sblur and tblur (kept for callers that read one blur).
     pub blur: f32,
+    /// Blur in s and t as fractions of the texture (RISpec "sblur"/"tblur"; "blur" sets both).
+    pub sblur: f32,
+    pub tblur: f32,
     pub swidth: f32,
     pub twidth: f32,
     pub fill: f32,

@@ -1715,6 +1715,9 @@ pub fn simple_match(pat: &str, s: &str) -> bool {
     (0..=s.len()).any(|k| m(&p, &s[k..]))
 }
 
+/// texture/environment/shadow: parses the optional parameters, builds each point's
+/// footprint (4 corners from the grid's derivatives when only a centre is given) and asks
+/// the texture system. Missing maps warn and return the fill value (shadow: 0, unshadowed).
 fn texture_call(
     ex: &mut Exec,
     f: Builtin,
@@ -1734,8 +1737,10 @@ fn texture_call(
     };
     let mut params = TextureParams {
         fill: 0.0,
-        filter: "box".into(),
+        filter: "gaussian".into(),
         samples: 16.0,
+        swidth: 1.0,
+        twidth: 1.0,
         ..Default::default()
     };
     let mut k = 3 + ncoord_regs;
@@ -1743,7 +1748,12 @@ fn texture_call(
         let pname = arg(ex, args, k).s();
         let v = arg(ex, args, k + 1);
         match &*pname {
-            "blur" | "sblur" | "tblur" => params.blur = v.f().first(),
+            "blur" => {
+                params.sblur = v.f().first();
+                params.tblur = params.sblur;
+            }
+            "sblur" => params.sblur = v.f().first(),
+            "tblur" => params.tblur = v.f().first(),
             "width" => {
                 params.swidth = v.f().first();
                 params.twidth = params.swidth;
@@ -1754,61 +1764,118 @@ fn texture_call(
             "filter" => params.filter = v.s().to_string(),
             "samples" => params.samples = v.f().first(),
             "bias" => params.bias = v.f().first(),
-            _ => {}
+            other => {
+                let msg = format!("texture parameter \"{other}\" is not supported; ignored");
+                ex.warn(span, msg);
+            }
         }
         k += 2;
     }
+    params.blur = params.sblur.max(params.tblur);
     let is_color = matches!(f, TextureC | EnvironmentC);
     let nchan = if is_color { 3 } else { 1 };
     let fill = params.fill;
     if name.is_empty() {
         return default_texture(f, n, fill, dst, ex);
     }
-    if let (Some(tex), TextureF | TextureC) = (ex.env.textures, f) {
-        // Build per-point (s,t) footprints: 4 corners from derivatives when only (s,t) given.
-        let (nu, nv) = (ex.env.nu, ex.env.nv);
-        let coords: Vec<Vec<f32>> = (0..ncoord_regs)
-            .map(|c| vec_f(arg(ex, args, 3 + c), n))
-            .collect();
-        let st: Vec<[f32; 8]> = if ncoord_regs == 8 {
-            (0..n)
-                .map(|i| std::array::from_fn(|c| coords[c][i]))
-                .collect()
-        } else {
-            let (s, t) = (&coords[0], &coords[1]);
-            let (dsu, dsv) = (deriv_f(s, nu, nv, 0, 1.0), deriv_f(s, nu, nv, 1, 1.0));
-            let (dtu, dtv) = (deriv_f(t, nu, nv, 0, 1.0), deriv_f(t, nu, nv, 1, 1.0));
-            (0..n)
-                .map(|i| {
-                    let (s0, t0) = (
-                        s[i] - 0.5 * (dsu[i] + dsv[i]),
-                        t[i] - 0.5 * (dtu[i] + dtv[i]),
-                    );
-                    [
-                        s0,
-                        t0,
-                        s0 + dsu[i],
-                        t0 + dtu[i],
-                        s0 + dsv[i],
-                        t0 + dtv[i],
-                        s0 + dsu[i] + dsv[i],
-                        t0 + dtu[i] + dtv[i],
-                    ]
-                })
-                .collect()
-        };
-        let mut buf = vec![0f32; n * nchan];
-        if tex.texture(&name, chan, nchan, &st, &params, &mut buf) {
-            return if is_color {
-                Slot::VT(
-                    (0..n)
-                        .map(|i| Vec3::new(buf[i * 3], buf[i * 3 + 1], buf[i * 3 + 2]))
-                        .collect(),
-                )
+    if f == Bump {
+        ex.warn(
+            span,
+            "bump() is not supported; it returns (0,0,0): use a displacement shader with calculatenormal",
+        );
+        return default_texture(f, n, fill, dst, ex);
+    }
+    let Some(tex) = ex.env.textures else {
+        ex.warn(
+            span,
+            format!("texture \"{name}\" is not available (no texture system); using the fill value {fill}"),
+        );
+        return default_texture(f, n, fill, dst, ex);
+    };
+    let (nu, nv) = (ex.env.nu, ex.env.nv);
+    let mut buf = vec![0f32; n * nchan];
+    let ok = match f {
+        TextureF | TextureC => {
+            let coords: Vec<Vec<f32>> = (0..ncoord_regs)
+                .map(|c| vec_f(arg(ex, args, 3 + c), n))
+                .collect();
+            let st: Vec<[f32; 8]> = if ncoord_regs == 8 {
+                (0..n)
+                    .map(|i| std::array::from_fn(|c| coords[c][i]))
+                    .collect()
             } else {
-                Slot::VF(buf)
+                let (s, t) = (&coords[0], &coords[1]);
+                let (dsu, dsv) = (deriv_f(s, nu, nv, 0, 1.0), deriv_f(s, nu, nv, 1, 1.0));
+                let (dtu, dtv) = (deriv_f(t, nu, nv, 0, 1.0), deriv_f(t, nu, nv, 1, 1.0));
+                (0..n)
+                    .map(|i| {
+                        let (s0, t0) = (
+                            s[i] - 0.5 * (dsu[i] + dsv[i]),
+                            t[i] - 0.5 * (dtu[i] + dtv[i]),
+                        );
+                        [
+                            s0,
+                            t0,
+                            s0 + dsu[i],
+                            t0 + dtu[i],
+                            s0 + dsv[i],
+                            t0 + dtv[i],
+                            s0 + dsu[i] + dsv[i],
+                            t0 + dtu[i] + dtv[i],
+                        ]
+                    })
+                    .collect()
             };
+            tex.texture(&name, chan, nchan, &st, &params, &mut buf)
         }
+        EnvironmentF | EnvironmentC | Shadow => {
+            let vs: Vec<Vec<Vec3>> = (0..ncoord_regs)
+                .map(|c| vec_t(arg(ex, args, 3 + c), n))
+                .collect();
+            let mut q: Vec<[Vec3; 5]> = if ncoord_regs == 4 {
+                (0..n)
+                    .map(|i| {
+                        let c = [vs[0][i], vs[1][i], vs[2][i], vs[3][i]];
+                        [0.25 * (c[0] + c[1] + c[2] + c[3]), c[0], c[1], c[2], c[3]]
+                    })
+                    .collect()
+            } else {
+                let p = &vs[0];
+                let (du, dv) = (deriv_t(p, nu, nv, 0, 1.0), deriv_t(p, nu, nv, 1, 1.0));
+                (0..n)
+                    .map(|i| {
+                        let c0 = p[i] - 0.5 * (du[i] + dv[i]);
+                        [p[i], c0, c0 + du[i], c0 + dv[i], c0 + du[i] + dv[i]]
+                    })
+                    .collect()
+            };
+            if f == Shadow {
+                // Points arrive in current (camera) space; maps hold world→light matrices.
+                let world_from_camera = (ex.env.spaces)("world")
+                    .map(|m| m.inverse())
+                    .unwrap_or(Mat4::IDENTITY);
+                for pts in &mut q {
+                    for p in pts.iter_mut() {
+                        *p = world_from_camera.transform_point3(*p);
+                    }
+                }
+                tex.shadow(&name, &q, &params, &mut buf)
+            } else {
+                tex.environment(&name, chan, nchan, &q, &params, &mut buf)
+            }
+        }
+        _ => false,
+    };
+    if ok {
+        return if is_color {
+            Slot::VT(
+                (0..n)
+                    .map(|i| Vec3::new(buf[i * 3], buf[i * 3 + 1], buf[i * 3 + 2]))
+                    .collect(),
+            )
+        } else {
+            Slot::VF(buf)
+        };
     }
     ex.warn(
         span,
@@ -1863,7 +1930,15 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
                 None => return false,
             }
         }
-        "attribute" | "option" | "rendererinfo" | "textureinfo" => (ex.env.info)(&which, &name),
+        "textureinfo" => match ex.env.textures {
+            // name is "map\0query" (see above).
+            Some(t) => {
+                let (map, query) = name.split_once('\u{0}').unwrap_or((&name, ""));
+                t.info(map, query)
+            }
+            None => (ex.env.info)(&which, &name),
+        },
+        "attribute" | "option" | "rendererinfo" => (ex.env.info)(&which, &name),
         other => {
             ex.warn(
                 ex.prog.span,

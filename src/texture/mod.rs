@@ -1,3 +1,25 @@
-//! texture (see DESIGN.md §2).
+//! Texture, environment and shadow maps (DESIGN.md §2; notes shading.md §2, pipeline.md
+//! §3.7–3.9, §4.5–4.7).
+//!
+//! * [`image_in`]: source pictures → float images.
+//! * [`mipmap`]: wrap modes and the pyramid.
+//! * [`format`]: the tiled mip-mapped `.tex` file.
+//! * [`make`]: `arbor texture` and the Make* requests.
+//! * [`cache`]: tiles on demand, shared across threads, bounded.
+//! * [`filter`]: point / trilinear / EWA lookups.
+//! * [`env`]: lat-long and cube environment lookups.
+//! * [`shadow`]: percentage-closer filtering.
+//! * [`system`]: the [`TextureLookup`](crate::shade::exec::TextureLookup) a frame renders with.
 
+pub mod cache;
+pub mod env;
+pub mod filter;
+pub mod format;
 pub mod horizon;
+pub mod image_in;
+pub mod make;
+pub mod mipmap;
+pub mod shadow;
+pub mod system;
+
+pub use system::{TextureSystem, DEFAULT_MEMORY_KB};

@@ -1,0 +1,287 @@
+//! The texture system a frame renders with: finds, opens and caches textures, and answers
+//! the shading language's texture(), environment(), shadow() and textureinfo().
+//!
+//! Input: the frame's texture search path and memory limit. Output: [`TextureLookup`] answers.
+//! Invariants: a name is resolved and opened once per frame (maps written by an earlier
+//! frame are seen by later ones because each frame gets a fresh system); a raw picture or
+//! zfile named directly is converted in memory on first use, with a warning; a missing or
+//! unreadable texture answers `false` (the caller warns and uses the fill value).
+
+use std::collections::{HashMap, HashSet};
+use std::fs::File;
+use std::io::Read;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
+
+use glam::Vec3;
+
+use crate::diag::{Diag, Diagnostics};
+use crate::film::zfile::{ZFile, ZFILE_MAGIC};
+use crate::shade::exec::{InfoValue, TextureLookup, TextureParams};
+
+use super::cache::{Fetcher, Source, Texture, TileCache};
+use super::env::{cube_lookup, latlong_lookup};
+use super::filter::{lookup, FilterKind, Footprint};
+use super::format::{self, Header, Kind, TILE};
+use super::image_in::read_image;
+use super::make::{resolve, shadow_image};
+use super::mipmap::{build_pyramid, Downsample, Wrap};
+use super::shadow::{pcf, LightView, ShadowParams};
+
+/// Default cache size when the scene sets no `Option "limits" "texturememory"`: 256 MB.
+pub const DEFAULT_MEMORY_KB: usize = 256 * 1024;
+
+pub struct TextureSystem<'a> {
+    search: Vec<PathBuf>,
+    pub cache: TileCache,
+    textures: Mutex<HashMap<String, Option<Arc<Texture>>>>,
+    next_id: AtomicU32,
+    warned: Mutex<HashSet<String>>,
+    diags: &'a Diagnostics,
+}
+
+impl<'a> TextureSystem<'a> {
+    /// `search`: directories tried after the name as given; `memory_kb`: the cache bound.
+    pub fn new(
+        search: Vec<PathBuf>,
+        memory_kb: usize,
+        diags: &'a Diagnostics,
+    ) -> TextureSystem<'a> {
+        TextureSystem {
+            search,
+            cache: TileCache::new(memory_kb.max(1) * 1024),
+            textures: Mutex::new(HashMap::new()),
+            next_id: AtomicU32::new(1),
+            warned: Mutex::new(HashSet::new()),
+            diags,
+        }
+    }
+
+    fn warn_once(&self, key: String, d: Diag) {
+        if let Ok(mut w) = self.warned.lock() {
+            if w.insert(key) {
+                self.diags.report(d);
+            }
+        }
+    }
+
+    /// The opened texture for a name (None when it cannot be found or read; warned once).
+    pub fn open(&self, name: &str) -> Option<Arc<Texture>> {
+        let mut map = self.textures.lock().ok()?;
+        if let Some(t) = map.get(name) {
+            return t.clone();
+        }
+        let t = match self.load(name) {
+            Ok(t) => Some(Arc::new(t)),
+            Err(e) => {
+                self.diags.report(Diag::warning("texture::open", e));
+                None
+            }
+        };
+        map.insert(name.to_string(), t.clone());
+        t
+    }
+
+    fn load(&self, name: &str) -> Result<Texture, String> {
+        let path = resolve(name, &self.search);
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let mut file = File::open(&path)
+            .map_err(|e| format!("texture `{name}`: cannot open `{}`: {e}", path.display()))?;
+        let mut head = vec![0u8; format::header_len_upper_bound()];
+        let mut got = 0;
+        while got < head.len() {
+            match file.read(&mut head[got..]) {
+                Ok(0) => break,
+                Ok(k) => got += k,
+                Err(e) => return Err(format!("texture `{name}`: {e}")),
+            }
+        }
+        head.truncate(got);
+        if head.starts_with(&format::MAGIC) {
+            let header =
+                format::parse_header(&head).map_err(|e| format!("texture `{name}`: {e}"))?;
+            return Ok(Texture {
+                id,
+                header,
+                source: Source::File(file),
+            });
+        }
+        let blank = |kind: Kind, nchan: usize, wrap: Wrap, matrices| Header {
+            kind,
+            nchan,
+            nfaces: 1,
+            swrap: wrap,
+            twrap: wrap,
+            tile: TILE,
+            levels: Vec::new(),
+            matrices,
+        };
+        if head.starts_with(&ZFILE_MAGIC) {
+            let bytes = std::fs::read(&path).map_err(|e| format!("texture `{name}`: {e}"))?;
+            let z = ZFile::from_bytes(&bytes).map_err(|e| format!("shadow map `{name}`: {e}"))?;
+            let (im, m) = shadow_image(&z).map_err(|e| format!("shadow map `{name}`: {e}"))?;
+            return Ok(Texture::from_pyramids(
+                id,
+                blank(Kind::Shadow, 1, Wrap::Black, Some(m)),
+                &[vec![im]],
+            ));
+        }
+        let im = read_image(&path).map_err(|e| format!("texture `{name}`: {e}"))?;
+        self.diags.report(
+            Diag::warning(
+                "texture::raw",
+                format!("texture `{name}` is a plain picture: converted to a mip-map on first use"),
+            )
+            .help(format!(
+                "prepare it once with `arbor texture {name} {name}.tex`"
+            )),
+        );
+        let nchan = im.nchan;
+        let levels = build_pyramid(im, Wrap::Periodic, Wrap::Periodic, Downsample::Box);
+        Ok(Texture::from_pyramids(
+            id,
+            blank(Kind::Texture, nchan, Wrap::Periodic, None),
+            &[levels],
+        ))
+    }
+
+    fn filter_kind(&self, name: &str) -> FilterKind {
+        FilterKind::parse(name).unwrap_or_else(|| {
+            self.warn_once(
+                format!("filter:{name}"),
+                Diag::warning(
+                    "texture::filter",
+                    format!("texture filter \"{name}\" is not known; using gaussian (EWA)"),
+                ),
+            );
+            FilterKind::Ewa
+        })
+    }
+
+    fn kind_mismatch(&self, name: &str, tex: &Texture, want: &str) {
+        self.warn_once(
+            format!("kind:{name}:{want}"),
+            Diag::warning(
+                "texture::kind",
+                format!(
+                    "`{name}` is a {} map, used by {want}()",
+                    tex.header.kind.type_name()
+                ),
+            ),
+        );
+    }
+}
+
+impl TextureLookup for TextureSystem<'_> {
+    fn texture(
+        &self,
+        name: &str,
+        first_chan: usize,
+        nchan: usize,
+        st: &[[f32; 8]],
+        params: &TextureParams,
+        out: &mut [f32],
+    ) -> bool {
+        let Some(tex) = self.open(name) else {
+            return false;
+        };
+        if tex.header.kind != Kind::Texture {
+            self.kind_mismatch(name, &tex, "texture");
+        }
+        let kind = self.filter_kind(&params.filter);
+        let mut f = Fetcher::new(&tex, &self.cache, first_chan, nchan);
+        for (i, c) in st.iter().enumerate() {
+            let o = &mut out[i * nchan..(i + 1) * nchan];
+            o.iter_mut().for_each(|v| *v = params.fill);
+            let fp = Footprint::from_corners(c, params.swidth, params.twidth);
+            lookup(&mut f, 0, &fp, params.sblur, params.tblur, kind, o);
+        }
+        true
+    }
+
+    fn environment(
+        &self,
+        name: &str,
+        first_chan: usize,
+        nchan: usize,
+        dirs: &[[Vec3; 5]],
+        params: &TextureParams,
+        out: &mut [f32],
+    ) -> bool {
+        let Some(tex) = self.open(name) else {
+            return false;
+        };
+        let kind = self.filter_kind(&params.filter);
+        let blur = params.sblur.max(params.tblur);
+        let mut f = Fetcher::new(&tex, &self.cache, first_chan, nchan);
+        for (i, d) in dirs.iter().enumerate() {
+            let o = &mut out[i * nchan..(i + 1) * nchan];
+            o.iter_mut().for_each(|v| *v = params.fill);
+            // swidth/twidth scale the footprint around its centre direction.
+            let wdt = 0.5 * (params.swidth + params.twidth);
+            let mut dd = *d;
+            for k in 1..5 {
+                dd[k] = d[0] + (d[k] - d[0]) * wdt;
+            }
+            match tex.header.kind {
+                Kind::Cube => {
+                    cube_lookup(&mut f, &dd, blur, o);
+                }
+                Kind::LatLong => latlong_lookup(&mut f, &dd, blur, kind, o),
+                _ => {
+                    self.kind_mismatch(name, &tex, "environment");
+                    latlong_lookup(&mut f, &dd, blur, kind, o)
+                }
+            }
+        }
+        true
+    }
+
+    fn shadow(
+        &self,
+        name: &str,
+        pts: &[[Vec3; 5]],
+        params: &TextureParams,
+        out: &mut [f32],
+    ) -> bool {
+        let Some(tex) = self.open(name) else {
+            return false;
+        };
+        let Some((a, b)) = tex.header.matrices else {
+            self.kind_mismatch(name, &tex, "shadow");
+            return false;
+        };
+        let view = LightView::from_rows(&a, &b);
+        let p = ShadowParams {
+            samples: params.samples.max(1.0) as usize,
+            bias: params.bias,
+            blur: params.sblur.max(params.tblur),
+            width: 0.5 * (params.swidth + params.twidth),
+        };
+        let mut f = Fetcher::new(&tex, &self.cache, 0, 1);
+        for (i, q) in pts.iter().enumerate() {
+            out[i] = pcf(&mut f, &view, q, &p);
+        }
+        true
+    }
+
+    fn info(&self, name: &str, query: &str) -> Option<InfoValue> {
+        let tex = self.open(name)?;
+        let h = &tex.header;
+        let l = h.levels[0][0];
+        match query {
+            "resolution" => Some(InfoValue::Floats(vec![l.width as f32, l.height as f32])),
+            "type" => Some(InfoValue::Str(h.kind.type_name().into())),
+            "channels" => Some(InfoValue::Floats(vec![h.nchan as f32])),
+            "viewingmatrix" | "projectionmatrix" => {
+                let (a, b) = h.matrices?;
+                let m = if query == "viewingmatrix" { a } else { b };
+                // Row-major in the file; InfoValue matrices are column-major (glam).
+                let g = glam::Mat4::from_cols_array(&m).transpose();
+                Some(InfoValue::Floats(g.to_cols_array().to_vec()))
+            }
+            _ => None,
+        }
+    }
+}
