@@ -168,7 +168,7 @@ impl Surface for PointBatch {
         let d = &self.data;
         let mut b = Bound::EMPTY;
         for k in self.range.clone() {
-            // Up to the enlarged radius of the coarsest outline (3 rows: a square, ×1.2533).
+            // Up to the enlarged radius of the coarsest outline (5 rows: an octagon, ×1.0856).
             let r = d.r[k] * 1.26;
             b.min = b.min.min(d.p[k] - Vec3::splat(r));
             b.max = b.max.max(d.p[k] + Vec3::splat(r));
@@ -204,7 +204,7 @@ impl Surface for PointBatch {
         let d = &*self.data;
         let np = self.range.len();
         let nu = nu.max(2);
-        let m = (nv / np.max(1)).max(3);
+        let m = (nv / np.max(1)).max(5);
         let mut g = Grid::with_size(nu, m * np);
         g.du = 1.0 / (nu - 1) as f32;
         g.dv = 1.0 / (m - 1) as f32;
