@@ -107,10 +107,24 @@ impl Builder<'_> {
     pub(super) fn interior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().interior = s;
+        // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
+        let d = Diag::warning(
+            "scene::unimplemented",
+            format!("`{}` volume shaders are recorded but not run (no ray tracing)", call.name()),
+        )
+        .label(call.span(), "not run");
+        self.report(d);
     }
     pub(super) fn exterior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().exterior = s;
+        // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
+        let d = Diag::warning(
+            "scene::unimplemented",
+            format!("`{}` volume shaders are recorded but not run (no ray tracing)", call.name()),
+        )
+        .label(call.span(), "not run");
+        self.report(d);
     }
 
     fn add_light(&mut self, call: &Call<'_>, area: bool) {
