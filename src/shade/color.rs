@@ -25,10 +25,12 @@ pub fn to_rgb(space: &str, c: Vec3) -> Vec3 {
                 ))
             }
         }
+        // The exact inverse of the RGB->YIQ matrix below (the usual 3-digit inverse is off by
+        // ~1e-3, so round trips drifted).
         "YIQ" => Vec3::new(
-            c.x + 0.956 * c.y + 0.621 * c.z,
-            c.x - 0.272 * c.y - 0.647 * c.z,
-            c.x - 1.106 * c.y + 1.703 * c.z,
+            c.x + 0.956_170_7 * c.y + 0.621_432_6 * c.z,
+            c.x - 0.272_688_6 * c.y - 0.646_813_2 * c.z,
+            c.x - 1.103_744_1 * c.y + 1.700_623_1 * c.z,
         ),
         _ => c,
     }
