@@ -110,7 +110,10 @@ impl Builder<'_> {
         // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
         let d = Diag::warning(
             "scene::unimplemented",
-            format!("`{}` volume shaders are recorded but not run (no ray tracing)", call.name()),
+            format!(
+                "`{}` volume shaders are recorded but not run (no ray tracing)",
+                call.name()
+            ),
         )
         .label(call.span(), "not run");
         self.report(d);
@@ -121,7 +124,10 @@ impl Builder<'_> {
         // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
         let d = Diag::warning(
             "scene::unimplemented",
-            format!("`{}` volume shaders are recorded but not run (no ray tracing)", call.name()),
+            format!(
+                "`{}` volume shaders are recorded but not run (no ray tracing)",
+                call.name()
+            ),
         )
         .label(call.span(), "not run");
         self.report(d);

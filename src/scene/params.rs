@@ -185,6 +185,7 @@ const STANDARD: &[(&str, &str)] = &[
     ("compression", "uniform string"),
     ("quality", "uniform float"),
     ("jitter", "uniform integer"),
+    ("masksize", "uniform integer"),
     ("depthfilter", "uniform string"),
     // Option "searchpath", "limits", "statistics".
     ("searchpath:shader", "uniform string"),

@@ -490,7 +490,7 @@ impl<'a> Exec<'a> {
                     self.warn(*span, "array index out of range (clamped)");
                 }
             }
-            other => ops::compute(self, other),
+            other => ops::compute(self, other, mask),
         }
     }
 

@@ -50,7 +50,8 @@ fn normalize(v: Vec3) -> Vec3 {
 }
 
 /// Runs one computation instruction.
-pub fn compute(ex: &mut Exec, ins: &Instr) {
+/// `mask` is the running mask: faults are only reported for points that are running.
+pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
     let n = ex.n;
     match ins {
         Instr::Arith {
@@ -71,8 +72,8 @@ pub fn compute(ex: &mut Exec, ins: &Instr) {
                         Arith::Mul => zip_ff(&mut out, n, x, y, |a, b| a * b),
                         Arith::Div => {
                             let zero = match y {
-                                F::U(v) => v == 0.0,
-                                F::V(v) => v.iter().any(|&z| z == 0.0),
+                                F::U(v) => v == 0.0 && !mask.is_none(),
+                                F::V(v) => v.iter().zip(&mask.bits).any(|(&z, &m)| m && z == 0.0),
                             };
                             zip_ff(&mut out, n, x, y, safe_div);
                             if zero {
