@@ -256,7 +256,15 @@ impl<'a> ShadeSystem<'a> {
                 None => return,
             },
         };
-        let lights = if uses_lights(&prog.body) {
+        // Lights are evaluated once per grid, for the surface and the atmosphere alike.
+        let atmosphere_lights = p
+            .attributes
+            .atmosphere
+            .as_ref()
+            .and_then(|a| self.program(a, ShaderKind::Volume))
+            .map(|a| uses_lights(&a.body))
+            .unwrap_or(false);
+        let lights = if uses_lights(&prog.body) || atmosphere_lights {
             self.eval_lights(grid, &ctx)
         } else {
             Vec::new()
