@@ -40,7 +40,10 @@ fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("texture_lookups");
     group.throughput(Throughput::Elements((n * n) as u64));
     for filter in ["box", "gaussian"] {
-        let params = TextureParams { filter: filter.to_string(), ..TextureParams::default() };
+        let params = TextureParams {
+            filter: filter.to_string(),
+            ..TextureParams::default()
+        };
         group.bench_function(if filter == "box" { "trilinear" } else { "ewa" }, |b| {
             b.iter(|| system.texture(&name, 0, 3, &st, &params, &mut out))
         });
