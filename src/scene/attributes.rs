@@ -107,21 +107,17 @@ impl Builder<'_> {
     pub(super) fn interior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().interior = s;
-        // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
-        let d = Diag::warning(
-            "scene::unimplemented",
-            format!(
-                "`{}` volume shaders are recorded but not run (no ray tracing)",
-                call.name()
-            ),
-        )
-        .label(call.span(), "not run");
-        self.report(d);
+        self.warn_volume_not_run(call);
     }
     pub(super) fn exterior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().exterior = s;
-        // Stored (attribute() can see it) but never run: arbor traces no rays through volumes.
+        self.warn_volume_not_run(call);
+    }
+
+    /// Interior/Exterior are stored (attribute() can see them) but never run: arbor traces no
+    /// rays through volumes.
+    fn warn_volume_not_run(&mut self, call: &Call<'_>) {
         let d = Diag::warning(
             "scene::unimplemented",
             format!(

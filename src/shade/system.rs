@@ -257,13 +257,14 @@ impl<'a> ShadeSystem<'a> {
             },
         };
         // Lights are evaluated once per grid, for the surface and the atmosphere alike.
-        let atmosphere_lights = p
+        let atmosphere = p
             .attributes
             .atmosphere
+            .clone()
+            .and_then(|a| self.program(&a, ShaderKind::Volume).map(|prog| (prog, a)));
+        let atmosphere_lights = atmosphere
             .as_ref()
-            .and_then(|a| self.program(a, ShaderKind::Volume))
-            .map(|a| uses_lights(&a.body))
-            .unwrap_or(false);
+            .is_some_and(|(a, _)| uses_lights(&a.body));
         let lights = if uses_lights(&prog.body) || atmosphere_lights {
             self.eval_lights(grid, &ctx)
         } else {
@@ -323,8 +324,8 @@ impl<'a> ShadeSystem<'a> {
             return;
         }
         // Atmosphere.
-        if let Some(aref) = p.attributes.atmosphere.clone() {
-            if let Some(aprog) = self.program(&aref, ShaderKind::Volume) {
+        if let Some((aprog, aref)) = atmosphere {
+            {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
                 if let Some(mut regs) =
