@@ -1,7 +1,7 @@
 //! Shading throughput: `plastic` with an ambient and two distant lights over grids of
 //! 16×16, 32×32 and 64×64 points, on one thread. Reports points per second.
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::{criterion_group, BenchmarkId, Criterion, Throughput};
 use glam::Vec3;
 
 use arbor::diag::{Diagnostics, SourceMap};

@@ -159,6 +159,9 @@ struct CheckArgs {
 struct InfoArgs {
     /// A .sl file or a shader name on the search path / in the standard library.
     shader: String,
+    /// Also print the compiled IR listing (registers and instructions).
+    #[arg(long)]
+    ir: bool,
     #[command(flatten)]
     paths: PathArgs,
 }
@@ -401,6 +404,9 @@ fn main() -> ExitCode {
                             arr
                         );
                         println!("\t\tDefault value: {}", par.default_text);
+                    }
+                    if a.ir {
+                        println!("{p}");
                     }
                     if failed {
                         ExitCode::from(1)

@@ -352,3 +352,45 @@ fn diagnostics_of_broken_shaders() {
     }
     insta::assert_snapshot!(all);
 }
+
+/// `var = expr` hands the temporary's buffer over (no copy) only where that is invisible:
+/// every point running, the temporary read once, in the block that computed it.
+#[test]
+fn assignments_from_temporaries_move_only_where_safe() {
+    let (prog, _) = compile_ok(
+        r#"surface t() {
+            color a = color(s, 0, 0);          /* top level: movable */
+            color b = 0;
+            color k = color(0, s * 2, 0);      /* computed once, used inside the loop */
+            float i;
+            for (i = 0; i < 3; i += 1) {
+                b = k;                          /* a variable: copied every iteration */
+                b += color(0, 0, 1);
+            }
+            if (s > 0.5) {
+                a = color(1, 1, 1);             /* masked: copies the running points */
+            }
+            Ci = a + b;
+            Oi = 1;
+        }"#,
+    );
+    assert!(
+        prog.movable.iter().any(|&m| m),
+        "the top-level assignment should move:\n{prog}"
+    );
+    let (ci, _) = run(&prog, 8);
+    for (i, c) in ci.iter().enumerate() {
+        let s = i as f32 / 8.0;
+        let a = if s > 0.5 {
+            Vec3::ONE
+        } else {
+            Vec3::new(s, 0.0, 0.0)
+        };
+        let b = Vec3::new(0.0, s * 2.0, 1.0);
+        assert!(
+            (*c - (a + b)).length() < 1e-6,
+            "point {i}: {c} vs {}",
+            a + b
+        );
+    }
+}

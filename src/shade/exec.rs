@@ -512,9 +512,29 @@ impl<'a> Exec<'a> {
             };
             return;
         }
+        let all = mask.is_all();
+        if all
+            && self
+                .prog
+                .movable
+                .get(src as usize)
+                .copied()
+                .unwrap_or(false)
+        {
+            // A temporary read only here: hand its buffer over instead of copying the grid.
+            let fits = match (&self.regs[src as usize], dinfo.kind) {
+                (Slot::VF(v), Kind::Float) => v.len() == n,
+                (Slot::VT(v), Kind::Triple) => v.len() == n,
+                (Slot::VM(v), Kind::Matrix) => v.len() == n,
+                _ => false,
+            };
+            if fits {
+                self.regs[dst as usize] = std::mem::take(&mut self.regs[src as usize]);
+                return;
+            }
+        }
         let mut out = std::mem::take(&mut self.regs[dst as usize]);
         let s = &self.regs[src as usize];
-        let all = mask.is_all();
         match dinfo.kind {
             Kind::Float => {
                 let a = s.f();
@@ -681,8 +701,8 @@ impl<'a> Exec<'a> {
                     }
                 }
                 None => {
-                    for i in 0..n {
-                        l[i] = -state.ns[i];
+                    for (li, ni) in l.iter_mut().zip(state.ns.iter()) {
+                        *li = -*ni;
                     }
                 }
             },

@@ -112,14 +112,8 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             let mut out = take(ex, *dst);
             let ra = &ex.regs[*a as usize];
             match kind {
-                Kind::Float => {
-                    let x = ra.f();
-                    write_f(&mut out, n, x.is_varying(), |i| -x.at(i))
-                }
-                Kind::Triple => {
-                    let x = ra.t();
-                    write_t(&mut out, n, x.is_varying(), |i| -x.at(i))
-                }
+                Kind::Float => map_ff(&mut out, n, ra.f(), |x| -x),
+                Kind::Triple => map_tt(&mut out, n, ra.t(), |x| -x),
                 Kind::Matrix => {
                     let x = ra.m();
                     write_m(&mut out, n, x.is_varying(), |i| -x.at(i))
@@ -1146,7 +1140,18 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let _ = (du, dv);
             out = Slot::VF((0..n).map(|i| a[i].cross(b[i]).length()).collect());
         }
-        FaceForward2 | FaceForward3 => {
+        FaceForward2 => {
+            // The common two-argument form runs over slices (no per-point operand dispatch).
+            let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            zip_tt(
+                &mut out,
+                n,
+                nn,
+                i_,
+                |nv, iv| if iv.dot(nv) < 0.0 { nv } else { -nv },
+            );
+        }
+        FaceForward3 => {
             let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
             let nref = if f == FaceForward3 {
                 arg(ex, args, 2).t()
@@ -1358,7 +1363,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             out = Slot::F(b2f(simple_match(&pat, &subj)));
         }
         Ambient => {
-            let mut c = vec![Vec3::ZERO; n];
+            let mut c = grid_vt_filled(n, Vec3::ZERO);
             for l in ex.env.lights.iter().filter(|l| l.ambient) {
                 for (ci, cl) in c.iter_mut().zip(&l.cl) {
                     *ci += *cl;
@@ -1371,24 +1376,32 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             // the light is distant).
             let nn = arg(ex, args, 0).t();
             let nv = to_vec_t(nn, n, normalize);
-            let mut c = vec![Vec3::ZERO; n];
+            let mut c = grid_vt_filled(n, Vec3::ZERO);
             for l in ex.env.lights.iter().filter(|l| !l.ambient && !l.nondiffuse) {
-                let lu = l.l_uniform.map(normalize);
-                for i in 0..n {
-                    let ln = match lu {
-                        Some(v) => v,
-                        None => normalize(l.l[i]),
-                    };
-                    let d = ln.dot(nv[i]);
-                    if l.lit[i] && d > 0.0 {
-                        c[i] += l.cl[i] * d;
+                let lanes = c.iter_mut().zip(&nv).zip(&l.lit).zip(&l.cl);
+                match l.l_uniform.map(normalize) {
+                    Some(ln) => {
+                        for (((ci, nvi), &lit), cl) in lanes {
+                            let d = ln.dot(*nvi);
+                            if lit && d > 0.0 {
+                                *ci += *cl * d;
+                            }
+                        }
+                    }
+                    None => {
+                        for ((((ci, nvi), &lit), cl), li) in lanes.zip(&l.l) {
+                            let d = normalize(*li).dot(*nvi);
+                            if lit && d > 0.0 {
+                                *ci += *cl * d;
+                            }
+                        }
                     }
                 }
             }
-            out = Slot::VT(c);
+            recycle([std::mem::replace(&mut out, Slot::VT(c)), Slot::VT(nv)]);
         }
         Specular | Phong | SpecularBrdf => {
-            let mut c = vec![Vec3::ZERO; n];
+            let mut c = grid_vt_filled(n, Vec3::ZERO);
             if f == SpecularBrdf {
                 // specularbrdf(L, N, V, roughness) for one light direction.
                 let (l, nn, vv, r) = (
@@ -1416,21 +1429,26 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let nv = to_vec_t(nn, n, normalize);
             let vn = to_vec_t(vv, n, normalize);
             let phong = f == Phong;
-            // exponent per point: 1/roughness (specular) or size (phong)
-            let expo: Vec<f32> = (0..n)
-                .map(|i| {
-                    let x = r.at(i);
-                    if phong {
-                        x
-                    } else if x > 0.0 {
-                        1.0 / x
-                    } else {
-                        1e4
-                    }
-                })
-                .collect();
+            // The exponent: 1/roughness (specular) or size (phong); once per grid when uniform.
+            let exponent = |x: f32| {
+                if phong {
+                    x
+                } else if x > 0.0 {
+                    1.0 / x
+                } else {
+                    1e4
+                }
+            };
+            let expo: Vec<f32> = match r {
+                F::U(x) => vec![exponent(x)],
+                F::V(v) => v.iter().map(|&x| exponent(x)).collect(),
+            };
+            let stride = usize::from(expo.len() == n && n > 1);
             let refl: Vec<Vec3> = if phong {
-                (0..n).map(|i| reflect(-vn[i], nv[i])).collect()
+                nv.iter()
+                    .zip(&vn)
+                    .map(|(&nn, &v)| reflect(-v, nn))
+                    .collect()
             } else {
                 Vec::new()
             };
@@ -1441,28 +1459,39 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 .filter(|l| !l.ambient && !l.nonspecular)
             {
                 let lu = l.l_uniform.map(normalize);
-                for i in 0..n {
-                    if !l.lit[i] {
+                let lanes = c
+                    .iter_mut()
+                    .zip(&nv)
+                    .zip(&vn)
+                    .zip(&l.lit)
+                    .zip(&l.cl)
+                    .enumerate();
+                for (i, ((((ci, &nvi), &vni), &lit), &cl)) in lanes {
+                    if !lit {
                         continue;
                     }
                     let ln = match lu {
                         Some(v) => v,
                         None => normalize(l.l[i]),
                     };
-                    if ln.dot(nv[i]) <= 0.0 {
+                    if ln.dot(nvi) <= 0.0 {
                         continue;
                     }
                     let base = if phong {
                         refl[i].dot(ln)
                     } else {
-                        nv[i].dot(normalize(ln + vn[i]))
+                        nvi.dot(normalize(ln + vni))
                     };
                     if base > 0.0 {
-                        c[i] += l.cl[i] * base.powf(expo[i]);
+                        *ci += cl * base.powf(expo[i * stride]);
                     }
                 }
             }
-            out = Slot::VT(c);
+            recycle([
+                std::mem::replace(&mut out, Slot::VT(c)),
+                Slot::VT(nv),
+                Slot::VT(vn),
+            ]);
         }
         Trace => {
             out = if ex.prog.regs[dst as usize].kind == Kind::Float {

@@ -54,6 +54,28 @@ fn uses_lights(instrs: &[Instr]) -> bool {
     })
 }
 
+/// Whether a light program has a `solar()` without an axis (it lights along the normal).
+fn uses_bare_solar(instrs: &[Instr]) -> bool {
+    instrs.iter().any(|i| match i {
+        Instr::Solar { axis: None, .. } => true,
+        Instr::If {
+            then, otherwise, ..
+        } => uses_bare_solar(then) || uses_bare_solar(otherwise),
+        Instr::Loop {
+            cond_code,
+            body,
+            step,
+            ..
+        } => uses_bare_solar(cond_code) || uses_bare_solar(body) || uses_bare_solar(step),
+        Instr::Function { body }
+        | Instr::Illuminate { body, .. }
+        | Instr::Solar { body, .. }
+        | Instr::Illuminance { body, .. } => uses_bare_solar(body),
+        Instr::Gather { otherwise } => uses_bare_solar(otherwise),
+        _ => false,
+    })
+}
+
 /// Per-run facts shared by the programs of one grid.
 struct RunCtx<'s> {
     scene: &'s Scene,
@@ -320,6 +342,7 @@ impl<'a> ShadeSystem<'a> {
                         .push(slot_to_gridvar(gname, ty, &regs[g.reg as usize], n));
                 }
             }
+            crate::shade::value::recycle(regs);
         } else {
             return;
         }
@@ -338,8 +361,12 @@ impl<'a> ShadeSystem<'a> {
                     if let Some(g) = aprog.global("Oi") {
                         grid.oi = own_vt(&mut regs[g.reg as usize], n);
                     }
+                    crate::shade::value::recycle(regs);
                 }
             }
+        }
+        for l in lights {
+            crate::shade::value::recycle([Slot::VT(l.l), Slot::VT(l.cl), Slot::VT(l.ol)]);
         }
         // Guard the hider against NaN and infinities from shaders.
         let mut bad = false;
@@ -363,7 +390,8 @@ impl<'a> ShadeSystem<'a> {
     fn eval_lights(&self, grid: &Grid, ctx: &RunCtx) -> Vec<LightResult> {
         let n = grid.len();
         let mut out = Vec::new();
-        let ns: Arc<[Vec3]> = grid.n.iter().map(|v| v.normalize_or_zero()).collect();
+        // The unit surface normal is needed only by solar() without an axis.
+        let mut ns: Option<Arc<[Vec3]>> = None;
         let ps: Arc<[Vec3]> = grid.p.as_slice().into();
         for &li in &ctx.attrs.lights_on {
             let Some(light) = ctx.scene.lights.get(li) else {
@@ -372,11 +400,17 @@ impl<'a> ShadeSystem<'a> {
             let Some(prog) = self.program(&light.shader, ShaderKind::Light) else {
                 continue;
             };
+            let ns = if uses_bare_solar(&prog.body) {
+                ns.get_or_insert_with(|| grid.n.iter().map(|v| v.normalize_or_zero()).collect())
+                    .clone()
+            } else {
+                Arc::from([])
+            };
             let state = LightState {
                 ran: false,
                 lit: vec![false; n],
                 ps: ps.clone(),
-                ns: ns.clone(),
+                ns,
             };
             let mut st = Some(state);
             let Some(mut regs) =
@@ -392,13 +426,22 @@ impl<'a> ShadeSystem<'a> {
                     .unwrap_or_else(|| vec![def; n])
             };
             let mut l: Vec<Vec3> = get("L", Vec3::ZERO);
-            l.iter_mut().for_each(|v| *v = -*v);
+            // One pass: L points from the surface to the light, and is it the same everywhere?
+            let first = l.first().map(|&v| -v);
+            let mut same = true;
+            for v in l.iter_mut() {
+                *v = -*v;
+                same &= Some(*v) == first;
+            }
+            let l_uniform = if same { first } else { None };
             let mut cl = get("Cl", Vec3::ZERO);
             let ol = get("Ol", Vec3::ONE);
             let lit = if ambient { vec![true; n] } else { state.lit };
-            for (c, &on) in cl.iter_mut().zip(&lit) {
-                if !on {
-                    *c = Vec3::ZERO;
+            if !lit.iter().all(|&b| b) {
+                for (c, &on) in cl.iter_mut().zip(&lit) {
+                    if !on {
+                        *c = Vec3::ZERO;
+                    }
                 }
             }
             let mut category = String::new();
@@ -415,10 +458,7 @@ impl<'a> ShadeSystem<'a> {
                 }
                 outputs.push((par.name.clone(), slot));
             }
-            let l_uniform = match l.first() {
-                Some(&f) if l.iter().all(|&x| x == f) => Some(f),
-                _ => None,
-            };
+            crate::shade::value::recycle(regs);
             out.push(LightResult {
                 l_uniform,
                 ambient,
@@ -509,15 +549,25 @@ impl<'a> ShadeSystem<'a> {
                 "E" => Slot::T(Vec3::ZERO),
                 "Ci" => match ci_oi {
                     Some((ci, _)) => Slot::VT(ci.to_vec()),
-                    None => Slot::VT(vec![Vec3::ZERO; n]),
+                    None => {
+                        // Output-only globals start as one uniform value: the grid-sized
+                        // buffer is made by the first store (Mov broadcasts), not here.
+                        ex.set(g.reg, Slot::T(Vec3::ZERO));
+                        continue;
+                    }
                 },
                 "Oi" => match ci_oi {
                     Some((_, oi)) => Slot::VT(oi.to_vec()),
                     None => Slot::VT(grid.os.clone()),
                 },
-                "Cl" => Slot::VT(vec![Vec3::ZERO; n]),
-                "Ol" => Slot::VT(vec![Vec3::ONE; n]),
-                "L" => Slot::VT(vec![Vec3::ZERO; n]),
+                "Cl" | "L" => {
+                    ex.set(g.reg, Slot::T(Vec3::ZERO));
+                    continue;
+                }
+                "Ol" => {
+                    ex.set(g.reg, Slot::T(Vec3::ONE));
+                    continue;
+                }
                 "ncomps" => Slot::F(3.0),
                 "time" | "dtime" => Slot::F(0.0),
                 "dPdtime" => Slot::VT(vec![Vec3::ZERO; n]),

@@ -134,14 +134,76 @@ impl Slot {
     }
 }
 
-/// Takes a float vector of length `n` out of a slot to reuse its allocation.
+/// Per-thread free lists of grid buffers, so the temporaries of one grid's run reuse the
+/// buffers of the previous run (no allocation or zero-fill per register per run, and the
+/// memory stays warm in cache). Bounded: beyond `POOL_MAX` buffers per kind they are freed.
+mod pool {
+    use glam::Vec3;
+    use std::cell::RefCell;
+
+    pub const POOL_MAX: usize = 96;
+
+    thread_local! {
+        pub static FLOATS: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
+        pub static TRIPLES: RefCell<Vec<Vec<Vec3>>> = const { RefCell::new(Vec::new()) };
+    }
+}
+
+/// A float buffer of length `n` with unspecified (initialised) contents.
+pub fn grid_vf(n: usize) -> Vec<f32> {
+    let mut v = pool::FLOATS
+        .with(|p| p.borrow_mut().pop())
+        .unwrap_or_default();
+    v.resize(n, 0.0);
+    v
+}
+
+/// A triple buffer of length `n` with unspecified (initialised) contents.
+pub fn grid_vt(n: usize) -> Vec<Vec3> {
+    let mut v = pool::TRIPLES
+        .with(|p| p.borrow_mut().pop())
+        .unwrap_or_default();
+    v.resize(n, Vec3::ZERO);
+    v
+}
+
+/// A triple buffer of length `n` filled with `x`.
+pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
+    let mut v = grid_vt(n);
+    v.fill(x);
+    v
+}
+
+/// Gives the grid buffers of finished registers back to this thread's pool.
+pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
+    for s in slots {
+        match s {
+            Slot::VF(v) => pool::FLOATS.with(|p| {
+                let mut p = p.borrow_mut();
+                if p.len() < pool::POOL_MAX {
+                    p.push(v);
+                }
+            }),
+            Slot::VT(v) => pool::TRIPLES.with(|p| {
+                let mut p = p.borrow_mut();
+                if p.len() < pool::POOL_MAX {
+                    p.push(v);
+                }
+            }),
+            _ => {}
+        }
+    }
+}
+
+/// Takes a float vector of length `n` out of a slot to reuse its allocation (contents are
+/// unspecified: callers overwrite every element).
 pub fn take_vf(slot: &mut Slot, n: usize) -> Vec<f32> {
     match std::mem::take(slot) {
         Slot::VF(mut v) => {
             v.resize(n, 0.0);
             v
         }
-        _ => vec![0.0; n],
+        _ => grid_vf(n),
     }
 }
 
@@ -151,7 +213,7 @@ pub fn take_vt(slot: &mut Slot, n: usize) -> Vec<Vec3> {
             v.resize(n, Vec3::ZERO);
             v
         }
-        _ => vec![Vec3::ZERO; n],
+        _ => grid_vt(n),
     }
 }
 
@@ -313,8 +375,14 @@ pub fn map_tf(out: &mut Slot, n: usize, a: T, f: impl Fn(Vec3) -> f32) {
 
 /// The values of a triple operand at every point (a copy; uniform values repeated).
 pub fn to_vec_t(a: T, n: usize, f: impl Fn(Vec3) -> Vec3) -> Vec<Vec3> {
+    let mut v = grid_vt(n);
     match a {
-        T::U(x) => vec![f(x); n],
-        T::V(x) => x.iter().map(|&v| f(v)).collect(),
+        T::U(x) => v.fill(f(x)),
+        T::V(x) => {
+            for (o, &xi) in v.iter_mut().zip(x) {
+                *o = f(xi);
+            }
+        }
     }
+    v
 }

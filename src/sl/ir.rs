@@ -292,6 +292,8 @@ pub struct Program {
     /// Computes parameter defaults (run before instance values are bound).
     pub init: Vec<Instr>,
     pub body: Vec<Instr>,
+    /// Per register: a temporary whose one `Mov` may take its value (see [`Program::movable_temps`]).
+    pub movable: Vec<bool>,
     /// The light category (`__category` parameter default), for light shaders.
     pub span: Span,
 }
@@ -451,15 +453,247 @@ impl fmt::Display for Program {
         for (reg, c) in &self.consts {
             writeln!(f, "  const {} = {:?}", r(*reg), c)?;
         }
-        for (i, info) in self.regs.iter().enumerate() {
-            if info.varying {
-                write!(f, "")?;
-            }
-            let _ = i;
+        for g in &self.globals {
+            let detail = if self.regs[g.reg as usize].varying {
+                "varying"
+            } else {
+                "uniform"
+            };
+            let w = if g.written { " (written)" } else { "" };
+            writeln!(f, "  global {detail} {} -> {}{w}", g.name, r(g.reg))?;
         }
         writeln!(f, "init:")?;
         list(f, &self.init, 1)?;
         writeln!(f, "body:")?;
         list(f, &self.body, 1)
+    }
+}
+
+/// Every register an instruction names (operands and destinations, not nested blocks);
+/// array instructions name their whole element range. Used for register-use analysis.
+fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
+    let space = |s: &Space, out: &mut Vec<Reg>| match s {
+        Space::Current => {}
+        Space::Named(r) | Space::Matrix(r) => out.push(*r),
+    };
+    match ins {
+        Instr::Mov { dst, src } | Instr::Copy { dst, src } => out.extend([*dst, *src]),
+        Instr::Arith { dst, a, b, .. }
+        | Instr::Dot { dst, a, b }
+        | Instr::Cross { dst, a, b }
+        | Instr::Compare { dst, a, b, .. }
+        | Instr::And { dst, a, b }
+        | Instr::Or { dst, a, b } => out.extend([*dst, *a, *b]),
+        Instr::Neg { dst, a, .. } | Instr::Promote { dst, a, .. } | Instr::Not { dst, a } => {
+            out.extend([*dst, *a])
+        }
+        Instr::Select {
+            dst, cond, a, b, ..
+        } => out.extend([*dst, *cond, *a, *b]),
+        Instr::MakeTriple { dst, x, y, z } => out.extend([*dst, *x, *y, *z]),
+        Instr::MakeMatrix { dst, elems } => {
+            out.push(*dst);
+            out.extend(elems.iter());
+        }
+        Instr::ColorFrom { dst, space, a } => out.extend([*dst, *space, *a]),
+        Instr::Transform {
+            dst, from, to, a, ..
+        } => {
+            out.extend([*dst, *a]);
+            space(from, out);
+            space(to, out);
+        }
+        Instr::SpaceMatrix { dst, space } => out.extend([*dst, *space]),
+        Instr::GetIndex {
+            dst,
+            base,
+            len,
+            index,
+            ..
+        } => {
+            out.extend([*dst, *index]);
+            out.extend(*base..*base + *len);
+        }
+        Instr::SetIndex {
+            base,
+            len,
+            index,
+            src,
+            ..
+        } => {
+            out.extend([*index, *src]);
+            out.extend(*base..*base + *len);
+        }
+        Instr::Call { dst, args, .. } => {
+            out.push(*dst);
+            out.extend(args.iter());
+        }
+        Instr::If { cond, .. } | Instr::Loop { cond, .. } => out.push(*cond),
+        Instr::Illuminance {
+            category,
+            pos,
+            axis,
+            ..
+        } => {
+            out.extend(category.iter());
+            out.push(*pos);
+            if let Some((a, b)) = axis {
+                out.extend([*a, *b]);
+            }
+        }
+        Instr::Illuminate { pos, axis, .. } => {
+            out.push(*pos);
+            if let Some((a, b)) = axis {
+                out.extend([*a, *b]);
+            }
+        }
+        Instr::Solar { axis, .. } => {
+            if let Some((a, b)) = axis {
+                out.extend([*a, *b]);
+            }
+        }
+        Instr::Break(_)
+        | Instr::Continue(_)
+        | Instr::Function { .. }
+        | Instr::Return
+        | Instr::Gather { .. } => {}
+    }
+}
+
+fn nested(ins: &Instr) -> Vec<&[Instr]> {
+    match ins {
+        Instr::If {
+            then, otherwise, ..
+        } => vec![then, otherwise],
+        Instr::Loop {
+            cond_code,
+            body,
+            step,
+            ..
+        } => vec![cond_code, body, step],
+        Instr::Function { body }
+        | Instr::Illuminance { body, .. }
+        | Instr::Illuminate { body, .. }
+        | Instr::Solar { body, .. } => vec![body],
+        Instr::Gather { otherwise } => vec![otherwise],
+        _ => vec![],
+    }
+}
+
+impl Program {
+    /// Registers whose value may be moved (not copied) into the destination of the one `Mov`
+    /// that reads them: compiler temporaries named exactly twice in the whole program (their
+    /// one definition and that `Mov`), defined by a computation rather than a move, and not
+    /// a parameter, global, constant or array element. The interpreter uses this to skip
+    /// whole-grid copies of `var = expr` when every point is running.
+    pub fn movable_temps(&self) -> Vec<bool> {
+        let n = self.regs.len();
+        let mut count = vec![0u32; n];
+        let mut mov_src = vec![false; n];
+        let mut mov_dst = vec![false; n];
+        let mut pinned = vec![false; n];
+        let mut regs = Vec::new();
+        // The block each register was last named in: a temporary defined in one block and
+        // moved in another (say, before a loop and inside it) must keep being copied.
+        let mut block_of = vec![usize::MAX; n];
+        let mut blocks = 0usize;
+        #[allow(clippy::too_many_arguments)]
+        fn walk(
+            code: &[Instr],
+            regs: &mut Vec<Reg>,
+            count: &mut [u32],
+            mov_src: &mut [bool],
+            mov_dst: &mut [bool],
+            pinned: &mut [bool],
+            block_of: &mut [usize],
+            blocks: &mut usize,
+        ) {
+            *blocks += 1;
+            let me = *blocks;
+            for ins in code {
+                regs.clear();
+                instr_regs(ins, regs);
+                for &r in regs.iter() {
+                    if let Some(c) = count.get_mut(r as usize) {
+                        *c += 1;
+                        let b = &mut block_of[r as usize];
+                        if *b != usize::MAX && *b != me {
+                            pinned[r as usize] = true;
+                        }
+                        *b = me;
+                    }
+                }
+                match ins {
+                    Instr::Mov { dst, src } | Instr::Copy { dst, src } => {
+                        let is_mov = matches!(ins, Instr::Mov { .. });
+                        if let Some(s) = mov_src.get_mut(*src as usize) {
+                            *s |= is_mov;
+                        }
+                        if let Some(d) = mov_dst.get_mut(*dst as usize) {
+                            *d = true;
+                        }
+                        if !is_mov {
+                            if let Some(p) = pinned.get_mut(*src as usize) {
+                                *p = true;
+                            }
+                        }
+                    }
+                    Instr::GetIndex { base, len, .. } | Instr::SetIndex { base, len, .. } => {
+                        for r in *base..*base + *len {
+                            if let Some(p) = pinned.get_mut(r as usize) {
+                                *p = true;
+                            }
+                        }
+                    }
+                    _ => {}
+                }
+                for block in nested(ins) {
+                    walk(
+                        block, regs, count, mov_src, mov_dst, pinned, block_of, blocks,
+                    );
+                }
+            }
+        }
+        walk(
+            &self.init,
+            &mut regs,
+            &mut count,
+            &mut mov_src,
+            &mut mov_dst,
+            &mut pinned,
+            &mut block_of,
+            &mut blocks,
+        );
+        walk(
+            &self.body,
+            &mut regs,
+            &mut count,
+            &mut mov_src,
+            &mut mov_dst,
+            &mut pinned,
+            &mut block_of,
+            &mut blocks,
+        );
+        for p in &self.params {
+            let len = p.array.unwrap_or(1).max(1) as Reg;
+            for r in p.reg..p.reg + len {
+                if let Some(x) = pinned.get_mut(r as usize) {
+                    *x = true;
+                }
+            }
+        }
+        for g in &self.globals {
+            if let Some(x) = pinned.get_mut(g.reg as usize) {
+                *x = true;
+            }
+        }
+        for (r, _) in &self.consts {
+            if let Some(x) = pinned.get_mut(*r as usize) {
+                *x = true;
+            }
+        }
+        (0..n)
+            .map(|r| count[r] == 2 && mov_src[r] && !mov_dst[r] && !pinned[r])
+            .collect()
     }
 }

@@ -485,7 +485,7 @@ impl<'a> Lowerer<'a> {
         let mut globals = std::mem::take(&mut self.globals);
         globals
             .retain(|g| used.contains(&g.reg) || matches!(g.name, "L" | "Cl" | "Ol" | "du" | "dv"));
-        Program {
+        let mut prog = Program {
             name: def.name.clone(),
             kind: def.kind,
             regs: std::mem::take(&mut self.regs),
@@ -494,8 +494,11 @@ impl<'a> Lowerer<'a> {
             globals,
             init,
             body,
+            movable: Vec::new(),
             span: def.span,
-        }
+        };
+        prog.movable = prog.movable_temps();
+        prog
     }
 
     fn alloc_var_regs(&mut self, ty: BaseType, array: Option<usize>, varying: bool) -> Reg {
