@@ -86,6 +86,17 @@ pub struct ShadedGrid {
     /// Raster rectangle (x0, y0, x1, y1) outside which this grid is never sampled: its live
     /// micropolygons' bound clipped to the bound of the surface it was diced from.
     pub bound: [f32; 4],
+    /// Raster bound (x0, y0, x1, y1) of each micropolygon, and of each row of live
+    /// micropolygons (empty rows are inverted): computed once per grid so that each bucket
+    /// a grid overlaps skips whole rows and rejects micropolygons with four compares.
+    pub mp_bounds: Vec<[f32; 4]>,
+    pub row_bounds: Vec<[f32; 4]>,
+}
+
+/// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
+#[inline]
+pub fn overlaps(b: &[f32; 4], x0: f32, y0: f32, x1: f32, y1: f32) -> bool {
+    b[0] <= x1 && b[2] >= x0 && b[1] <= y1 && b[3] >= y0
 }
 
 /// How a grid came to be, for [`ShadedGrid::new`].
@@ -159,14 +170,19 @@ impl ShadedGrid {
             fill_aov(grid, a, off, aov_width, &mut aov);
             off += a.width();
         }
-        let mut live = Vec::with_capacity((nu.max(1) - 1) * (nv.max(1) - 1));
-        let mut b = [
+        let nmp = (nu.max(1) - 1) * (nv.max(1) - 1);
+        let mut live = Vec::with_capacity(nmp);
+        let mut mp_bounds = Vec::with_capacity(nmp);
+        let mut row_bounds = Vec::with_capacity(nv.saturating_sub(1));
+        const EMPTY: [f32; 4] = [
             f32::INFINITY,
             f32::INFINITY,
             f32::NEG_INFINITY,
             f32::NEG_INFINITY,
         ];
+        let mut b = EMPTY;
         for j in 0..nv.saturating_sub(1) {
+            let mut rb = EMPTY;
             for i in 0..nu.saturating_sub(1) {
                 let k = j * nu + i;
                 let corners = [k, k + 1, k + nu, k + nu + 1];
@@ -177,16 +193,27 @@ impl ShadedGrid {
                     // Facing the eye when Ng points against the viewing direction.
                     alive = m.dot(view_dir) < 0.0;
                 }
+                let mut mb = EMPTY;
                 if alive {
                     for &c in &corners {
-                        b[0] = b[0].min(xy[c][0]);
-                        b[1] = b[1].min(xy[c][1]);
-                        b[2] = b[2].max(xy[c][0]);
-                        b[3] = b[3].max(xy[c][1]);
+                        mb[0] = mb[0].min(xy[c][0]);
+                        mb[1] = mb[1].min(xy[c][1]);
+                        mb[2] = mb[2].max(xy[c][0]);
+                        mb[3] = mb[3].max(xy[c][1]);
+                    }
+                    for q in 0..2 {
+                        rb[q] = rb[q].min(mb[q]);
+                        rb[q + 2] = rb[q + 2].max(mb[q + 2]);
                     }
                 }
+                mp_bounds.push(mb);
                 live.push(alive);
             }
+            for q in 0..2 {
+                b[q] = b[q].min(rb[q]);
+                b[q + 2] = b[q + 2].max(rb[q + 2]);
+            }
+            row_bounds.push(rb);
         }
         let bound = [
             b[0].max(info.clip[0]),
@@ -208,6 +235,8 @@ impl ShadedGrid {
             matte: info.matte,
             smooth: info.smooth,
             bound,
+            mp_bounds,
+            row_bounds,
         }
     }
 

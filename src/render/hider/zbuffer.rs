@@ -229,27 +229,30 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
     let mut mean_aov = vec![0f32; aw];
     let mut interp_aov = vec![0f32; aw];
     for j in 0..g.nv.saturating_sub(1) {
+        if !g
+            .row_bounds
+            .get(j)
+            .is_some_and(|rb| super::overlaps(rb, wx0, wy0, wx1, wy1))
+        {
+            continue;
+        }
         for i in 0..nu.saturating_sub(1) {
             let m = j * (nu - 1) + i;
             if !g.live[m] {
                 continue;
             }
+            let mb = g.mp_bounds[m];
+            if !super::overlaps(&mb, wx0, wy0, wx1, wy1) {
+                continue;
+            }
             let k = j * nu + i;
             let corner = [k, k + 1, k + nu + 1, k + nu];
-            let (mut x0, mut y0, mut x1, mut y1) = (
-                f32::INFINITY,
-                f32::INFINITY,
-                f32::NEG_INFINITY,
-                f32::NEG_INFINITY,
+            let (x0, y0, x1, y1) = (
+                mb[0].max(wx0),
+                mb[1].max(wy0),
+                mb[2].min(wx1),
+                mb[3].min(wy1),
             );
-            for &c in &corner {
-                let [x, y] = g.xy[c];
-                x0 = x0.min(x);
-                y0 = y0.min(y);
-                x1 = x1.max(x);
-                y1 = y1.max(y);
-            }
-            let (x0, y0, x1, y1) = (x0.max(wx0), y0.max(wy0), x1.min(wx1), y1.min(wy1));
             if !(x0 <= x1 && y0 <= y1) {
                 continue;
             }
