@@ -10,6 +10,7 @@
 use super::filter::Filter;
 use super::SampleBuffer;
 use crate::diag::{Diag, Diagnostics};
+use crate::num::{ceil_i64, floor_i64};
 use crate::scene::{Hider, PixelFilter};
 
 /// The full filtered image: `channel_names.len()` floats per pixel, rows top to bottom.
@@ -314,10 +315,10 @@ pub fn filter_tile(
                         continue; // a broken sample must not poison its neighbours
                     }
                     // Output pixel range whose support contains the sample (clipped to the region).
-                    let px_lo = ((sx - hx - 0.5).ceil() as i64).max(x0 as i64);
-                    let px_hi = ((sx + hx - 0.5).floor() as i64).min(x1 as i64 - 1);
-                    let py_lo = ((sy - hy - 0.5).ceil() as i64).max(y0 as i64);
-                    let py_hi = ((sy + hy - 0.5).floor() as i64).min(y1 as i64 - 1);
+                    let px_lo = ceil_i64(sx - hx - 0.5).max(x0 as i64);
+                    let px_hi = floor_i64(sx + hx - 0.5).min(x1 as i64 - 1);
+                    let py_lo = ceil_i64(sy - hy - 0.5).max(y0 as i64);
+                    let py_hi = floor_i64(sy + hy - 0.5).min(y1 as i64 - 1);
                     if px_lo > px_hi || py_lo > py_hi {
                         continue;
                     }

@@ -12,6 +12,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::film::SampleBuffer;
+use crate::num::floor_i32;
 
 use super::super::camera::PixelRect;
 use super::super::sampler::sample_position;
@@ -300,10 +301,10 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 if !(tx0 <= tx1 && ty0 <= ty1) {
                     continue;
                 }
-                let px0 = (tx0.floor() as i32).max(rect.x0);
-                let px1 = (tx1.floor() as i32).min(rect.x1 - 1);
-                let py0 = (ty0.floor() as i32).max(rect.y0);
-                let py1 = (ty1.floor() as i32).min(rect.y1 - 1);
+                let px0 = floor_i32(tx0).max(rect.x0);
+                let px1 = floor_i32(tx1).min(rect.x1 - 1);
+                let py0 = floor_i32(ty0).max(rect.y0);
+                let py1 = floor_i32(ty1).min(rect.y1 - 1);
                 let sub = (m as u32) << 1 | t as u32;
                 let inv_area = 1.0 / area;
                 let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
