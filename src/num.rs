@@ -10,7 +10,7 @@
 pub fn floor_i64(x: f32) -> i64 {
     let i = x as i64;
     if (i as f32) > x {
-        i - 1
+        i.saturating_sub(1)
     } else {
         i
     }
