@@ -12,7 +12,7 @@ use crate::scene::{TextureJob, TextureJobKind};
 
 use super::format::{self, Kind};
 use super::image_in::{read_image, Image};
-use super::mipmap::{build_pyramid, Downsample, Wrap};
+use super::mipmap::{build_pyramid_with, Downsample, Wrap};
 
 /// How to build the pyramid.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +20,10 @@ pub struct MakeOptions {
     pub swrap: Wrap,
     pub twrap: Wrap,
     pub filter: Downsample,
+    /// Prefilter widths in texels of the level being made (RISpec swidth/twidth); 0 means
+    /// the filter's natural width.
+    pub swidth: f32,
+    pub twidth: f32,
 }
 
 impl Default for MakeOptions {
@@ -28,33 +32,52 @@ impl Default for MakeOptions {
             swrap: Wrap::Periodic,
             twrap: Wrap::Periodic,
             filter: Downsample::Box,
+            swidth: 0.0,
+            twidth: 0.0,
         }
     }
 }
 
-/// Downsampling filter for a RenderMan filter name: box stays box, every smooth filter
-/// (gaussian, catmull-rom, sinc, …) uses the [1 3 3 1] kernel. None for unknown names.
-pub fn downsample_for(name: &str) -> Option<Downsample> {
-    match name.to_ascii_lowercase().as_str() {
-        "" | "box" => Some(Downsample::Box),
-        "gaussian" | "triangle" | "catmull-rom" | "sinc" | "disk" | "bessel" | "mitchell" => {
-            Some(Downsample::Gaussian)
-        }
-        _ => None,
+impl MakeOptions {
+    fn pyramid(&self, im: Image, swrap: Wrap, twrap: Wrap) -> Vec<Image> {
+        let nat = self.filter.natural_width();
+        let w = |v: f32| if v > 0.0 { v } else { nat };
+        build_pyramid_with(
+            im,
+            swrap,
+            twrap,
+            self.filter,
+            w(self.swidth),
+            w(self.twidth),
+        )
     }
+}
+
+/// Downsampling filter for a RenderMan filter name (box, triangle, catmull-rom, gaussian,
+/// sinc, mitchell, disk, bessel, b-spline; "" is box). None for unknown names.
+pub fn downsample_for(name: &str) -> Option<Downsample> {
+    Downsample::parse(name)
 }
 
 /// A 2-D texture.
 pub fn make_texture(input: &Path, output: &Path, o: &MakeOptions) -> Result<(), String> {
     let im = read_image(input)?;
-    let levels = build_pyramid(im, o.swrap, o.twrap, o.filter);
+    let levels = o.pyramid(im, o.swrap, o.twrap);
     format::write(output, Kind::Texture, &[levels], o.swrap, o.twrap, None)
+}
+
+/// A bump map (see [`super::bump`]): heights and their s/t slopes, mip-mapped together.
+pub fn make_bump(input: &Path, output: &Path, o: &MakeOptions) -> Result<(), String> {
+    let im = read_image(input)?;
+    let im = super::bump::bump_image(&im, o.swrap, o.twrap);
+    let levels = o.pyramid(im, o.swrap, o.twrap);
+    format::write(output, Kind::Bump, &[levels], o.swrap, o.twrap, None)
 }
 
 /// A lat-long environment (s periodic, t clamped).
 pub fn make_latlong(input: &Path, output: &Path, o: &MakeOptions) -> Result<(), String> {
     let im = read_image(input)?;
-    let levels = build_pyramid(im, Wrap::Periodic, Wrap::Clamp, o.filter);
+    let levels = o.pyramid(im, Wrap::Periodic, Wrap::Clamp);
     format::write(
         output,
         Kind::LatLong,
@@ -89,7 +112,7 @@ pub fn make_cube(inputs: &[PathBuf], output: &Path, o: &MakeOptions) -> Result<(
     }
     let pyr: Vec<Vec<Image>> = faces
         .into_iter()
-        .map(|f| build_pyramid(f, Wrap::Clamp, Wrap::Clamp, o.filter))
+        .map(|f| o.pyramid(f, Wrap::Clamp, Wrap::Clamp))
         .collect();
     format::write(output, Kind::Cube, &pyr, Wrap::Clamp, Wrap::Clamp, None)
 }
@@ -154,6 +177,23 @@ pub fn run_job(job: &TextureJob, search: &[PathBuf], diags: &Diagnostics) {
             Downsample::Gaussian
         }
     };
+    // swidth/twidth: the prefilter's support in texels of each level made.
+    let width = |v: f32, which: &str| {
+        if v.is_finite() && (1.0..=16.0).contains(&v) {
+            return v;
+        }
+        let w = if v.is_finite() {
+            v.clamp(1.0, 16.0)
+        } else {
+            1.0
+        };
+        warn(format!(
+            "{which} {v} is outside [1, 16] texels (narrower would skip texels when halving); using {w}"
+        ));
+        w
+    };
+    // (MakeShadow has neither: its job carries 1 × 1, and a shadow map has no pyramid.)
+    let (swidth, twidth) = (width(job.swidth, "swidth"), width(job.twidth, "twidth"));
     let wrap = |s: &str| {
         if s.is_empty() {
             return Wrap::Periodic;
@@ -169,11 +209,14 @@ pub fn run_job(job: &TextureJob, search: &[PathBuf], diags: &Diagnostics) {
         swrap: wrap(&job.swrap),
         twrap: wrap(&job.twrap),
         filter,
+        swidth,
+        twidth,
     };
     let out = PathBuf::from(&job.output);
     let inputs: Vec<PathBuf> = job.inputs.iter().map(|n| resolve(n, search)).collect();
     let r = match job.kind {
         TextureJobKind::Texture => make_texture(&inputs[0], &out, &o),
+        TextureJobKind::Bump => make_bump(&inputs[0], &out, &o),
         TextureJobKind::LatLongEnvironment => make_latlong(&inputs[0], &out, &o),
         TextureJobKind::CubeFaceEnvironment => {
             if (job.fov - 90.0).abs() > 1e-3 {
