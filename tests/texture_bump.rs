@@ -257,3 +257,41 @@ fn bump_in_a_shader_tilts_the_normal_by_the_ramp() {
         }
     }
 }
+
+#[test]
+fn bump_calls_type_check_in_every_form() {
+    let compile = |body: &str| {
+        let src = format!(
+            "surface t(string m = \"\") {{ normal Nn = N; float ss = s, tt = t; {body} Ci = 1; }}\n"
+        );
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let progs = arbor::sl::compile_source(
+            "t.sl",
+            &src,
+            None,
+            &sources,
+            &diags,
+            &arbor::sl::CompileOptions::default(),
+        );
+        let msgs: Vec<String> = diags
+            .snapshot()
+            .iter()
+            .map(|(d, _)| d.message.clone())
+            .collect();
+        (progs.len() == 1 && !diags.has_errors(), msgs)
+    };
+    for ok in [
+        "N += bump(m, N, dPdu, dPdv);",
+        "Nn = normalize(Nn + bump(m[0], Nn, dPdu, dPdv, ss, tt));",
+        "N += bump(m, N, dPdu, dPdv, ss, tt, ss, tt, ss, tt, ss, tt, \"blur\", 0.1, \"filter\", \"sat\");",
+    ] {
+        let (good, msgs) = compile(ok);
+        assert!(good && msgs.is_empty(), "{ok}: {msgs:?}");
+    }
+    for bad in ["N += bump(m, N);", "N += bump(m, N, dPdu, dPdv, ss);"] {
+        let (good, msgs) = compile(bad);
+        assert!(!good, "{bad} should not compile");
+        assert!(msgs.iter().any(|m| m.contains("bump")), "{bad}: {msgs:?}");
+    }
+}
