@@ -239,3 +239,88 @@ pub fn run_job(job: &TextureJob, search: &[PathBuf], diags: &Diagnostics) {
         );
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::texture::format::parse_header;
+
+    fn job(kind: TextureJobKind, input: &Path, output: &Path, filter: &str, w: f32) -> TextureJob {
+        TextureJob {
+            kind,
+            inputs: vec![input.display().to_string()],
+            output: output.display().to_string(),
+            swrap: "periodic".into(),
+            twrap: "periodic".into(),
+            filter: filter.into(),
+            swidth: w,
+            twidth: w,
+            fov: 90.0,
+            span: Default::default(),
+        }
+    }
+
+    /// Level 1 of a made file, read back whole.
+    fn level1(path: &Path) -> Vec<f32> {
+        let bytes = std::fs::read(path).unwrap();
+        let h = parse_header(&bytes).unwrap();
+        let tex = crate::texture::cache::Texture::new(
+            1,
+            h,
+            crate::texture::cache::Source::File(std::fs::File::open(path).unwrap()),
+        );
+        tex.read_level(0, 1).unwrap().data
+    }
+
+    #[test]
+    fn requests_honour_filter_and_widths_and_make_bump_maps() {
+        let dir = std::env::temp_dir().join(format!("arbor-make-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // One bright column (x = 8) in a 16 × 4 grey-level picture.
+        let png = dir.join("line.png");
+        image::GrayImage::from_fn(16, 4, |x, _| image::Luma([if x == 8 { 255 } else { 0 }]))
+            .save(&png)
+            .unwrap();
+        let out = dir.join("line.tex");
+        let diags = Diagnostics::new();
+        let row = |j: &TextureJob| {
+            run_job(j, &[], &diags);
+            level1(&out)[..8].to_vec()
+        };
+        // box 1 1: the 2 × 2 average; box 2 2 reaches one more texel each side; a 2-wide
+        // triangle is [1 3 3 1]/8.
+        let b1 = row(&job(TextureJobKind::Texture, &png, &out, "box", 1.0));
+        assert_eq!(b1, [0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0]);
+        let b2 = row(&job(TextureJobKind::Texture, &png, &out, "box", 2.0));
+        assert_eq!(b2, [0.0, 0.0, 0.0, 0.25, 0.25, 0.0, 0.0, 0.0]);
+        let t2 = row(&job(TextureJobKind::Texture, &png, &out, "triangle", 2.0));
+        assert_eq!(t2, [0.0, 0.0, 0.0, 0.125, 0.375, 0.0, 0.0, 0.0]);
+        assert!(diags.snapshot().is_empty(), "{:?}", diags.snapshot());
+        // Widths outside [1, 16] warn by name and are clamped.
+        let b0 = row(&job(TextureJobKind::Texture, &png, &out, "box", 0.25));
+        assert_eq!(b0, b1);
+        let msgs: Vec<String> = diags
+            .snapshot()
+            .iter()
+            .map(|(d, _)| d.message.clone())
+            .collect();
+        assert!(
+            msgs.iter().any(|m| m.starts_with("swidth 0.25")),
+            "{msgs:?}"
+        );
+        assert!(
+            msgs.iter().any(|m| m.starts_with("twidth 0.25")),
+            "{msgs:?}"
+        );
+        // MakeBump: a bump-kind file with heights and slopes (3 channels for 1).
+        let bump = dir.join("line.bump");
+        run_job(
+            &job(TextureJobKind::Bump, &png, &bump, "box", 1.0),
+            &[],
+            &diags,
+        );
+        let h = parse_header(&std::fs::read(&bump).unwrap()).unwrap();
+        assert_eq!((h.kind, h.nchan), (Kind::Bump, 3));
+        assert!(!diags.has_errors());
+    }
+}

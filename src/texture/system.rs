@@ -260,6 +260,15 @@ impl TextureLookup for TextureSystem<'_> {
             return false;
         };
         let kind = self.filter_kind(&params.filter);
+        if kind == FilterKind::Sat {
+            self.warn_once(
+                format!("envsat:{name}"),
+                Diag::warning(
+                    "texture::filter",
+                    format!("filter \"sat\" applies to texture() and bump(); environment `{name}` is filtered trilinearly"),
+                ),
+            );
+        }
         let blur = params.sblur.max(params.tblur);
         let mut f = Fetcher::new(&tex, &self.cache, first_chan, nchan);
         for (i, d) in dirs.iter().enumerate() {
@@ -330,13 +339,22 @@ impl TextureLookup for TextureSystem<'_> {
             Kind::Bump => {
                 // Filtered precomputed slopes: the derivative of the filtered height.
                 let heights = h.nchan / 3;
-                let mut f = Fetcher::new(&tex, &self.cache, slope_channel(h.nchan, chan), 2);
+                let first = slope_channel(h.nchan, chan);
+                let sat = if kind == FilterKind::Sat {
+                    self.sat(name, &tex)
+                } else {
+                    None
+                };
+                let mut f = Fetcher::new(&tex, &self.cache, first, 2);
                 for (i, c) in st.iter().enumerate() {
                     let o = &mut out[2 * i..2 * i + 2];
                     o.fill(0.0);
                     if chan < heights {
                         let fp = Footprint::from_corners(c, params.swidth, params.twidth);
-                        lookup(&mut f, 0, &fp, params.sblur, params.tblur, kind, o);
+                        match &sat {
+                            Some(t) => t.lookup(&fp, params.sblur, params.tblur, first, o),
+                            None => lookup(&mut f, 0, &fp, params.sblur, params.tblur, kind, o),
+                        }
                     }
                 }
             }
