@@ -1,6 +1,13 @@
 //! Bump maps: the stored form `MakeBump` writes, and Blinn's normal perturbation that the
 //! shading language's `bump()` returns (book §6.4; notes shading.md §2.11).
 //!
+//! `bump()` and `MakeBump` are RISpec 3.0/3.1 (3.2 dropped both in favour of displacement
+//! shaders; arbor follows 3.1). There `bump(name, N, dPds, dPdt, …)` returns the change of
+//! the normal — Pixar's own 1989 `bumpy` shader does `N += bump(map, N, dPdu, dPdv) *
+//! amplitude` — without fixing its formula; arbor returns Blinn's D, which makes the
+//! bumped normal agree (to first order) with the normal of the surface displaced by
+//! B·normalize(N), i.e. what `P += B * normalize(N); N = calculatenormal(P)` would give.
+//!
 //! Input: a height picture (any channel count; each channel is one height field B(s, t) in
 //! the units of the shading space, t = 0 at the top row). Output of [`bump_image`]: an image
 //! of 3n channels — the n heights, then (∂B/∂s, ∂B/∂t) for each of them — that the usual
