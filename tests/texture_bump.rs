@@ -182,10 +182,18 @@ const SHADER: &str = "surface bumpn(string map = \"\") {
 }
 ";
 
+/// The same heights as true displacement, for comparison.
+const DISPLACE: &str = "displacement dispn(string map = \"\") {
+    P += float texture(map) * normalize(N);
+    N = calculatenormal(P);
+}
+";
+
 fn render(dir: &Path, rib: &str) -> Diagnostics {
     let path = dir.join("scene.rib");
     std::fs::write(&path, rib).unwrap();
     std::fs::write(dir.join("bumpn.sl"), SHADER).unwrap();
+    std::fs::write(dir.join("dispn.sl"), DISPLACE).unwrap();
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let stdlib = concat!(env!("CARGO_MANIFEST_DIR"), "/stdlib/shaders").to_string();
@@ -209,22 +217,38 @@ fn bump_in_a_shader_tilts_the_normal_by_the_ramp() {
     let (bump, tex) = (dir.join("ramp.bump"), dir.join("ramp.tex"));
     let out = |k: &str| dir.join(format!("{k}.png"));
     let frame = |k: &str, map: &Path| {
+        let (surf, disp) = if k == "displaced" {
+            (
+                String::new(),
+                format!(
+                    "Displacement \"dispn\" \"string map\" \"{}\"\n\
+                Attribute \"displacementbound\" \"sphere\" [1.2]\n",
+                    map.display()
+                ),
+            )
+        } else {
+            (map.display().to_string(), String::new())
+        };
         format!(
             "FrameBegin {}\nDisplay \"{}\" \"png\" \"rgb\"\nFormat 16 16 1\nPixelSamples 1 1\n\
              PixelFilter \"box\" 1 1\nProjection \"orthographic\"\nScreenWindow -1 1 -1 1\n\
              ConcatTransform [1 0 0 0  0 0 -1 0  0 1 0 0  0 0 0 1]\nTranslate 0 -5 0\n\
-             WorldBegin\nSurface \"bumpn\" \"string map\" \"{}\"\n\
+             WorldBegin\n{disp}Surface \"bumpn\" \"string map\" \"{surf}\"\n\
              Patch \"bilinear\" \"P\" [-1 0 -1  1 0 -1  -1 0 1  1 0 1]\nWorldEnd\nFrameEnd\n",
-            if k == "plain" { 2 } else { 1 },
+            match k {
+                "bumpfile" => 1,
+                "plain" => 2,
+                _ => 3,
+            },
             out(k).display(),
-            map.display()
         )
     };
     let rib = format!(
         "MakeBump \"{png}\" \"{bump}\" \"clamp\" \"clamp\" \"box\" 1 1\n\
-         MakeTexture \"{png}\" \"{tex}\" \"clamp\" \"clamp\" \"gaussian\" 2 2\n{}{}",
+         MakeTexture \"{png}\" \"{tex}\" \"clamp\" \"clamp\" \"gaussian\" 2 2\n{}{}{}",
         frame("bumpfile", &bump),
         frame("plain", &tex),
+        frame("displaced", &tex),
         png = png.display(),
         bump = bump.display(),
         tex = tex.display(),
@@ -237,10 +261,11 @@ fn bump_in_a_shader_tilts_the_normal_by_the_ramp() {
         .collect();
     assert!(!diags.has_errors() && msgs.is_empty(), "{msgs:#?}");
     // s runs over 2 units of x: the surface rises (256/255)/2 per unit x along its normal,
-    // so the bumped normal is ∝ (−k, ±1, 0) with k = 128/255, whichever way N points.
+    // so the bumped normal is ∝ (−k, ±1, 0) with k = 128/255, whichever way N points —
+    // the normal calculatenormal finds on the truly displaced surface.
     let k = 128.0f32 / 255.0;
     let want = [k, 1.0, 0.0].map(|v| v / (1.0 + k * k).sqrt());
-    for which in ["bumpfile", "plain"] {
+    for which in ["bumpfile", "plain", "displaced"] {
         let img = image::open(out(which)).unwrap().to_rgb8();
         for j in 3..13 {
             for i in 3..13 {
