@@ -77,10 +77,10 @@ struct ShadeArgs {
 
 #[derive(Args)]
 struct TextureArgs {
-    /// Input picture (PNG, TIFF, JPEG, HDR, EXR; a zfile with --shadow). Unused with --envcube.
-    input: Option<PathBuf>,
-    /// Output texture file.
-    output: PathBuf,
+    /// IN OUT: the input picture (PNG, TIFF, JPEG, HDR, EXR; a zfile with --shadow) and the
+    /// output texture file; with --envcube only OUT.
+    #[arg(required = true, num_args = 1..=2, value_names = ["IN", "OUT"])]
+    paths: Vec<PathBuf>,
     /// Wrap mode for s and t: periodic, clamp or black.
     #[arg(long, default_value = "periodic")]
     wrap: String,
@@ -554,26 +554,28 @@ fn texture_cmd(a: TextureArgs) -> ExitCode {
         twidth: a.twidth.unwrap_or(0.0),
     };
     // With --envcube the six faces are the inputs and the one positional is the output.
+    let output = a.paths.last().expect("clap requires a path").clone();
     let r = if let Some(faces) = &a.envcube {
-        let out = a
-            .input
-            .clone()
-            .map(|_| a.output.clone())
-            .unwrap_or(a.output.clone());
-        make::make_cube(faces, &out, &o)
+        if a.paths.len() != 1 {
+            eprintln!(
+                "error: with --envcube give only the output file (the faces follow --envcube)"
+            );
+            return ExitCode::from(2);
+        }
+        make::make_cube(faces, &output, &o)
     } else {
-        let Some(input) = &a.input else {
-            eprintln!("error: arbor texture IN OUT needs an input picture");
+        let [input, _] = a.paths.as_slice() else {
+            eprintln!("error: arbor texture IN OUT needs an input picture and an output file");
             return ExitCode::from(2);
         };
         if a.shadow {
-            make::make_shadow(input, &a.output)
+            make::make_shadow(input, &output)
         } else if a.envlatl {
-            make::make_latlong(input, &a.output, &o)
+            make::make_latlong(input, &output, &o)
         } else if a.bump {
-            make::make_bump(input, &a.output, &o)
+            make::make_bump(input, &output, &o)
         } else {
-            make::make_texture(input, &a.output, &o)
+            make::make_texture(input, &output, &o)
         }
     };
     match r {
