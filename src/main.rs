@@ -48,7 +48,7 @@ enum Cmd {
         #[arg(long, default_value_t = 8)]
         directions: usize,
     },
-    /// Make a mip-mapped texture, environment or shadow map (arbor's tiled .tex format).
+    /// Make a mip-mapped texture, bump, environment or shadow map (arbor's tiled .tex format).
     Texture(TextureArgs),
 }
 
@@ -77,16 +77,26 @@ struct ShadeArgs {
 
 #[derive(Args)]
 struct TextureArgs {
-    /// Input picture (PNG, TIFF, JPEG, HDR, EXR; a zfile with --shadow). Unused with --envcube.
-    input: Option<PathBuf>,
-    /// Output texture file.
-    output: PathBuf,
+    /// IN OUT: the input picture (PNG, TIFF, JPEG, HDR, EXR; a zfile with --shadow) and the
+    /// output texture file; with --envcube only OUT.
+    #[arg(required = true, num_args = 1..=2, value_names = ["IN", "OUT"])]
+    paths: Vec<PathBuf>,
     /// Wrap mode for s and t: periodic, clamp or black.
     #[arg(long, default_value = "periodic")]
     wrap: String,
-    /// Pyramid filter: box or gaussian (also: triangle, catmull-rom, sinc, …).
+    /// Pyramid filter: box, triangle, catmull-rom, gaussian, sinc, mitchell, disk, bessel,
+    /// b-spline.
     #[arg(long, default_value = "box")]
     filter: String,
+    /// Filter width in s, in texels of each level made (default: the filter's own).
+    #[arg(long)]
+    swidth: Option<f32>,
+    /// Filter width in t, in texels of each level made (default: the filter's own).
+    #[arg(long)]
+    twidth: Option<f32>,
+    /// Make a bump map (heights and their slopes) for the shading language's bump().
+    #[arg(long)]
+    bump: bool,
     /// Make a lat-long environment map.
     #[arg(long)]
     envlatl: bool,
@@ -529,35 +539,49 @@ fn texture_cmd(a: TextureArgs) -> ExitCode {
     };
     let Some(filter) = make::downsample_for(&a.filter) else {
         eprintln!(
-            "error: --filter `{}` is not known (box, gaussian, triangle, catmull-rom, sinc)",
+            "error: --filter `{}` is not known (box, triangle, catmull-rom, gaussian, sinc, mitchell, disk, bessel, b-spline)",
             a.filter
         );
         return ExitCode::from(2);
     };
+    for (flag, w) in [("--swidth", a.swidth), ("--twidth", a.twidth)] {
+        if let Some(w) = w {
+            if !(w.is_finite() && (1.0..=16.0).contains(&w)) {
+                eprintln!("error: {flag} takes a width from 1 to 16 texels, found {w}");
+                return ExitCode::from(2);
+            }
+        }
+    }
     let o = make::MakeOptions {
         swrap: wrap,
         twrap: wrap,
         filter,
+        swidth: a.swidth.unwrap_or(0.0),
+        twidth: a.twidth.unwrap_or(0.0),
     };
     // With --envcube the six faces are the inputs and the one positional is the output.
+    let output = a.paths.last().expect("clap requires a path").clone();
     let r = if let Some(faces) = &a.envcube {
-        let out = a
-            .input
-            .clone()
-            .map(|_| a.output.clone())
-            .unwrap_or(a.output.clone());
-        make::make_cube(faces, &out, &o)
+        if a.paths.len() != 1 {
+            eprintln!(
+                "error: with --envcube give only the output file (the faces follow --envcube)"
+            );
+            return ExitCode::from(2);
+        }
+        make::make_cube(faces, &output, &o)
     } else {
-        let Some(input) = &a.input else {
-            eprintln!("error: arbor texture IN OUT needs an input picture");
+        let [input, _] = a.paths.as_slice() else {
+            eprintln!("error: arbor texture IN OUT needs an input picture and an output file");
             return ExitCode::from(2);
         };
         if a.shadow {
-            make::make_shadow(input, &a.output)
+            make::make_shadow(input, &output)
         } else if a.envlatl {
-            make::make_latlong(input, &a.output, &o)
+            make::make_latlong(input, &output, &o)
+        } else if a.bump {
+            make::make_bump(input, &output, &o)
         } else {
-            make::make_texture(input, &a.output, &o)
+            make::make_texture(input, &output, &o)
         }
     };
     match r {

@@ -39,6 +39,7 @@ fn constant_colour_through_every_filter() {
             swrap: Wrap::Periodic,
             twrap: Wrap::Clamp,
             filter: filt,
+            ..MakeOptions::default()
         };
         make_texture(&src, &tex, &o).unwrap();
         let diags = Diagnostics::new();

@@ -588,7 +588,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Geometry", ["type": Str], ALL, true, "5.5", B::geometry_named),
     // ---- texture-making utilities (§8) ----
     req!("MakeTexture", ["picturename": Str, "texturename": Str, "swrap": Str, "twrap": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.1", B::make_texture),
-    req!("MakeBump", ["picturename": Str, "texturename": Str, "swrap": Str, "twrap": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.1", B::unimplemented),
+    req!("MakeBump", ["picturename": Str, "texturename": Str, "swrap": Str, "twrap": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.1", B::make_bump),
     req!("MakeLatLongEnvironment", ["picturename": Str, "texturename": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.2", B::make_latlong),
     req!("MakeCubeFaceEnvironment", ["px": Str, "nx": Str, "py": Str, "ny": Str, "pz": Str, "nz": Str, "texturename": Str, "fov": Num, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.2", B::make_cube),
     req!("MakeShadow", ["picturename": Str, "texturename": Str], ALL, true, "8.3", B::make_shadow),

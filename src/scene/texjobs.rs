@@ -1,5 +1,5 @@
-//! The texture-making requests (RISpec §8): MakeTexture, MakeLatLongEnvironment,
-//! MakeCubeFaceEnvironment and MakeShadow.
+//! The texture-making requests (RISpec §8): MakeTexture, MakeBump (RISpec 3.0/3.1; 3.2
+//! dropped it), MakeLatLongEnvironment, MakeCubeFaceEnvironment and MakeShadow.
 //!
 //! Input: a checked [`Call`]. Output: a [`TextureJob`] recorded on the scene of the next (or
 //! current) world block; the pipeline runs the jobs before rendering that frame, so a
@@ -58,6 +58,21 @@ impl Builder<'_> {
         let mut j = Self::job(
             call,
             TextureJobKind::Texture,
+            vec![call.pos[0].str().to_string()],
+            1,
+        );
+        j.swrap = call.pos[2].str().to_string();
+        j.twrap = call.pos[3].str().to_string();
+        j.filter = call.pos[4].str().to_string();
+        j.swidth = call.pos[5].num();
+        j.twidth = call.pos[6].num();
+        self.record_job(call, j);
+    }
+
+    pub(super) fn make_bump(&mut self, call: &Call<'_>) {
+        let mut j = Self::job(
+            call,
+            TextureJobKind::Bump,
             vec![call.pos[0].str().to_string()],
             1,
         );

@@ -545,6 +545,8 @@ pub enum TextureJobKind {
     LatLongEnvironment,
     CubeFaceEnvironment,
     Shadow,
+    /// MakeBump (RISpec 3.0/3.1; dropped from 3.2).
+    Bump,
 }
 
 /// One MakeTexture/MakeLatLongEnvironment/MakeCubeFaceEnvironment/MakeShadow request.

@@ -131,6 +131,19 @@ pub trait TextureLookup: Sync {
     fn info(&self, _name: &str, _query: &str) -> Option<InfoValue> {
         None
     }
+
+    /// bump(): the filtered height gradient (∂B/∂s, ∂B/∂t) of channel `chan` over each
+    /// footprint (corners as for `texture`), 2 values per point.
+    fn bump_slopes(
+        &self,
+        _name: &str,
+        _chan: usize,
+        _st: &[[f32; 8]],
+        _params: &TextureParams,
+        _out: &mut [f32],
+    ) -> bool {
+        false
+    }
 }
 
 #[derive(Clone, Debug, Default)]

@@ -1745,9 +1745,10 @@ pub fn simple_match(pat: &str, s: &str) -> bool {
     (0..=s.len()).any(|k| m(&p, &s[k..]))
 }
 
-/// texture/environment/shadow: parses the optional parameters, builds each point's
+/// texture/environment/shadow/bump: parses the optional parameters, builds each point's
 /// footprint (4 corners from the grid's derivatives when only a centre is given) and asks
-/// the texture system. Missing maps warn and return the fill value (shadow: 0, unshadowed).
+/// the texture system. Missing maps warn and return the fill value (shadow: 0, unshadowed;
+/// bump: no change of the normal).
 fn texture_call(
     ex: &mut Exec,
     f: Builtin,
@@ -1765,6 +1766,8 @@ fn texture_call(
         (TextureF | TextureC | Bump, k) => k,
         (_, k) => k,
     };
+    // bump: N, dPds, dPdt come before the coordinates.
+    let coord0 = if f == Bump { 6 } else { 3 };
     let mut params = TextureParams {
         fill: 0.0,
         filter: "gaussian".into(),
@@ -1773,7 +1776,7 @@ fn texture_call(
         twidth: 1.0,
         ..Default::default()
     };
-    let mut k = 3 + ncoord_regs;
+    let mut k = coord0 + ncoord_regs;
     while k + 1 < args.len() {
         let pname = arg(ex, args, k).s();
         let v = arg(ex, args, k + 1);
@@ -1808,13 +1811,6 @@ fn texture_call(
     if name.is_empty() {
         return default_texture(f, n, fill, dst, ex);
     }
-    if f == Bump {
-        ex.warn(
-            span,
-            "bump() is not supported; it returns (0,0,0): use a displacement shader with calculatenormal",
-        );
-        return default_texture(f, n, fill, dst, ex);
-    }
     let Some(tex) = ex.env.textures else {
         ex.warn(
             span,
@@ -1823,11 +1819,11 @@ fn texture_call(
         return default_texture(f, n, fill, dst, ex);
     };
     let (nu, nv) = (ex.env.nu, ex.env.nv);
-    let mut buf = vec![0f32; n * nchan];
+    let mut buf = vec![0f32; n * if f == Bump { 2 } else { nchan }];
     let ok = match f {
-        TextureF | TextureC => {
+        TextureF | TextureC | Bump => {
             let coords: Vec<Vec<f32>> = (0..ncoord_regs)
-                .map(|c| vec_f(arg(ex, args, 3 + c), n))
+                .map(|c| vec_f(arg(ex, args, coord0 + c), n))
                 .collect();
             let st: Vec<[f32; 8]> = if ncoord_regs == 8 {
                 (0..n)
@@ -1856,7 +1852,32 @@ fn texture_call(
                     })
                     .collect()
             };
-            tex.texture(&name, chan, nchan, &st, &params, &mut buf)
+            if f == Bump {
+                if tex.bump_slopes(&name, chan, &st, &params, &mut buf) {
+                    // Blinn's perturbation from the filtered slopes (texture::bump).
+                    let (nn, dpds, dpdt) = (
+                        vec_t(arg(ex, args, 3), n),
+                        vec_t(arg(ex, args, 4), n),
+                        vec_t(arg(ex, args, 5), n),
+                    );
+                    return Slot::VT(
+                        (0..n)
+                            .map(|i| {
+                                crate::texture::bump::bump_displacement(
+                                    nn[i],
+                                    dpds[i],
+                                    dpdt[i],
+                                    buf[2 * i],
+                                    buf[2 * i + 1],
+                                )
+                            })
+                            .collect(),
+                    );
+                }
+                false
+            } else {
+                tex.texture(&name, chan, nchan, &st, &params, &mut buf)
+            }
         }
         EnvironmentF | EnvironmentC | Shadow => {
             let vs: Vec<Vec<Vec3>> = (0..ncoord_regs)

@@ -2548,6 +2548,29 @@ impl<'a> Lowerer<'a> {
             params.push(pv.reg);
             k += 2;
         }
+        // bump(name, N, dPds, dPdt, [coordinates], …) (RISpec 3.0/3.1 §15.7; 3.2 dropped
+        // it): the frame comes first, then the coordinates as for texture().
+        let mut frame = Vec::new();
+        if name == "bump" {
+            if coords.len() < 3 {
+                return self.error(
+                    Diag::error(
+                        "sl::call",
+                        "`bump` takes the normal N and the vectors dPds, dPdt after the map name",
+                    )
+                    .label(span, "call")
+                    .help("N += bump(\"map.tex\", N, dPdu, dPdv);"),
+                );
+            }
+            for (i, (v, sp)) in coords.drain(..3).enumerate() {
+                let ty = if i == 0 {
+                    BaseType::Normal
+                } else {
+                    BaseType::Vector
+                };
+                frame.push(self.coerce(v, ty, sp).reg);
+            }
+        }
         let (coord_ty, counts): (BaseType, &[usize]) = match name {
             "texture" => (BaseType::Float, &[0, 2, 8]),
             "environment" => (BaseType::Vector, &[1, 4]),
@@ -2568,6 +2591,7 @@ impl<'a> Lowerer<'a> {
             );
         }
         let mut regs = vec![map.reg, chan.reg, self.const_float(coords.len() as f32)];
+        regs.extend(frame);
         if coords.is_empty() {
             // default coordinates (s, t)
             for g in ["s", "t"] {

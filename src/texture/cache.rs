@@ -11,10 +11,11 @@
 use std::collections::HashMap;
 use std::fs::File;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use super::format::{self, Header};
 use super::image_in::Image;
+use super::sat::Sat;
 
 /// Where a texture's tiles come from.
 pub enum Source {
@@ -30,9 +31,46 @@ pub struct Texture {
     pub id: u32,
     pub header: Header,
     pub source: Source,
+    /// The summed-area table, built on the first `"filter" "sat"` lookup (None when the
+    /// level could not be read).
+    pub sat: OnceLock<Option<Arc<Sat>>>,
 }
 
 impl Texture {
+    pub fn new(id: u32, header: Header, source: Source) -> Texture {
+        Texture {
+            id,
+            header,
+            source,
+            sat: OnceLock::new(),
+        }
+    }
+
+    /// A whole level of a face, read straight from the source (not through the cache, so
+    /// building a summed-area table does not evict the tiles other lookups use).
+    pub fn read_level(&self, face: usize, level: usize) -> Result<Image, String> {
+        let h = &self.header;
+        let l = h.levels[face][level];
+        let (t, nc) = (h.tile, h.nchan);
+        let mut im = Image::new(l.width, l.height, nc);
+        for ty in 0..l.height.div_ceil(t) {
+            for tx in 0..l.width.div_ceil(t) {
+                let tile: Arc<[f32]> = match &self.source {
+                    Source::Memory(m) => m[face][level][ty * l.tiles_x(t) + tx].clone(),
+                    Source::File(f) => Arc::from(format::read_tile(f, h, face, level, tx, ty)?),
+                };
+                for y in ty * t..((ty + 1) * t).min(l.height) {
+                    for x in tx * t..((tx + 1) * t).min(l.width) {
+                        let src = (((y % t) * t) + (x % t)) * nc;
+                        let dst = (y * l.width + x) * nc;
+                        im.data[dst..dst + nc].copy_from_slice(&tile[src..src + nc]);
+                    }
+                }
+            }
+        }
+        Ok(im)
+    }
+
     /// Tiles a set of pyramids in memory (raw pictures converted on first use, zfiles).
     pub fn from_pyramids(id: u32, mut header: Header, faces: &[Vec<Image>]) -> Texture {
         let t = header.tile;
@@ -72,11 +110,7 @@ impl Texture {
                     .collect()
             })
             .collect();
-        Texture {
-            id,
-            header,
-            source: Source::Memory(tiles),
-        }
+        Texture::new(id, header, Source::Memory(tiles))
     }
 }
 
@@ -118,6 +152,11 @@ impl TileCache {
             evictions: AtomicUsize::new(0),
             read_errors: AtomicUsize::new(0),
         }
+    }
+
+    /// The memory bound in bytes.
+    pub fn limit_bytes(&self) -> usize {
+        self.limit_per_shard * SHARDS
     }
 
     /// Resident bytes (approximate while other threads work).
@@ -271,11 +310,9 @@ mod tests {
         .unwrap();
         let bytes = std::fs::read(&p).unwrap();
         let header = format::parse_header(&bytes).unwrap();
-        let tex = Texture {
-            id: 1,
-            header,
-            source: Source::File(File::open(&p).unwrap()),
-        };
+        let tex = Texture::new(1, header, Source::File(File::open(&p).unwrap()));
+        let whole = tex.read_level(0, 0).unwrap();
+        assert_eq!(whole.data, im.data);
         // Room for about 16 tiles of the 64.
         let cache = TileCache::new(16 * TILE * TILE * 4);
         for pass in 0..2 {

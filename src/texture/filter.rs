@@ -1,4 +1,5 @@
-//! Filtered 2-D lookups into one face of a texture: point, trilinear mip-map and EWA.
+//! Filtered 2-D lookups into one face of a texture: point, trilinear mip-map and EWA (the
+//! summed-area-table filter lives in [`super::sat`]: it reads a table, not tiles).
 //!
 //! Input: a [`Fetcher`], a face, a [`Footprint`] (centre and the two axis vectors of the
 //! shading point's area in [0,1] texture units) and blur. Output: `nchan` filtered channels.
@@ -24,6 +25,10 @@ pub enum FilterKind {
     Trilinear,
     /// Elliptical weighted average with a Gaussian.
     Ewa,
+    /// Box average over the footprint's bounding rectangle from a summed-area table
+    /// (`"filter" "sat"`; book §4.7.2). Where no table applies (environment maps) it falls
+    /// back to trilinear.
+    Sat,
 }
 
 impl FilterKind {
@@ -35,6 +40,7 @@ impl FilterKind {
             "gaussian" | "ewa" | "disk" | "radial-bspline" | "catmull-rom" | "sinc" => {
                 FilterKind::Ewa
             }
+            "sat" | "summed-area" | "summedarea" | "summed-area-table" => FilterKind::Sat,
             _ => return None,
         })
     }
@@ -84,7 +90,7 @@ pub fn lookup(
     let acc = &mut acc[..n.min(16)];
     let wsum = match kind {
         FilterKind::Point => point(f, face, fp, acc),
-        FilterKind::Trilinear => trilinear(f, face, fp, sblur, tblur, acc),
+        FilterKind::Trilinear | FilterKind::Sat => trilinear(f, face, fp, sblur, tblur, acc),
         FilterKind::Ewa => ewa(f, face, fp, sblur, tblur, acc),
     };
     let inv = if wsum > 0.0 { 1.0 / wsum } else { 0.0 };

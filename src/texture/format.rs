@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | 0 | 4 | magic `b"ARBT"` |
 //! | 4 | u32 | version = 1 |
-//! | 8 | u32 | kind: 0 texture, 1 lat-long environment, 2 cube environment, 3 shadow |
+//! | 8 | u32 | kind: 0 texture, 1 lat-long environment, 2 cube environment, 3 shadow, 4 bump |
 //! | 12 | u32 | channels |
 //! | 16 | u32 | faces (6 for cube maps: px nx py ny pz nz; else 1) |
 //! | 20 | u32 | swrap, 24 u32 twrap (0 periodic, 1 clamp, 2 black) |
@@ -44,6 +44,8 @@ pub enum Kind {
     LatLong,
     Cube,
     Shadow,
+    /// Heights then their s/t slopes (see [`super::bump`]).
+    Bump,
 }
 
 impl Kind {
@@ -53,6 +55,7 @@ impl Kind {
             Kind::LatLong => 1,
             Kind::Cube => 2,
             Kind::Shadow => 3,
+            Kind::Bump => 4,
         }
     }
     fn from_code(c: u32) -> Option<Kind> {
@@ -61,6 +64,7 @@ impl Kind {
             1 => Kind::LatLong,
             2 => Kind::Cube,
             3 => Kind::Shadow,
+            4 => Kind::Bump,
             _ => return None,
         })
     }
@@ -70,6 +74,7 @@ impl Kind {
             Kind::Texture => "texture",
             Kind::LatLong | Kind::Cube => "environment",
             Kind::Shadow => "shadow",
+            Kind::Bump => "bump",
         }
     }
 }

@@ -5,12 +5,15 @@
 //! * [`mipmap`]: wrap modes and the pyramid.
 //! * [`format`]: the tiled mip-mapped `.tex` file.
 //! * [`make`]: `arbor texture` and the Make* requests.
+//! * [`bump`]: the bump-map form (heights + slopes) and Blinn's perturbation for bump().
 //! * [`cache`]: tiles on demand, shared across threads, bounded.
-//! * [`filter`]: point / trilinear / EWA lookups.
+//! * [`filter`]: point / trilinear / EWA / summed-area-table lookups.
+//! * [`sat`]: summed-area tables (Crow 1984).
 //! * [`env`]: lat-long and cube environment lookups.
 //! * [`shadow`]: percentage-closer filtering.
 //! * [`system`]: the [`TextureLookup`](crate::shade::exec::TextureLookup) a frame renders with.
 
+pub mod bump;
 pub mod cache;
 pub mod env;
 pub mod filter;
@@ -19,6 +22,7 @@ pub mod horizon;
 pub mod image_in;
 pub mod make;
 pub mod mipmap;
+pub mod sat;
 pub mod shadow;
 pub mod system;
 

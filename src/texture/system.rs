@@ -1,11 +1,14 @@
 //! The texture system a frame renders with: finds, opens and caches textures, and answers
-//! the shading language's texture(), environment(), shadow() and textureinfo().
+//! the shading language's texture(), environment(), shadow(), bump() and textureinfo().
 //!
 //! Input: the frame's texture search path and memory limit. Output: [`TextureLookup`] answers.
 //! Invariants: a name is resolved and opened once per frame (maps written by an earlier
 //! frame are seen by later ones because each frame gets a fresh system); a raw picture or
 //! zfile named directly is converted in memory on first use, with a warning; a missing or
 //! unreadable texture answers `false` (the caller warns and uses the fill value).
+//! Summed-area tables (`"filter" "sat"`) are built once per texture on first use, on the
+//! finest level whose f64 table fits in the texture memory limit; they are held beside the
+//! tile cache (not counted in its bound, but never larger than it).
 
 use std::collections::{HashMap, HashSet};
 use std::fs::File;
@@ -20,6 +23,7 @@ use crate::diag::{Diag, Diagnostics};
 use crate::film::zfile::{ZFile, ZFILE_MAGIC};
 use crate::shade::exec::{InfoValue, TextureLookup, TextureParams};
 
+use super::bump::slope_channel;
 use super::cache::{Fetcher, Source, Texture, TileCache};
 use super::env::{cube_lookup, latlong_lookup};
 use super::filter::{lookup, FilterKind, Footprint};
@@ -27,6 +31,7 @@ use super::format::{self, Header, Kind, TILE};
 use super::image_in::read_image;
 use super::make::{resolve, shadow_image};
 use super::mipmap::{build_pyramid, Downsample, Wrap};
+use super::sat::Sat;
 use super::shadow::{pcf, LightView, ShadowParams};
 
 /// Default cache size when the scene sets no `Option "limits" "texturememory"`: 256 MB.
@@ -101,11 +106,7 @@ impl<'a> TextureSystem<'a> {
         if head.starts_with(&format::MAGIC) {
             let header =
                 format::parse_header(&head).map_err(|e| format!("texture `{name}`: {e}"))?;
-            return Ok(Texture {
-                id,
-                header,
-                source: Source::File(file),
-            });
+            return Ok(Texture::new(id, header, Source::File(file)));
         }
         let blank = |kind: Kind, nchan: usize, wrap: Wrap, matrices| Header {
             kind,
@@ -159,6 +160,41 @@ impl<'a> TextureSystem<'a> {
         })
     }
 
+    /// The summed-area table of a texture's face 0 (built on first use; warned once when
+    /// memory forces a coarser level, None when no level fits or the level cannot be read).
+    fn sat(&self, name: &str, tex: &Texture) -> Option<Arc<Sat>> {
+        tex.sat
+            .get_or_init(|| {
+                let h = &tex.header;
+                let budget = self.cache.limit_bytes();
+                let level = h.levels[0]
+                    .iter()
+                    .position(|l| Sat::bytes_for(l.width, l.height, h.nchan) <= budget)?;
+                let l = h.levels[0][level];
+                if level > 0 {
+                    self.warn_once(
+                        format!("sat:{name}"),
+                        Diag::warning(
+                            "texture::sat",
+                            format!(
+                                "the summed-area table of `{name}` is built on level {level} ({}×{}) to fit Option \"limits\" \"texturememory\"",
+                                l.width, l.height
+                            ),
+                        ),
+                    );
+                }
+                match tex.read_level(0, level) {
+                    Ok(im) => Some(Arc::new(Sat::build(&im, h.swrap, h.twrap, level))),
+                    Err(e) => {
+                        self.diags
+                            .report(Diag::warning("texture::sat", format!("`{name}`: {e}")));
+                        None
+                    }
+                }
+            })
+            .clone()
+    }
+
     fn kind_mismatch(&self, name: &str, tex: &Texture, want: &str) {
         self.warn_once(
             format!("kind:{name}:{want}"),
@@ -186,10 +222,21 @@ impl TextureLookup for TextureSystem<'_> {
         let Some(tex) = self.open(name) else {
             return false;
         };
-        if tex.header.kind != Kind::Texture {
+        if !matches!(tex.header.kind, Kind::Texture | Kind::Bump) {
             self.kind_mismatch(name, &tex, "texture");
         }
         let kind = self.filter_kind(&params.filter);
+        if kind == FilterKind::Sat {
+            if let Some(sat) = self.sat(name, &tex) {
+                for (i, c) in st.iter().enumerate() {
+                    let o = &mut out[i * nchan..(i + 1) * nchan];
+                    o.iter_mut().for_each(|v| *v = params.fill);
+                    let fp = Footprint::from_corners(c, params.swidth, params.twidth);
+                    sat.lookup(&fp, params.sblur, params.tblur, first_chan, o);
+                }
+                return true;
+            }
+        }
         let mut f = Fetcher::new(&tex, &self.cache, first_chan, nchan);
         for (i, c) in st.iter().enumerate() {
             let o = &mut out[i * nchan..(i + 1) * nchan];
@@ -213,6 +260,15 @@ impl TextureLookup for TextureSystem<'_> {
             return false;
         };
         let kind = self.filter_kind(&params.filter);
+        if kind == FilterKind::Sat {
+            self.warn_once(
+                format!("envsat:{name}"),
+                Diag::warning(
+                    "texture::filter",
+                    format!("filter \"sat\" applies to texture() and bump(); environment `{name}` is filtered trilinearly"),
+                ),
+            );
+        }
         let blur = params.sblur.max(params.tblur);
         let mut f = Fetcher::new(&tex, &self.cache, first_chan, nchan);
         for (i, d) in dirs.iter().enumerate() {
@@ -266,6 +322,81 @@ impl TextureLookup for TextureSystem<'_> {
         true
     }
 
+    fn bump_slopes(
+        &self,
+        name: &str,
+        chan: usize,
+        st: &[[f32; 8]],
+        params: &TextureParams,
+        out: &mut [f32],
+    ) -> bool {
+        let Some(tex) = self.open(name) else {
+            return false;
+        };
+        let kind = self.filter_kind(&params.filter);
+        let h = &tex.header;
+        match h.kind {
+            Kind::Bump => {
+                // Filtered precomputed slopes: the derivative of the filtered height.
+                let heights = h.nchan / 3;
+                let first = slope_channel(h.nchan, chan);
+                let sat = if kind == FilterKind::Sat {
+                    self.sat(name, &tex)
+                } else {
+                    None
+                };
+                let mut f = Fetcher::new(&tex, &self.cache, first, 2);
+                for (i, c) in st.iter().enumerate() {
+                    let o = &mut out[2 * i..2 * i + 2];
+                    o.fill(0.0);
+                    if chan < heights {
+                        let fp = Footprint::from_corners(c, params.swidth, params.twidth);
+                        match &sat {
+                            Some(t) => t.lookup(&fp, params.sblur, params.tblur, first, o),
+                            None => lookup(&mut f, 0, &fp, params.sblur, params.tblur, kind, o),
+                        }
+                    }
+                }
+            }
+            _ => {
+                if h.kind != Kind::Texture {
+                    self.kind_mismatch(name, &tex, "bump");
+                }
+                // A plain height texture: central differences of the filtered height across
+                // the footprint (half its extent each way, one level-0 texel at least).
+                let l0 = h.levels[0][0];
+                let (w, ht) = (l0.width as f32, l0.height as f32);
+                let mut f = Fetcher::new(&tex, &self.cache, chan, 1);
+                let sat = if kind == FilterKind::Sat {
+                    self.sat(name, &tex)
+                } else {
+                    None
+                };
+                let mut sample = |fp: &Footprint| {
+                    let mut v = [0f32];
+                    match &sat {
+                        Some(t) => t.lookup(fp, params.sblur, params.tblur, chan, &mut v),
+                        None => lookup(&mut f, 0, fp, params.sblur, params.tblur, kind, &mut v),
+                    }
+                    v[0]
+                };
+                for (i, c) in st.iter().enumerate() {
+                    let fp = Footprint::from_corners(c, params.swidth, params.twidth);
+                    let ds = (0.5 * (fp.ds1.abs() + fp.ds2.abs())).max(1.0 / w);
+                    let dt = (0.5 * (fp.dt1.abs() + fp.dt2.abs())).max(1.0 / ht);
+                    let at = |s: f32, t: f32| Footprint { s, t, ..fp };
+                    let bs =
+                        (sample(&at(fp.s + ds, fp.t)) - sample(&at(fp.s - ds, fp.t))) / (2.0 * ds);
+                    let bt =
+                        (sample(&at(fp.s, fp.t + dt)) - sample(&at(fp.s, fp.t - dt))) / (2.0 * dt);
+                    out[2 * i] = if bs.is_finite() { bs } else { 0.0 };
+                    out[2 * i + 1] = if bt.is_finite() { bt } else { 0.0 };
+                }
+            }
+        }
+        true
+    }
+
     fn info(&self, name: &str, query: &str) -> Option<InfoValue> {
         let tex = self.open(name)?;
         let h = &tex.header;
@@ -273,7 +404,11 @@ impl TextureLookup for TextureSystem<'_> {
         match query {
             "resolution" => Some(InfoValue::Floats(vec![l.width as f32, l.height as f32])),
             "type" => Some(InfoValue::Str(h.kind.type_name().into())),
-            "channels" => Some(InfoValue::Floats(vec![h.nchan as f32])),
+            "channels" => Some(InfoValue::Floats(vec![if h.kind == Kind::Bump {
+                (h.nchan / 3) as f32
+            } else {
+                h.nchan as f32
+            }])),
             "viewingmatrix" | "projectionmatrix" => {
                 let (a, b) = h.matrices?;
                 let m = if query == "viewingmatrix" { a } else { b };
