@@ -8,14 +8,18 @@
 //! Invariants:
 //! * each micropolygon (the quad of four grid points) becomes, in every pixel it touches, a
 //!   fragment with one colour, one opacity, a depth range and a coverage mask; the mask is the
-//!   XOR of per-edge masks ("1s to the right of the edge", rows whose centre lies in the edge's
-//!   half-open y range), i.e. exact even-odd point-in-polygon at the cell centres, computed on
-//!   the fly per subpixel row (no 45×45 table, so 16×16 costs no table memory);
-//! * an edge's crossing is computed from its endpoints in a canonical order, so two polygons
-//!   sharing an edge get disjoint masks whose union has no holes (Watt & Watt Fig 4.20);
+//!   XOR of per-edge masks ("1s to the right of the edge"), computed on the fly (no 45×45
+//!   table, so 16×16 costs no table memory). Each edge is a lattice path that follows the edge
+//!   by area (see [`rasterize`]): a pixel crossed by an edge is covered to within one cell
+//!   (1/w²) of its exact area at every orientation, not only for edges far from horizontal;
+//! * an edge's path is computed from its endpoints in a canonical order, so two polygons
+//!   sharing an edge get complementary masks: their union has no holes (Watt & Watt Fig 4.20),
+//!   and near shared vertices paths follow the cell centres so that corners of 45° or more
+//!   never overlap;
 //! * fragments live in one pooled `Vec` per bucket with index links and a free list; adjacent
 //!   micropolygons of one grid with disjoint masks and touching depth ranges are merged (OR of
-//!   masks, area-weighted colour) so a diced surface leaves no seams; the pool is bounded;
+//!   masks, area-weighted colour) so a diced surface leaves no seams; the pool is bounded,
+//!   and hitting the bound is reported once per render through [`Hider::finish`];
 //! * the resolve walks each pixel's fragments front to back in the total order
 //!   (zmin, grid key, micropolygon) with a search mask; fragments whose depth ranges overlap
 //!   are blended over their common cells by Carpenter's zmin/zmax rule, so the image does not
@@ -241,7 +245,10 @@ impl Dither {
         let n = if centre {
             (v + 0.5).floor()
         } else {
-            ((self.sum + 0.5).floor() - self.done).clamp(v.floor(), v.ceil())
+            // max/min rather than clamp: no panic on a NaN from degenerate input.
+            ((self.sum + 0.5).floor() - self.done)
+                .max(v.floor())
+                .min(v.ceil())
         };
         self.done += n;
         n as i64
@@ -262,11 +269,15 @@ impl Dither {
 /// cell centres: a steep edge (|dx| ≤ |dy|) gets one riser per subpixel row, a shallow one
 /// one step per subpixel column, their positions chosen by [`Dither`] so that in each pixel
 /// the cells beside an edge match the exact area within a cell at every orientation.
-/// A shallow path's mask is built from its columns ("cells above the step") plus the two
-/// quadrants of its endpoints, which differ from its leftward-ray mask by exactly those
-/// quadrants. Each edge's path depends only on its two (canonically ordered) endpoints, so
-/// polygons sharing an edge get complementary masks: no holes, no double coverage (Watt &
-/// Watt Fig 4.20); and a pixel's mask does not depend on the window.
+/// A shallow path's mask is built from its columns ("cells above the step") instead: for any
+/// lattice path, the leftward-ray mask XOR the cells-above mask is the XOR of the upper-right
+/// quadrants of its two endpoints, so those quadrants are flipped too.
+///
+/// Each edge's path depends only on its two (canonically ordered) endpoints, so polygons
+/// sharing an edge get masks whose XOR is the mask of their union (no holes; Watt & Watt
+/// Fig 4.20), and a pixel's mask does not depend on the window. Paths of edges leaving one
+/// vertex do not cross (no cell covered twice) when the corners are 45° or more, thanks to
+/// [`GUARD`]; narrower corners may share a cell.
 #[allow(clippy::too_many_arguments)]
 pub fn rasterize(
     poly: &[[f32; 2]],
