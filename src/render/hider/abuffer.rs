@@ -108,22 +108,22 @@ fn flip_row(m: &mut Mask, w: usize, row: usize, from: usize) {
     m[bit / 64] ^= bits << (bit % 64);
 }
 
-/// XORs rows `j0..j1` of column `col` (of a `w`-wide mask) into `m`.
+/// XORs rows `j0..j1` of column `col` (of a `w`-wide mask, `w = 1 << sh`) into `m`.
 #[inline]
-fn flip_col(m: &mut Mask, w: usize, col: usize, j0: usize, j1: usize) {
+fn flip_col(m: &mut Mask, sh: u32, col: usize, j0: usize, j1: usize) {
     // Bit 0 of every row that one word holds.
-    let pat: u64 = match w {
-        4 => 0x1111_1111_1111_1111,
-        8 => 0x0101_0101_0101_0101,
+    let pat: u64 = match sh {
+        2 => 0x1111_1111_1111_1111,
+        3 => 0x0101_0101_0101_0101,
         _ => 0x0001_0001_0001_0001,
     };
-    let per_word = 64 / w;
+    let wsh = 6 - sh; // log2 of the rows per word
     let mut j = j0;
     while j < j1 {
-        let word = j / per_word;
-        let first = word * per_word;
-        let end = (first + per_word).min(j1);
-        let (lo, hi) = ((j - first) * w, (end - first) * w);
+        let word = j >> wsh;
+        let first = word << wsh;
+        let end = (first + (1 << wsh)).min(j1);
+        let (lo, hi) = ((j - first) << sh, (end - first) << sh);
         let range = if hi >= 64 { u64::MAX } else { (1u64 << hi) - 1 } & (u64::MAX << lo);
         m[word] ^= (pat & range) << col;
         j = end;
@@ -134,13 +134,25 @@ fn flip_col(m: &mut Mask, w: usize, col: usize, j0: usize, j1: usize) {
 /// centres in `[t0, t1)` are those of cells `snap(t0)..snap(t1)`.
 #[inline]
 fn snap(t: f32) -> i64 {
-    (t - 0.5).ceil() as i64
+    let x = t - 0.5;
+    let i = x as i64;
+    i + ((i as f32) < x) as i64
+}
+
+/// `⌊x⌋` by integer conversion (the `floorf` call is a library call without SSE4.1 and
+/// dominated this loop); saturates far outside raster range, 0 for NaN.
+#[inline]
+fn floor_i(x: f32) -> i64 {
+    let i = x as i64;
+    i - ((i as f32) > x) as i64
 }
 
 /// Masks of a rectangle of pixels, addressed by global subpixel row and column.
 struct Window<'m> {
     masks: &'m mut [Mask],
     w: usize,
+    /// log2 w: global cell → pixel is a shift (w is a power of two).
+    shift: u32,
     px0: i64,
     px1: i64,
     py0: i64,
@@ -156,18 +168,18 @@ impl Window<'_> {
     /// XORs the cells of global row `r` (inside the window) from global column `x` rightwards.
     #[inline]
     fn flip_right(&mut self, r: i64, x: i64) {
-        let wi = self.w as i64;
-        let py = r.div_euclid(wi);
-        let row = (r - py * wi) as usize;
+        let (sh, low) = (self.shift, self.w as i64 - 1);
+        let py = r >> sh;
+        let row = (r & low) as usize;
         let line = (py - self.py0) as usize * self.npx;
-        let pxe = x.div_euclid(wi);
+        let pxe = x >> sh;
         if pxe > self.px1 {
             return;
         }
         let first = if pxe < self.px0 {
             self.px0
         } else {
-            let from = (x - pxe * wi) as usize;
+            let from = (x & low) as usize;
             flip_row(
                 &mut self.masks[line + (pxe - self.px0) as usize],
                 self.w,
@@ -189,19 +201,19 @@ impl Window<'_> {
     /// XORs the cells of global column `c` (inside the window) in global rows `ra..rb`.
     #[inline]
     fn flip_column(&mut self, c: i64, ra: i64, rb: i64) {
-        let wi = self.w as i64;
+        let (sh, wi) = (self.shift, self.w as i64);
         let (ra, rb) = (ra.max(self.r0), rb.min(self.r1));
         if ra >= rb {
             return;
         }
-        let px = c.div_euclid(wi);
-        let col = (c - px * wi) as usize;
-        for py in ra.div_euclid(wi)..=(rb - 1).div_euclid(wi) {
+        let px = c >> sh;
+        let col = (c & (wi - 1)) as usize;
+        for py in (ra >> sh)..=((rb - 1) >> sh) {
             let base = py * wi;
             let j0 = (ra.max(base) - base) as usize;
             let j1 = (rb.min(base + wi) - base) as usize;
             let k = (py - self.py0) as usize * self.npx + (px - self.px0) as usize;
-            flip_col(&mut self.masks[k], self.w, col, j0, j1);
+            flip_col(&mut self.masks[k], sh, col, j0, j1);
         }
     }
 }
@@ -219,7 +231,7 @@ const GUARD: i64 = 2;
 struct Dither {
     key: (i64, i64),
     sum: f32,
-    done: f32,
+    done: i64,
 }
 
 impl Dither {
@@ -227,7 +239,7 @@ impl Dither {
         Dither {
             key: (i64::MIN, i64::MIN),
             sum: 0.0,
-            done: 0.0,
+            done: 0,
         }
     }
     /// The whole-cell count for exact count `v` ∈ [0, w) of run `key`: `⌊v⌋` or `⌈v⌉`, the
@@ -238,20 +250,20 @@ impl Dither {
             *self = Dither {
                 key,
                 sum: 0.0,
-                done: 0.0,
+                done: 0,
             };
         }
         self.sum += v;
+        // v and the sum are ≥ 0, so truncation is the floor (and a NaN gives 0, no panic).
         let n = if centre {
-            (v + 0.5).floor()
+            (v + 0.5) as i64
         } else {
-            // max/min rather than clamp: no panic on a NaN from degenerate input.
-            ((self.sum + 0.5).floor() - self.done)
-                .max(v.floor())
-                .min(v.ceil())
+            let fl = v as i64;
+            let cl = fl + (v > fl as f32) as i64;
+            ((self.sum + 0.5) as i64 - self.done).max(fl).min(cl)
         };
         self.done += n;
-        n as i64
+        n
     }
     fn reset(&mut self) {
         self.key = (i64::MIN, i64::MIN);
@@ -299,6 +311,7 @@ pub fn rasterize(
     let mut win = Window {
         masks,
         w,
+        shift: w.trailing_zeros(),
         px0: px0 as i64,
         px1: px1 as i64,
         py0: py0 as i64,
@@ -342,22 +355,21 @@ fn steep_edge(win: &mut Window, a: [f32; 2], b: [f32; 2]) {
         return;
     }
     let dxdy = (b[0] - a[0]) / (b[1] - a[1]);
-    let (lo, hi) = (win.px0 as f32, win.px1 as f32);
+    let (ax, ay, inv) = (a[0] * wf, a[1] * wf, 1.0 / wf);
     let mut dither = Dither::new();
     for r in ra..rb {
-        let yc = (r as f32 + 0.5) / wf;
         // The edge at the row centre, in cells: its area left of the edge in this row.
-        let u = (a[0] + (yc - a[1]) * dxdy) * wf;
-        let p = (u / wf).floor();
-        if p < lo {
+        let u = ax + (r as f32 + 0.5 - ay) * dxdy;
+        let p = floor_i(u * inv);
+        if p < win.px0 {
             dither.reset();
             win.flip_right(r, win.c0);
-        } else if p > hi {
+        } else if p > win.px1 {
             dither.reset();
         } else {
             let centre = r < ea + GUARD || r >= eb - GUARD;
-            let n = dither.step((r.div_euclid(wi), p as i64), u - p * wf, centre);
-            win.flip_right(r, p as i64 * wi + n);
+            let n = dither.step((r >> win.shift, p), u - (p * wi) as f32, centre);
+            win.flip_right(r, p * wi + n);
         }
     }
 }
@@ -380,22 +392,22 @@ fn shallow_edge(win: &mut Window, a: [f32; 2], b: [f32; 2]) {
         return;
     }
     let dydx = (b[1] - a[1]) / (b[0] - a[0]);
-    let (lo, hi) = (win.py0 as f32, (win.r1 / wi - 1) as f32);
+    let (ax, ay, inv) = (a[0] * wf, a[1] * wf, 1.0 / wf);
+    let py1 = (win.r1 >> win.shift) - 1;
     let mut dither = Dither::new();
     for c in c0..c1 {
-        let xc = (c as f32 + 0.5) / wf;
         // The edge at the column centre, in cells: its area below the edge in this column.
-        let t = (a[1] + (xc - a[0]) * dydx) * wf;
-        let p = (t / wf).floor();
-        let y = if p < lo {
+        let t = ay + (c as f32 + 0.5 - ax) * dydx;
+        let p = floor_i(t * inv);
+        let y = if p < win.py0 {
             dither.reset();
             win.r0
-        } else if p > hi {
+        } else if p > py1 {
             dither.reset();
             win.r1
         } else {
             let centre = c < ca + GUARD || c >= cb - GUARD;
-            p as i64 * wi + dither.step((c.div_euclid(wi), p as i64), t - p * wf, centre)
+            p * wi + dither.step((c >> win.shift, p), t - (p * wi) as f32, centre)
         };
         win.flip_column(c, y.min(top), y.max(top));
     }
