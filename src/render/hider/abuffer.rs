@@ -1204,10 +1204,10 @@ mod tests {
             for _ in 0..300 {
                 // A random convex quad inside the pixel (a micropolygon's shape).
                 let (cx, cy, r) = (0.3 + 0.4 * rnd(), 0.3 + 0.4 * rnd(), 0.1 + 0.2 * rnd());
-                let a0 = rnd() * 6.283;
+                let a0 = rnd() * std::f32::consts::TAU;
                 let poly: Vec<[f32; 2]> = (0..4)
                     .map(|k| {
-                        let t = a0 + k as f32 * 1.5708 + 0.5 * (rnd() - 0.5);
+                        let t = a0 + k as f32 * std::f32::consts::FRAC_PI_2 + 0.5 * (rnd() - 0.5);
                         [cx + r * t.cos(), cy + r * t.sin()]
                     })
                     .collect();
