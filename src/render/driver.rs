@@ -710,6 +710,7 @@ fn render_inner(
     if let Some((r, bufs)) = hidden.take() {
         filter_row(&mut film, r, &bufs);
     }
+    frame.hider.finish(diags);
     stats
         .wall_ns
         .fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);

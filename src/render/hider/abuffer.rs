@@ -8,14 +8,18 @@
 //! Invariants:
 //! * each micropolygon (the quad of four grid points) becomes, in every pixel it touches, a
 //!   fragment with one colour, one opacity, a depth range and a coverage mask; the mask is the
-//!   XOR of per-edge masks ("1s to the right of the edge", rows whose centre lies in the edge's
-//!   half-open y range), i.e. exact even-odd point-in-polygon at the cell centres, computed on
-//!   the fly per subpixel row (no 45×45 table, so 16×16 costs no table memory);
-//! * an edge's crossing is computed from its endpoints in a canonical order, so two polygons
-//!   sharing an edge get disjoint masks whose union has no holes (Watt & Watt Fig 4.20);
+//!   XOR of per-edge masks ("1s to the right of the edge"), computed on the fly (no 45×45
+//!   table, so 16×16 costs no table memory). Each edge is a lattice path that follows the edge
+//!   by area (see [`rasterize`]): a pixel crossed by an edge is covered to within one cell
+//!   (1/w²) of its exact area at every orientation, not only for edges far from horizontal;
+//! * an edge's path is computed from its endpoints in a canonical order, so two polygons
+//!   sharing an edge get complementary masks: their union has no holes (Watt & Watt Fig 4.20),
+//!   and near shared vertices paths follow the cell centres so that corners of 45° or more
+//!   never overlap;
 //! * fragments live in one pooled `Vec` per bucket with index links and a free list; adjacent
 //!   micropolygons of one grid with disjoint masks and touching depth ranges are merged (OR of
-//!   masks, area-weighted colour) so a diced surface leaves no seams; the pool is bounded;
+//!   masks, area-weighted colour) so a diced surface leaves no seams; the pool is bounded,
+//!   and hitting the bound is reported once per render through [`Hider::finish`];
 //! * the resolve walks each pixel's fragments front to back in the total order
 //!   (zmin, grid key, micropolygon) with a search mask; fragments whose depth ranges overlap
 //!   are blended over their common cells by Carpenter's zmin/zmax rule, so the image does not
@@ -104,10 +108,188 @@ fn flip_row(m: &mut Mask, w: usize, row: usize, from: usize) {
     m[bit / 64] ^= bits << (bit % 64);
 }
 
+/// XORs rows `j0..j1` of column `col` (of a `w`-wide mask, `w = 1 << sh`) into `m`.
+#[inline]
+fn flip_col(m: &mut Mask, sh: u32, col: usize, j0: usize, j1: usize) {
+    // Bit 0 of every row that one word holds.
+    let pat: u64 = match sh {
+        2 => 0x1111_1111_1111_1111,
+        3 => 0x0101_0101_0101_0101,
+        _ => 0x0001_0001_0001_0001,
+    };
+    let wsh = 6 - sh; // log2 of the rows per word
+    let mut j = j0;
+    while j < j1 {
+        let word = j >> wsh;
+        let first = word << wsh;
+        let end = (first + (1 << wsh)).min(j1);
+        let (lo, hi) = ((j - first) << sh, (end - first) << sh);
+        let range = if hi >= 64 { u64::MAX } else { (1u64 << hi) - 1 } & (u64::MAX << lo);
+        m[word] ^= (pat & range) << col;
+        j = end;
+    }
+}
+
+/// The lattice line (cell boundary) nearest to `t` cells, rounding halves down: the cell
+/// centres in `[t0, t1)` are those of cells `snap(t0)..snap(t1)`.
+#[inline]
+fn snap(t: f32) -> i64 {
+    let x = t - 0.5;
+    let i = x as i64;
+    i + ((i as f32) < x) as i64
+}
+
+/// `⌊x⌋` by integer conversion (the `floorf` call is a library call without SSE4.1 and
+/// dominated this loop); saturates far outside raster range, 0 for NaN.
+#[inline]
+fn floor_i(x: f32) -> i64 {
+    let i = x as i64;
+    i - ((i as f32) > x) as i64
+}
+
+/// Masks of a rectangle of pixels, addressed by global subpixel row and column.
+struct Window<'m> {
+    masks: &'m mut [Mask],
+    w: usize,
+    /// log2 w: global cell → pixel is a shift (w is a power of two).
+    shift: u32,
+    px0: i64,
+    px1: i64,
+    py0: i64,
+    npx: usize,
+    /// Global subpixel rows and columns of the window: `r0..r1`, `c0..c1`.
+    r0: i64,
+    r1: i64,
+    c0: i64,
+    c1: i64,
+}
+
+impl Window<'_> {
+    /// XORs the cells of global row `r` (inside the window) from global column `x` rightwards.
+    #[inline]
+    fn flip_right(&mut self, r: i64, x: i64) {
+        let (sh, low) = (self.shift, self.w as i64 - 1);
+        let py = r >> sh;
+        let row = (r & low) as usize;
+        let line = (py - self.py0) as usize * self.npx;
+        let pxe = x >> sh;
+        if pxe > self.px1 {
+            return;
+        }
+        let first = if pxe < self.px0 {
+            self.px0
+        } else {
+            let from = (x & low) as usize;
+            flip_row(
+                &mut self.masks[line + (pxe - self.px0) as usize],
+                self.w,
+                row,
+                from,
+            );
+            pxe + 1
+        };
+        for px in first..=self.px1 {
+            flip_row(
+                &mut self.masks[line + (px - self.px0) as usize],
+                self.w,
+                row,
+                0,
+            );
+        }
+    }
+
+    /// XORs the cells of global column `c` (inside the window) in global rows `ra..rb`.
+    #[inline]
+    fn flip_column(&mut self, c: i64, ra: i64, rb: i64) {
+        let (sh, wi) = (self.shift, self.w as i64);
+        let (ra, rb) = (ra.max(self.r0), rb.min(self.r1));
+        if ra >= rb {
+            return;
+        }
+        let px = c >> sh;
+        let col = (c & (wi - 1)) as usize;
+        for py in (ra >> sh)..=((rb - 1) >> sh) {
+            let base = py * wi;
+            let j0 = (ra.max(base) - base) as usize;
+            let j1 = (rb.min(base + wi) - base) as usize;
+            let k = (py - self.py0) as usize * self.npx + (px - self.px0) as usize;
+            flip_col(&mut self.masks[k], sh, col, j0, j1);
+        }
+    }
+}
+
+/// Subpixel rows (columns) at each end of a steep (shallow) edge whose riser (step) is placed
+/// by the cell centres, as point sampling would: there the paths of edges meeting at the
+/// vertex are too close for independent rounding, which could cross them and leave cells
+/// covered twice by neighbouring polygons. Beyond, edges at usual micropolygon angles are
+/// more than a cell apart.
+const GUARD: i64 = 2;
+
+/// Rounds an edge's exact per-row (or per-column) cell counts so that every run of rows
+/// crossing one pixel stays within half a cell of the exact area: the running sum is rounded,
+/// not each count. A run is named by `key` (the pixel); a new key starts a new sum.
+struct Dither {
+    key: (i64, i64),
+    sum: f32,
+    done: i64,
+}
+
+impl Dither {
+    fn new() -> Dither {
+        Dither {
+            key: (i64::MIN, i64::MIN),
+            sum: 0.0,
+            done: 0,
+        }
+    }
+    /// The whole-cell count for exact count `v` ∈ [0, w) of run `key`: `⌊v⌋` or `⌈v⌉`, the
+    /// nearest (cell centres) when `centre`, else whichever keeps the run's sum closest.
+    #[inline]
+    fn step(&mut self, key: (i64, i64), v: f32, centre: bool) -> i64 {
+        if key != self.key {
+            *self = Dither {
+                key,
+                sum: 0.0,
+                done: 0,
+            };
+        }
+        self.sum += v;
+        // v and the sum are ≥ 0, so truncation is the floor (and a NaN gives 0, no panic).
+        let n = if centre {
+            (v + 0.5) as i64
+        } else {
+            let fl = v as i64;
+            let cl = fl + (v > fl as f32) as i64;
+            ((self.sum + 0.5) as i64 - self.done).max(fl).min(cl)
+        };
+        self.done += n;
+        n
+    }
+    fn reset(&mut self) {
+        self.key = (i64::MIN, i64::MIN);
+    }
+}
+
 /// Rasterises the polygon `poly` (raster coordinates, any winding, even-odd) into the
 /// `w`×`w` masks of the pixels `[px0, px1] × [py0, py1]`, stored row-major in `masks`
-/// (cleared first). A cell is covered when its centre is inside the polygon; a centre exactly
-/// on an edge belongs to the polygon on the edge's left (in raster x), one side only.
+/// (cleared first).
+///
+/// Every edge becomes a lattice path (along cell boundaries) between its endpoints snapped to
+/// the nearest lattice points, and the mask is the set of cells inside the closed lattice
+/// curve — the XOR of the per-edge masks "cells whose leftward ray crosses the edge's path",
+/// Watt & Watt's "1s to the right of the edge". The path follows the edge by area, not by
+/// cell centres: a steep edge (|dx| ≤ |dy|) gets one riser per subpixel row, a shallow one
+/// one step per subpixel column, their positions chosen by [`Dither`] so that in each pixel
+/// the cells beside an edge match the exact area within a cell at every orientation.
+/// A shallow path's mask is built from its columns ("cells above the step") instead: for any
+/// lattice path, the leftward-ray mask XOR the cells-above mask is the XOR of the upper-right
+/// quadrants of its two endpoints, so those quadrants are flipped too.
+///
+/// Each edge's path depends only on its two (canonically ordered) endpoints, so polygons
+/// sharing an edge get masks whose XOR is the mask of their union (no holes; Watt & Watt
+/// Fig 4.20), and a pixel's mask does not depend on the window. Paths of edges leaving one
+/// vertex do not cross (no cell covered twice) when the corners are 45° or more, thanks to
+/// [`GUARD`]; narrower corners may share a cell.
 #[allow(clippy::too_many_arguments)]
 pub fn rasterize(
     poly: &[[f32; 2]],
@@ -125,62 +307,109 @@ pub fn rasterize(
     if npx == 0 || npy == 0 {
         return;
     }
-    let wf = w as f32;
+    let wi = w as i64;
+    let mut win = Window {
+        masks,
+        w,
+        shift: w.trailing_zeros(),
+        px0: px0 as i64,
+        px1: px1 as i64,
+        py0: py0 as i64,
+        npx,
+        r0: py0 as i64 * wi,
+        r1: (py1 as i64 + 1) * wi,
+        c0: px0 as i64 * wi,
+        c1: (px1 as i64 + 1) * wi,
+    };
     let n = poly.len();
     for e in 0..n {
-        let (mut a, mut b) = (poly[e], poly[(e + 1) % n]);
-        // Canonical order (lower y first, then lower x): both polygons sharing this edge compute
-        // bit-identical crossings.
-        if (a[1], a[0]) > (b[1], b[0]) {
-            std::mem::swap(&mut a, &mut b);
-        }
-        if a[1] == b[1] {
-            continue; // horizontal edges cross no row centre
-        }
-        let dxdy = (b[0] - a[0]) / (b[1] - a[1]);
-        // Global subpixel rows whose centre (r + ½)/w lies in [a.y, b.y). All of them are
-        // walked (from the edge's own first row) so the error carry below does not depend on
-        // the window; rows outside it are skipped after updating the carry.
-        let ra = (a[1] * wf - 0.5).ceil() as i64;
-        let rb = (b[1] * wf - 0.5).ceil() as i64;
-        let (wy0, wy1) = (py0 as i64 * w as i64, (py1 as i64 + 1) * w as i64);
-        // Cumulative quantisation error of this edge's crossings, in cells: choosing each row's
-        // first covered cell against it keeps every run of rows within one cell of the exact
-        // area right of the edge (Bresenham-style), instead of half a cell per row.
-        let mut carry = 0f32;
-        for r in ra..rb.min(wy1) {
-            let yc = (r as f32 + 0.5) / wf;
-            if !(yc >= a[1] && yc < b[1]) {
-                continue;
-            }
-            let xe = a[0] + (yc - a[1]) * dxdy;
-            // Crossing in global cell units, and the first cell counted right of it.
-            let u = xe * wf;
-            let first_cell = (u - carry - 0.5).floor() + 1.0;
-            carry += first_cell - u;
-            if r < wy0 {
-                continue;
-            }
-            let py = r.div_euclid(w as i64);
-            let row = (r - py * w as i64) as usize;
-            let line = (py - py0 as i64) as usize * npx;
-            // Pixel px holds cells px·w .. px·w + w; pixels right of the crossing's pixel flip
-            // whole rows.
-            let pxe = (first_cell / wf).floor();
-            let first = if pxe < px0 as f32 {
-                px0
-            } else if pxe > px1 as f32 {
-                continue;
+        let (a, b) = (poly[e], poly[(e + 1) % n]);
+        if (b[0] - a[0]).abs() > (b[1] - a[1]).abs() {
+            // Canonical order (lower x first): both polygons sharing this edge compute the
+            // same path bit for bit.
+            let (a, b) = if (a[0], a[1]) > (b[0], b[1]) {
+                (b, a)
             } else {
-                let pxe = pxe as i32;
-                let from = (first_cell - pxe as f32 * wf).clamp(0.0, wf) as usize;
-                flip_row(&mut masks[line + (pxe - px0) as usize], w, row, from);
-                pxe + 1
+                (a, b)
             };
-            for px in first..=px1 {
-                flip_row(&mut masks[line + (px - px0) as usize], w, row, 0);
-            }
+            shallow_edge(&mut win, a, b);
+        } else {
+            let (a, b) = if (a[1], a[0]) > (b[1], b[0]) {
+                (b, a)
+            } else {
+                (a, b)
+            };
+            steep_edge(&mut win, a, b);
         }
+    }
+}
+
+/// An edge with |dx| ≤ |dy|, `a` below `b`: in each subpixel row whose centre lies in the
+/// edge's y range, the cells from the riser rightwards.
+fn steep_edge(win: &mut Window, a: [f32; 2], b: [f32; 2]) {
+    let wi = win.w as i64;
+    let wf = win.w as f32;
+    let (ea, eb) = (snap(a[1] * wf), snap(b[1] * wf));
+    let (ra, rb) = (ea.max(win.r0), eb.min(win.r1));
+    if ra >= rb {
+        return;
+    }
+    let dxdy = (b[0] - a[0]) / (b[1] - a[1]);
+    let (ax, ay, inv) = (a[0] * wf, a[1] * wf, 1.0 / wf);
+    let mut dither = Dither::new();
+    for r in ra..rb {
+        // The edge at the row centre, in cells: its area left of the edge in this row.
+        let u = ax + (r as f32 + 0.5 - ay) * dxdy;
+        let p = floor_i(u * inv);
+        if p < win.px0 {
+            dither.reset();
+            win.flip_right(r, win.c0);
+        } else if p > win.px1 {
+            dither.reset();
+        } else {
+            let centre = r < ea + GUARD || r >= eb - GUARD;
+            let n = dither.step((r >> win.shift, p), u - (p * wi) as f32, centre);
+            win.flip_right(r, p * wi + n);
+        }
+    }
+}
+
+/// An edge with |dx| > |dy|, `a` left of `b`: per subpixel column whose centre lies in the
+/// edge's x range, the cells between the step and the higher endpoint's lattice row; and the
+/// rows between the endpoints' lattice rows right of the lower endpoint's lattice column.
+fn shallow_edge(win: &mut Window, a: [f32; 2], b: [f32; 2]) {
+    let wi = win.w as i64;
+    let wf = win.w as f32;
+    let (ca, cb) = (snap(a[0] * wf), snap(b[0] * wf));
+    let (ya, yb) = (snap(a[1] * wf), snap(b[1] * wf));
+    let top = ya.max(yb);
+    let (low, xlow) = if ya <= yb { (ya, ca) } else { (yb, cb) };
+    for r in low.max(win.r0)..top.min(win.r1) {
+        win.flip_right(r, xlow);
+    }
+    let (c0, c1) = (ca.max(win.c0), cb.min(win.c1));
+    if c0 >= c1 {
+        return;
+    }
+    let dydx = (b[1] - a[1]) / (b[0] - a[0]);
+    let (ax, ay, inv) = (a[0] * wf, a[1] * wf, 1.0 / wf);
+    let py1 = (win.r1 >> win.shift) - 1;
+    let mut dither = Dither::new();
+    for c in c0..c1 {
+        // The edge at the column centre, in cells: its area below the edge in this column.
+        let t = ay + (c as f32 + 0.5 - ax) * dydx;
+        let p = floor_i(t * inv);
+        let y = if p < win.py0 {
+            dither.reset();
+            win.r0
+        } else if p > py1 {
+            dither.reset();
+            win.r1
+        } else {
+            let centre = c < ca + GUARD || c >= cb - GUARD;
+            p * wi + dither.step((c >> win.shift, p), t - (p * wi) as f32, centre)
+        };
+        win.flip_column(c, y.min(top), y.max(top));
     }
 }
 
@@ -218,7 +447,8 @@ pub struct ABuffer {
 }
 
 impl ABuffer {
-    /// `Hider "abuffer"` with its parameters: `"masksize"` 4, 8 (default) or 16.
+    /// `Hider "abuffer"` with its parameters: `"masksize"` 4, 8 (default) or 16, and
+    /// `"fragmentlimit"`, the most fragments a bucket may hold (see [`ABuffer::with_limit`]).
     pub fn new(config: HiderConfig, params: &ParamList, diags: &Diagnostics) -> ABuffer {
         let w = match params.float("masksize") {
             None => 8,
@@ -236,7 +466,23 @@ impl ABuffer {
                 8
             }
         };
-        ABuffer::with_mask(config, w)
+        let mut hider = ABuffer::with_mask(config, w);
+        match params.float("fragmentlimit") {
+            None => {}
+            Some(n) if n >= 1.0 => hider = hider.with_limit(n as usize),
+            Some(n) => {
+                let mut d = Diag::warning(
+                    "render::hider",
+                    format!("A-buffer fragmentlimit {n} is not positive; using {DEFAULT_FRAGMENT_LIMIT}"),
+                )
+                .help("fragmentlimit is the most fragments one bucket may hold (at least 1)");
+                if let Some(p) = params.get("fragmentlimit") {
+                    d = d.label(p.span, "this limit");
+                }
+                diags.report(d);
+            }
+        }
+        hider
     }
 
     /// An A-buffer with `w`×`w` masks (`w` is 4, 8 or 16).
@@ -401,6 +647,28 @@ impl Bucket<'_> {
 impl Hider for ABuffer {
     fn config(&self) -> &HiderConfig {
         &self.config
+    }
+
+    /// Reports, once per render, how many fragments did not fit their bucket's pool.
+    fn finish(&self, diags: &Diagnostics) {
+        let n = self.overflowed.swap(0, Ordering::Relaxed);
+        if n > 0 {
+            diags.report(
+                Diag::warning(
+                    "render::hider",
+                    format!(
+                        "A-buffer fragment pool full ({} fragments per bucket): {n} fragments \
+                         were merged into the nearest fragment of their pixel instead of stored, \
+                         so their pixels may be approximate",
+                        self.limit
+                    ),
+                )
+                .help(
+                    "raise Hider \"abuffer\" \"fragmentlimit\", or use smaller buckets \
+                     (Option \"limits\" \"bucketsize\")",
+                ),
+            );
+        }
     }
 
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
@@ -904,8 +1172,8 @@ mod tests {
 
     #[test]
     fn diagonal_triangle_area() {
-        // (0,0) (1,0) (1,1): exactly half the pixel; the carried crossings keep it within a
-        // cell (plain cell-centre sampling would give 28 of 64).
+        // (0,0) (1,0) (1,1): exactly half the pixel; the area-following path keeps it within
+        // a cell (plain cell-centre sampling would give 28 of 64).
         let m = mask_of(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], 8);
         assert!((popcount(&m) as i32 - 32).abs() <= 1, "{}", popcount(&m));
         // and its complement across the diagonal tiles the pixel exactly
@@ -936,10 +1204,10 @@ mod tests {
             for _ in 0..300 {
                 // A random convex quad inside the pixel (a micropolygon's shape).
                 let (cx, cy, r) = (0.3 + 0.4 * rnd(), 0.3 + 0.4 * rnd(), 0.1 + 0.2 * rnd());
-                let a0 = rnd() * 6.283;
+                let a0 = rnd() * std::f32::consts::TAU;
                 let poly: Vec<[f32; 2]> = (0..4)
                     .map(|k| {
-                        let t = a0 + k as f32 * 1.5708 + 0.5 * (rnd() - 0.5);
+                        let t = a0 + k as f32 * std::f32::consts::FRAC_PI_2 + 0.5 * (rnd() - 0.5);
                         [cx + r * t.cos(), cy + r * t.sin()]
                     })
                     .collect();
@@ -950,6 +1218,7 @@ mod tests {
                 let err = (popcount(&m) as f32 - shoelace(&poly) * (w * w) as f32).abs();
                 worst = worst.max(err);
             }
+            eprintln!("mask {w}: worst micropolygon error {worst} cells");
             // Four edges, each within about a cell of its exact area (rows where an edge
             // starts or ends are quantised to whole rows).
             assert!(
@@ -1003,65 +1272,198 @@ mod tests {
         }
     }
 
-    #[test]
-    fn half_plane_coverage_within_one_cell() {
-        // A line through the pixel at many angles: |coverage − exact area| ≤ 1/64 at 8×8.
-        let mut worst = 0f32;
-        for k in 0..180 {
-            let th = (k as f32 + 0.37) * std::f32::consts::PI / 180.0;
-            let (c, s) = (th.cos(), th.sin());
-            let off = 0.13 * ((k % 7) as f32 - 3.0) / 3.0;
-            // The half-plane n·(p − centre) ≤ off, as a big polygon clipped by the pixel.
-            let (n, t) = ([c, s], [-s, c]);
-            let o = [0.5 + n[0] * off, 0.5 + n[1] * off];
-            let big = 10.0;
-            let poly = [
-                [o[0] + t[0] * big, o[1] + t[1] * big],
-                [o[0] - t[0] * big, o[1] - t[1] * big],
-                [
-                    o[0] - t[0] * big - n[0] * big,
-                    o[1] - t[1] * big - n[1] * big,
-                ],
-                [
-                    o[0] + t[0] * big - n[0] * big,
-                    o[1] + t[1] * big - n[1] * big,
-                ],
-            ];
-            let cov = popcount(&mask_of(&poly, 8)) as f32 / 64.0;
-            // Exact area by fine numerical integration of the clipped half-plane.
-            let steps = 2000;
-            let mut area = 0f64;
-            for iy in 0..steps {
-                let y = (iy as f64 + 0.5) / steps as f64;
-                // x range in [0,1] with c·(x−o.x) + s·(y−o.y) ≤ 0
-                let (c, s) = (c as f64, s as f64);
-                let rhs = -s * (y - o[1] as f64);
-                let len = if c.abs() < 1e-12 {
-                    if rhs >= 0.0 {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                } else {
-                    let xb = o[0] as f64 + rhs / c;
-                    if c > 0.0 {
-                        xb.clamp(0.0, 1.0)
-                    } else {
-                        1.0 - xb.clamp(0.0, 1.0)
-                    }
-                };
-                area += len / steps as f64;
+    /// Area of the unit pixel `(px, py)` on the side `n·(p − o) ≤ 0` of a line (exact, by
+    /// clipping the square).
+    fn clipped_area(px: f64, py: f64, n: [f64; 2], o: [f64; 2]) -> f64 {
+        let sq = [
+            [px, py],
+            [px + 1.0, py],
+            [px + 1.0, py + 1.0],
+            [px, py + 1.0],
+        ];
+        let d = |p: [f64; 2]| n[0] * (p[0] - o[0]) + n[1] * (p[1] - o[1]);
+        let mut out: Vec<[f64; 2]> = Vec::new();
+        for i in 0..4 {
+            let (p, q) = (sq[i], sq[(i + 1) % 4]);
+            let (dp, dq) = (d(p), d(q));
+            if dp <= 0.0 {
+                out.push(p);
             }
-            // Edges within 15° of horizontal are quantised to whole rows where they cross
-            // one (the book's row masks): bounded by half a row instead.
-            let shallow = (th - std::f32::consts::FRAC_PI_2).abs() < 15f32.to_radians();
-            let err = (cov - area as f32).abs();
-            if shallow {
-                assert!(err <= 4.0 / 64.0, "angle {k}: {err}");
-            } else {
-                worst = worst.max(err);
+            if (dp < 0.0) != (dq < 0.0) && dp != dq {
+                let t = dp / (dp - dq);
+                out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
             }
         }
-        assert!(worst <= 1.0 / 64.0 + 1e-4, "worst coverage error {worst}");
+        let m = out.len();
+        let s: f64 = (0..m)
+            .map(|i| out[i][0] * out[(i + 1) % m][1] - out[(i + 1) % m][0] * out[i][1])
+            .sum();
+        0.5 * s.abs()
+    }
+
+    /// The worst |coverage − exact area| of pixels crossed by one edge, sweeping the edge's
+    /// direction over the full turn (every angle 0..180° with either side filled) and its
+    /// offset through the pixel, at two pixel positions.
+    fn worst_edge_error(w: usize) -> f64 {
+        let mut worst = 0f64;
+        for (px, py) in [(0i32, 0i32), (37, -12)] {
+            for k in 0..720 {
+                // Whole and half degrees (axis-aligned and 45° edges included), then a
+                // slightly irrational one.
+                let deg = if k < 360 {
+                    k as f64
+                } else {
+                    (k - 360) as f64 + 0.5371
+                };
+                let th = deg.to_radians();
+                let (n, t) = ([th.cos(), th.sin()], [-th.sin(), th.cos()]);
+                for j in 0..15 {
+                    let off = -0.7 + 1.4 * j as f64 / 14.0 + 0.013 * (k % 3) as f64;
+                    let o = [px as f64 + 0.5 + n[0] * off, py as f64 + 0.5 + n[1] * off];
+                    let big = 10.0;
+                    let v = |s: f64, r: f64| {
+                        [
+                            (o[0] + t[0] * s - n[0] * r) as f32,
+                            (o[1] + t[1] * s - n[1] * r) as f32,
+                        ]
+                    };
+                    let poly = [v(big, 0.0), v(-big, 0.0), v(-big, big), v(big, big)];
+                    // The f32 polygon's own line, for the exact area.
+                    let (p0, p1) = (poly[0], poly[1]);
+                    let dir = [(p1[0] - p0[0]) as f64, (p1[1] - p0[1]) as f64];
+                    let mut nn = [dir[1], -dir[0]];
+                    let inside = [poly[2][0] as f64, poly[2][1] as f64];
+                    let o32 = [p0[0] as f64, p0[1] as f64];
+                    if nn[0] * (inside[0] - o32[0]) + nn[1] * (inside[1] - o32[1]) > 0.0 {
+                        nn = [-nn[0], -nn[1]];
+                    }
+                    let exact = clipped_area(px as f64, py as f64, nn, o32);
+                    let mut masks = Vec::new();
+                    rasterize(&poly, w, px, px, py, py, &mut masks);
+                    let cov = popcount(&masks[0]) as f64 / (w * w) as f64;
+                    worst = worst.max((cov - exact).abs());
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn edge_coverage_is_the_exact_area_at_every_orientation() {
+        // The issue's bound: within 1/64 at 8×8, and likewise one cell (1/w²) at 4 and 16;
+        // the dithered paths actually keep every orientation within about half a cell.
+        for w in [4usize, 8, 16] {
+            let worst = worst_edge_error(w);
+            let cell = 1.0 / (w * w) as f64;
+            eprintln!(
+                "mask {w}: worst edge-pixel error {worst:.5} = {:.3} cells",
+                worst / cell
+            );
+            assert!(worst <= cell, "mask {w}: worst coverage error {worst}");
+        }
+    }
+
+    #[test]
+    fn shared_edges_of_a_jittered_grid_tile_exactly() {
+        // Micropolygons of a jittered 5×5-point grid over 2×2 pixels: adjacent ones share
+        // edges, so their masks must be disjoint and their union the outline's mask.
+        let mut s = 777u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for w in [4usize, 8, 16] {
+            for _ in 0..40 {
+                let mut pts = [[0f32; 2]; 25];
+                for j in 0..5 {
+                    for i in 0..5 {
+                        let jit = |r: f32| if i % 4 == 0 && j % 4 == 0 { 0.0 } else { r };
+                        pts[j * 5 + i] = [
+                            0.3 + 0.37 * i as f32 + jit(0.2 * (rnd() - 0.5)),
+                            0.2 + 0.41 * j as f32 + jit(0.2 * (rnd() - 0.5)),
+                        ];
+                    }
+                }
+                let mut union = vec![[0u64; 4]; 4];
+                let mut masks = Vec::new();
+                for j in 0..4 {
+                    for i in 0..4 {
+                        let k = j * 5 + i;
+                        let q = [pts[k], pts[k + 1], pts[k + 6], pts[k + 5]];
+                        rasterize(&q, w, 0, 1, 0, 1, &mut masks);
+                        for (u, m) in union.iter_mut().zip(&masks) {
+                            assert!(is_zero(&and(u, m)), "overlap");
+                            *u = or(u, m);
+                        }
+                    }
+                }
+                let outline: Vec<[f32; 2]> = (0..4)
+                    .map(|i| pts[i])
+                    .chain((0..4).map(|j| pts[j * 5 + 4]))
+                    .chain((1..5).rev().map(|i| pts[20 + i]))
+                    .chain((1..5).rev().map(|j| pts[j * 5]))
+                    .collect();
+                rasterize(&outline, w, 0, 1, 0, 1, &mut masks);
+                assert_eq!(union, masks);
+            }
+        }
+    }
+
+    #[test]
+    fn fans_around_a_vertex_tile_exactly() {
+        // Triangles around a shared vertex, corners of at least 45° (usual micropolygons):
+        // the guard rows keep their paths from crossing near the vertex, so the masks are
+        // disjoint and tile the fan's outline. (Narrower corners can overlap by a cell.)
+        let mut s = 99u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for w in [4usize, 8, 16] {
+            for _ in 0..300 {
+                let v = [0.5 + rnd(), 0.5 + rnd()];
+                let mut angs: Vec<f32> = Vec::new();
+                for _ in 0..100 {
+                    let a = rnd() * 360.0;
+                    if angs.iter().all(|&b| {
+                        let d = (a - b).abs();
+                        d.min(360.0 - d) >= 45.0
+                    }) {
+                        angs.push(a);
+                    }
+                }
+                angs.sort_by(f32::total_cmp);
+                let pts: Vec<[f32; 2]> = angs
+                    .iter()
+                    .map(|a| {
+                        let t = a.to_radians();
+                        [v[0] + 1.3 * t.cos(), v[1] + 1.3 * t.sin()]
+                    })
+                    .collect();
+                let mut union = vec![[0u64; 4]; 16];
+                let mut masks = Vec::new();
+                for i in 0..pts.len() {
+                    rasterize(
+                        &[v, pts[i], pts[(i + 1) % pts.len()]],
+                        w,
+                        -1,
+                        2,
+                        -1,
+                        2,
+                        &mut masks,
+                    );
+                    for (u, m) in union.iter_mut().zip(&masks) {
+                        assert!(is_zero(&and(u, m)), "overlap at {v:?} {angs:?}");
+                        *u = or(u, m);
+                    }
+                }
+                rasterize(&pts, w, -1, 2, -1, 2, &mut masks);
+                assert_eq!(union, masks);
+            }
+        }
     }
 }

@@ -433,6 +433,9 @@ pub trait Hider: Sync {
     /// Samples `grids` in the pixels of `rect` (a bucket plus its filter margin).
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer;
     fn config(&self) -> &HiderConfig;
+    /// Called once after a frame's last bucket: reports what the buckets could not (they run
+    /// in parallel without diagnostics), e.g. a resource bound that was hit.
+    fn finish(&self, _diags: &Diagnostics) {}
 }
 
 /// `Hider "null"`: no samples are ever covered.
