@@ -28,6 +28,7 @@
 // Colour loops index several parallel arrays by channel.
 #![allow(clippy::needless_range_loop)]
 
+use crate::num::floor_i32;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::diag::{Diag, Diagnostics};
@@ -732,33 +733,29 @@ fn fragment_grid(b: &mut Bucket, rect: PixelRect, w: usize, g: &ShadedGrid, mask
     let rw = rect.width();
     let mut aov = vec![0f32; aw];
     for j in 0..g.nv.saturating_sub(1) {
+        if !g
+            .row_bounds
+            .get(j)
+            .is_some_and(|rb| super::overlaps(rb, wx0, wy0, wx1, wy1))
+        {
+            continue;
+        }
         for i in 0..nu.saturating_sub(1) {
             let m = j * (nu - 1) + i;
             if !g.live[m] {
                 continue;
             }
-            let k = j * nu + i;
-            let corner = [k, k + 1, k + nu + 1, k + nu];
-            let poly = corner.map(|c| g.xy[c]);
-            let (mut x0, mut y0, mut x1, mut y1) = (
-                f32::INFINITY,
-                f32::INFINITY,
-                f32::NEG_INFINITY,
-                f32::NEG_INFINITY,
-            );
-            for p in &poly {
-                x0 = x0.min(p[0]);
-                y0 = y0.min(p[1]);
-                x1 = x1.max(p[0]);
-                y1 = y1.max(p[1]);
-            }
+            let [x0, y0, x1, y1] = g.mp_bounds[m];
             if !(x0.max(wx0) <= x1.min(wx1) && y0.max(wy0) <= y1.min(wy1)) {
                 continue;
             }
-            let px0 = (x0.max(wx0).floor() as i32).max(rect.x0);
-            let px1 = (x1.min(wx1).floor() as i32).min(rect.x1 - 1);
-            let py0 = (y0.max(wy0).floor() as i32).max(rect.y0);
-            let py1 = (y1.min(wy1).floor() as i32).min(rect.y1 - 1);
+            let k = j * nu + i;
+            let corner = [k, k + 1, k + nu + 1, k + nu];
+            let poly = corner.map(|c| g.xy[c]);
+            let px0 = floor_i32(x0.max(wx0)).max(rect.x0);
+            let px1 = floor_i32(x1.min(wx1)).min(rect.x1 - 1);
+            let py0 = floor_i32(y0.max(wy0)).max(rect.y0);
+            let py1 = floor_i32(y1.min(wy1)).min(rect.y1 - 1);
             if px0 > px1 || py0 > py1 {
                 continue;
             }
