@@ -103,8 +103,8 @@ fn point(f: &mut Fetcher, face: usize, fp: &Footprint, acc: &mut [f32]) -> f32 {
     let h = &f.tex.header;
     let l = h.levels[face][0];
     let (sw, tw) = (h.swrap, h.twrap);
-    let x = (fp.s * l.width as f32).floor() as i64;
-    let y = (fp.t * l.height as f32).floor() as i64;
+    let x = crate::num::floor_i64(fp.s * l.width as f32);
+    let y = crate::num::floor_i64(fp.t * l.height as f32);
     if let (Some(x), Some(y)) = (sw.index(x, l.width), tw.index(y, l.height)) {
         f.accum(face, 0, x, y, 1.0, acc);
     }
@@ -127,9 +127,9 @@ pub fn bilinear(
     let (sw, tw): (Wrap, Wrap) = (h.swrap, h.twrap);
     let x = s * l.width as f32 - 0.5;
     let y = t * l.height as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let (x0, y0) = (x0 as i64, y0 as i64);
+    // Integer floor: f32::floor is a library call on baseline x86-64.
+    let (x0, y0) = (crate::num::floor_i64(x), crate::num::floor_i64(y));
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
     for (dy, wy) in [(0, 1.0 - fy), (1, fy)] {
         let Some(yy) = tw.index(y0 + dy, l.height) else {
             continue;

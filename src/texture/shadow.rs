@@ -94,7 +94,7 @@ pub fn pcf(f: &mut Fetcher, view: &LightView, pts: &[Vec3; 5], p: &ShadowParams)
         for i in 0..ns {
             let su = x - hx + (i as f32 + rand01(&mut seed)) * ds;
             let tv = y - hy + (j as f32 + rand01(&mut seed)) * dt;
-            let (iu, iv) = (su.floor() as i64, tv.floor() as i64);
+            let (iu, iv) = (crate::num::floor_i64(su), crate::num::floor_i64(tv));
             if iu < 0 || iv < 0 || iu >= l.width as i64 || iv >= l.height as i64 {
                 continue;
             }
