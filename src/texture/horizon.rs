@@ -15,14 +15,32 @@
 //! texels. Their true (s,t) azimuths are stored, so the θ interpolation stays exact for
 //! non-square maps.
 //!
-//! Lookup: the light is moved into the standard patch's frame by `C⁻¹` (C's columns are
-//! dP/ds, dP/dt and n̂·|dP/ds × dP/dt|^{1/2}, Max §5), the horizon elevation is bilinear in
-//! (s,t) and linear in azimuth, and the visible fraction is Max's disc-sun penumbra function.
+//! Besides the tangent, each entry keeps the *reach*: the (s,t) distance to the profile point
+//! that sets that horizon (0 when nothing rises above the texel).
 //!
-//! File format (`.hzn`, little-endian): magic `b"ARBHZN1\0"`, u32 width, u32 height,
+//! Lookup: the light is moved into the standard patch's frame by `C⁻¹` (C's columns are
+//! dP/ds, dP/dt and n̂·|dP/ds × dP/dt|^{1/2}, Max §5) and its elevation compared with the
+//! horizon towards its azimuth θ; the visible fraction is Max's disc-sun penumbra function.
+//! Max interpolates the horizon linearly in θ between the two nearest tabulated directions
+//! ([`HorizonTable::elevation_interpolated`]). That is exact for long ridges but not for
+//! isolated bumps: seen from a point in a bump's shadow, the bump spans a few degrees, so the
+//! rays 45° apart on either side of the light miss it, and the shadow splits into two faint
+//! copies along the tabulated directions (shadow-mask IoU 0.4–0.6 against ray-marched truth
+//! between directions). [`HorizonTable::elevation`] instead uses the two neighbouring
+//! directions' tables to *find* the occluders on the light's ray: a shadow cast along θ_k is
+//! the shadow along θ rotated about its occluder, so the texel q = p + D(û_θ − û_k) whose θ_k
+//! ray crosses p's θ ray at distance D names (by its reach) where an occluder lies; the true
+//! height is sampled there on p's own ray. D runs over a doubling sequence and is refined by
+//! a fixed-point step (D ← where q's occluder projects). Every sample is a point of the height
+//! field on the light ray, so the estimate never exceeds the true horizon (no false shadows);
+//! on tabulated directions it reduces to the table. The curvature correction of Max §6 lowers
+//! (convex) or raises (concave) the horizon by γ = √(2h/R) ([`curvature_drop`]).
+//!
+//! File format (`.hzn`, little-endian): magic `b"ARBHZN2\0"`, u32 width, u32 height,
 //! u32 ndirs, u32 flags (bit 0: periodic, always set), ndirs × f32 azimuth (radians, in
 //! [0, 2π), increasing), W·H f32 heights (row-major, row = t), W·H·ndirs f32 tangents
-//! (texel-major: the ndirs tangents of one texel are contiguous).
+//! (texel-major: the ndirs tangents of one texel are contiguous), W·H·ndirs f32 reaches (same
+//! order). Version-1 files (`ARBHZN1`, no reaches) are rebuilt from their heights on reading.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -30,7 +48,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{Mat3, Vec3};
 
-const MAGIC: &[u8; 8] = b"ARBHZN1\0";
+const MAGIC: &[u8; 8] = b"ARBHZN2\0";
+const MAGIC_V1: &[u8; 8] = b"ARBHZN1\0";
 
 /// Integer texel steps of the 8 tabulated directions (E, NE, N, NW, W, SW, S, SE).
 pub const DIRS8: [(i32, i32); 8] = [
@@ -75,6 +94,9 @@ pub struct HorizonTable {
     pub heights: Vec<f32>,
     /// tan(horizon elevation) per texel and direction: `tans[texel * ndirs + k]`, ≥ 0.
     pub tans: Vec<f32>,
+    /// (s,t) distance from the texel centre to the profile point that sets `tans` (same
+    /// order); 0 where the horizon is flat (tan 0).
+    pub reach: Vec<f32>,
 }
 
 /// Direction steps for a direction count (8 or 16).
@@ -102,10 +124,14 @@ impl HorizonTable {
             return Err("height map holds a non-finite value".into());
         }
         let mut tans = vec![0f32; w * h * ndirs];
+        let mut reach = vec![0f32; w * h * ndirs];
         let mut sweep = Sweep::default();
         for (k, &(a, b)) in dirs.iter().enumerate() {
-            sweep.direction(heights, w, h, a, b, |texel, tan| {
-                tans[texel * ndirs + k] = tan.max(0.0)
+            sweep.direction(heights, w, h, a, b, |texel, tan, dist| {
+                if tan > 0.0 {
+                    tans[texel * ndirs + k] = tan;
+                    reach[texel * ndirs + k] = dist;
+                }
             });
         }
         let azimuths = dirs
@@ -121,6 +147,7 @@ impl HorizonTable {
             azimuths,
             heights: heights.to_vec(),
             tans,
+            reach,
         })
     }
 
@@ -164,10 +191,9 @@ impl HorizonTable {
         (0..4).map(|c| self.heights[ix[c]] * wt[c]).sum()
     }
 
-    /// Horizon elevation (radians) at (s, t) towards azimuth `theta` (radians, from +s towards
-    /// +t), for bump heights multiplied by `scale`: bilinear in (s,t) per direction, then
-    /// linear in azimuth between the two nearest tabulated directions.
-    pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+    /// The tabulated directions around azimuth `theta`: (k0, k1, f) with θ at fraction f of
+    /// the way from azimuth k0 to k1 (wrapping past 2π).
+    fn bracket(&self, theta: f32) -> (usize, usize, f32) {
         let nd = self.ndirs();
         let th = if theta.is_finite() {
             theta.rem_euclid(std::f32::consts::TAU)
@@ -190,7 +216,17 @@ impl HorizonTable {
         if x < a0 {
             x += std::f32::consts::TAU;
         }
-        let f = ((x - a0) / (a1 - a0)).clamp(0.0, 1.0);
+        (k0, k1, ((x - a0) / (a1 - a0)).clamp(0.0, 1.0))
+    }
+
+    /// Max's lookup (§2): horizon elevation (radians) at (s, t) towards azimuth `theta`
+    /// (radians, from +s towards +t) for heights multiplied by `scale`, bilinear in (s,t) per
+    /// direction, then linear in azimuth between the two nearest tabulated directions. Exact
+    /// on tabulated directions and for long ridges; isolated bumps between directions are
+    /// missed (see the module header), so rendering uses [`HorizonTable::elevation`].
+    pub fn elevation_interpolated(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+        let nd = self.ndirs();
+        let (k0, k1, f) = self.bracket(theta);
         let (ix, wt) = self.corners(s, t);
         let (mut t0, mut t1) = (0.0, 0.0);
         for c in 0..4 {
@@ -201,14 +237,119 @@ impl HorizonTable {
         (1.0 - f) * (sc * t0).atan() + f * (sc * t1).atan()
     }
 
+    /// Horizon elevation (radians) at (s, t) towards azimuth `theta` for heights multiplied
+    /// by `scale`: the occluder search of the module header. Never above the true horizon of
+    /// the (bilinear) height field; equal to the table on tabulated directions.
+    pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+        (scale.max(0.0) * self.horizon_tan(s, t, theta, f32::INFINITY)).atan()
+    }
+
+    /// tan(horizon elevation) of the unscaled map at (s, t) towards `theta` (see
+    /// [`HorizonTable::elevation`]); returns as soon as it reaches `stop` (the caller only
+    /// needs to know the light is hidden).
+    pub fn horizon_tan(&self, s: f32, t: f32, theta: f32, stop: f32) -> f32 {
+        let (s, t) = (
+            if s.is_finite() { s } else { 0.0 },
+            if t.is_finite() { t } else { 0.0 },
+        );
+        let theta = if theta.is_finite() { theta } else { 0.0 };
+        let nd = self.ndirs();
+        let (k0, k1, f) = self.bracket(theta);
+        let (w, h) = (self.width as f32, self.height as f32);
+        let (wi, hi) = (self.width as i64, self.height as i64);
+        // One texel: the search's length unit.
+        let unit = 1.0 / w.min(h);
+        let u = (theta.cos(), theta.sin());
+        let zp = self.height_at(s, t);
+        let mut best = 0f32;
+        let mut best_along = 0f32;
+        // Height on p's own ray at distance `along`: the only thing ever compared.
+        let sample = |along: f32, best: &mut f32, best_along: &mut f32| {
+            if along > 0.1 * unit {
+                let z = self.height_at(s + along * u.0, t + along * u.1);
+                let slope = (z - zp) / along;
+                if slope > *best {
+                    *best = slope;
+                    *best_along = along;
+                }
+            }
+        };
+        let ks: &[usize] = if f < 1e-6 {
+            &[k0]
+        } else if f > 1.0 - 1e-6 {
+            &[k1]
+        } else {
+            &[k0, k1]
+        };
+        for &k in ks {
+            let a = self.azimuths[k];
+            let uk = (a.cos(), a.sin());
+            let dl = (u.0 - uk.0, u.1 - uk.1);
+            let spread = (dl.0 * dl.0 + dl.1 * dl.1).sqrt();
+            // Candidates closer than half a texel to p all name p's own texel: start there.
+            let mut d_start = 0.0f32;
+            while d_start <= 2.0 {
+                let mut d = d_start;
+                for _ in 0..3 {
+                    let (qx, qy) = ((s + d * dl.0) * w, (t + d * dl.1) * h);
+                    let (cx, cy) = (qx.floor(), qy.floor());
+                    let i = ((cy as i64).rem_euclid(hi) * wi + (cx as i64).rem_euclid(wi)) as usize;
+                    let r = self.reach[i * nd + k];
+                    if r <= 0.0 {
+                        break;
+                    }
+                    // The occluder q's θ_k ray meets, projected onto p's θ ray.
+                    let (ox, oy) = ((cx + 0.5) / w + r * uk.0, (cy + 0.5) / h + r * uk.1);
+                    let along = (ox - s) * u.0 + (oy - t) * u.1;
+                    if along <= 0.0 {
+                        break;
+                    }
+                    sample(along, &mut best, &mut best_along);
+                    if best >= stop {
+                        return best;
+                    }
+                    if (along - d).abs() < 0.5 * unit {
+                        break;
+                    }
+                    d = along;
+                }
+                d_start = if d_start == 0.0 {
+                    if spread * 2.0 < 1.0 {
+                        unit.max(0.5 * unit / spread.max(1e-6))
+                    } else {
+                        unit
+                    }
+                } else {
+                    d_start * 2.0
+                };
+            }
+        }
+        // The candidate rays cross p's near, not at, the occluder's crest: look around it.
+        if best_along > 0.0 {
+            let a0 = best_along;
+            for dd in [-1.0f32, -0.5, 0.5, 1.0] {
+                sample(a0 + dd * unit, &mut best, &mut best_along);
+            }
+        }
+        best
+    }
+
     /// Serialises to the `.hzn` format (module header).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(24 + 4 * (self.heights.len() + self.tans.len() + 16));
+        let mut out = Vec::with_capacity(
+            24 + 4 * (self.heights.len() + self.tans.len() + self.reach.len() + 16),
+        );
         out.extend_from_slice(MAGIC);
         for v in [self.width, self.height, self.ndirs(), 1] {
             out.extend_from_slice(&(v as u32).to_le_bytes());
         }
-        for v in self.azimuths.iter().chain(&self.heights).chain(&self.tans) {
+        for v in self
+            .azimuths
+            .iter()
+            .chain(&self.heights)
+            .chain(&self.tans)
+            .chain(&self.reach)
+        {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out
@@ -216,7 +357,8 @@ impl HorizonTable {
 
     /// Parses the `.hzn` format, checking sizes and values.
     pub fn from_bytes(b: &[u8]) -> Result<Self, String> {
-        if b.len() < 24 || &b[..8] != MAGIC {
+        let v1 = b.len() >= 8 && &b[..8] == MAGIC_V1;
+        if b.len() < 24 || (&b[..8] != MAGIC && !v1) {
             return Err("not an arbor horizon table (bad magic)".into());
         }
         let u = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as usize;
@@ -226,9 +368,10 @@ impl HorizonTable {
                 "bad horizon table header ({w}x{h}, {nd} directions)"
             ));
         }
+        let per_texel = if v1 { nd + 1 } else { 2 * nd + 1 };
         let n = w
             .checked_mul(h)
-            .and_then(|t| t.checked_mul(nd + 1))
+            .and_then(|t| t.checked_mul(per_texel))
             .and_then(|t| t.checked_add(nd))
             .ok_or("horizon table too large")?;
         if b.len() != 24 + 4 * n {
@@ -245,12 +388,19 @@ impl HorizonTable {
         if f.iter().any(|v| !v.is_finite()) {
             return Err("horizon table holds a non-finite value".into());
         }
+        let heights = &f[nd..nd + w * h];
+        if v1 {
+            // No reaches stored: rebuild (fast) from the heights it carries.
+            return Self::build(heights, w, h, nd);
+        }
+        let tans_end = nd + w * h * (nd + 1);
         Ok(HorizonTable {
             width: w,
             height: h,
             azimuths: f[..nd].to_vec(),
-            heights: f[nd..nd + w * h].to_vec(),
-            tans: f[nd + w * h..].to_vec(),
+            heights: heights.to_vec(),
+            tans: f[nd + w * h..tans_end].to_vec(),
+            reach: f[tans_end..].to_vec(),
         })
     }
 
@@ -274,7 +424,8 @@ struct Sweep {
 }
 
 impl Sweep {
-    /// Calls `emit(texel, tan)` once per texel with the max slope ahead along step (a, b).
+    /// Calls `emit(texel, tan, dist)` once per texel with the max slope ahead along step
+    /// (a, b) and the (s,t) distance to the point that has it.
     fn direction(
         &mut self,
         f: &[f32],
@@ -282,7 +433,7 @@ impl Sweep {
         h: usize,
         a: i32,
         b: i32,
-        mut emit: impl FnMut(usize, f32),
+        mut emit: impl FnMut(usize, f32, f32),
     ) {
         // Knight steps sample the midpoint between texels too (sub = 2 samples per step).
         let sub = if a.abs() > 1 || b.abs() > 1 { 2 } else { 1 };
@@ -341,8 +492,11 @@ impl Sweep {
                     }
                 }
                 if j < m && j % sub == 0 {
-                    let tan = self.stack.last().map_or(0.0, |&q| slope(q));
-                    emit(self.texel[j / sub] as usize, tan);
+                    let (tan, dist) = self
+                        .stack
+                        .last()
+                        .map_or((0.0, 0.0), |&q| (slope(q), (q as usize - j) as f32 * ds));
+                    emit(self.texel[j / sub] as usize, tan, dist);
                 }
                 self.stack.push(j as u32);
             }
@@ -394,12 +548,46 @@ pub fn visibility(
     scale: f32,
     penumbra: f32,
 ) -> f32 {
+    visibility_curved(table, s, t, lp, scale, penumbra, 0.0)
+}
+
+/// [`visibility`] with Max's §6 curvature correction: the horizon is lowered by `drop`
+/// radians (γ of [`curvature_drop`]; negative on concave surfaces raises it).
+pub fn visibility_curved(
+    table: &HorizonTable,
+    s: f32,
+    t: f32,
+    lp: Vec3,
+    scale: f32,
+    penumbra: f32,
+    drop: f32,
+) -> f32 {
+    use std::f32::consts::FRAC_PI_2;
     let horiz = (lp.x * lp.x + lp.y * lp.y).sqrt();
     let el = lp.z.atan2(horiz);
+    if el.is_nan() {
+        return 0.0;
+    }
     let theta = lp.y.atan2(lp.x);
-    let hz = table.elevation(s, t, theta, scale);
+    let drop = if drop.is_finite() { drop } else { 0.0 };
+    let half = if penumbra > 0.0 { 0.5 * penumbra } else { 0.0 };
+    // Table elevations lie in [0, π/2): decide without searching when they cannot matter.
+    let hidden_at = el + half + drop; // table elevation from which the light is fully hidden
+    if hidden_at <= 0.0 {
+        return 0.0;
+    }
+    if el - half + drop >= FRAC_PI_2 {
+        return 1.0;
+    }
+    let sc = scale.max(0.0);
+    let stop = if hidden_at >= FRAC_PI_2 || sc == 0.0 {
+        f32::INFINITY
+    } else {
+        hidden_at.tan() / sc
+    };
+    let hz = (sc * table.horizon_tan(s, t, theta, stop)).atan() - drop;
     if penumbra > 0.0 {
-        penumbra_fraction((el - hz) / (0.5 * penumbra))
+        penumbra_fraction((el - hz) / half)
     } else if el >= hz {
         1.0
     } else {
@@ -645,9 +833,10 @@ mod tests {
         let e1 = t.tan_at(10, 3, 1).atan();
         let e7 = t.tan_at(10, 3, 7).atan();
         let d = std::f32::consts::PI / 8.0;
-        assert!((t.elevation(s, tt, 0.0, 1.0) - e0).abs() < 1e-6);
-        assert!((t.elevation(s, tt, d, 1.0) - 0.5 * (e0 + e1)).abs() < 1e-6);
-        assert!((t.elevation(s, tt, -d, 1.0) - 0.5 * (e7 + e0)).abs() < 1e-6);
+        let e = |th: f32| t.elevation_interpolated(s, tt, th, 1.0);
+        assert!((e(0.0) - e0).abs() < 1e-6);
+        assert!((e(d) - 0.5 * (e0 + e1)).abs() < 1e-6);
+        assert!((e(-d) - 0.5 * (e7 + e0)).abs() < 1e-6);
     }
 
     #[test]
