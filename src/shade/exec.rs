@@ -131,6 +131,12 @@ pub trait TextureLookup: Sync {
     fn info(&self, _name: &str, _query: &str) -> Option<InfoValue> {
         None
     }
+
+    /// The directories texture names are looked up in after the name as given (horizon
+    /// maps are found on the same path).
+    fn search_path(&self) -> &[std::path::PathBuf] {
+        &[]
+    }
 }
 
 #[derive(Clone, Debug, Default)]

@@ -604,6 +604,8 @@ pub struct HorizonParams {
     pub penumbra: f32,
     /// Filter footprint multiplier (like texture's "width").
     pub width: f32,
+    /// Weight of Max's §6 curvature correction (1: as the paper prescribes, 0: flat tables).
+    pub curvature: f32,
 }
 
 impl Default for HorizonParams {
@@ -612,12 +614,14 @@ impl Default for HorizonParams {
             scale: 1.0,
             penumbra: 0.5f32.to_radians(),
             width: 1.0,
+            curvature: 1.0,
         }
     }
 }
 
 /// One grid's inputs: per point s, t, P, the outward normal and the light vector, plus the
-/// per-grid-step differences of s, t and P along u and v (from the diced grid).
+/// per-grid-step differences of s, t, P and the unit normal along u and v (from the diced
+/// grid; the normal's differences give the curvature of Max §6, empty slices: none).
 pub struct GridInputs<'a> {
     pub s: &'a [f32],
     pub t: &'a [f32],
@@ -629,6 +633,42 @@ pub struct GridInputs<'a> {
     pub dtdv: &'a [f32],
     pub dpdu: &'a [Vec3],
     pub dpdv: &'a [Vec3],
+    pub dndu: &'a [Vec3],
+    pub dndv: &'a [Vec3],
+}
+
+/// Max §6: a point raised `h` above a surface whose section in the light's vertical plane
+/// has normal curvature `k` (1/R; negative = convex, with the normal on the bumps' side)
+/// sees past the smooth surface's tangent plane by the central angle γ ≈ √(2h/R). Returns
+/// the amount to lower the horizon elevation by: +γ on convex surfaces (β' = β + γ), −γ on
+/// concave ones (β' = β − γ); 0 for h ≤ 0 or k = 0.
+pub fn curvature_drop(h: f32, k: f32) -> f32 {
+    if !(h > 0.0) || !k.is_finite() {
+        return 0.0;
+    }
+    let g = (2.0 * h * k.abs()).sqrt().min(std::f32::consts::FRAC_PI_2);
+    if k < 0.0 {
+        g
+    } else {
+        -g
+    }
+}
+
+/// Normal curvature of the surface along the tangent `w = a·ps + b·pt` (ps, pt = dP/ds,
+/// dP/dt), from the unit normal's derivatives `ns`, `nt` (dn̂/ds, dn̂/dt): Weingarten's
+/// `k = −dn̂(w)·w / w·w`. A sphere of radius R with outward n̂ gives −1/R in every direction.
+pub fn normal_curvature(ps: Vec3, pt: Vec3, ns: Vec3, nt: Vec3, a: f32, b: f32) -> f32 {
+    let w = ps * a + pt * b;
+    let ww = w.length_squared();
+    if !(ww > 1e-30) {
+        return 0.0;
+    }
+    let k = -(ns * a + nt * b).dot(w) / ww;
+    if k.is_finite() {
+        k
+    } else {
+        0.0
+    }
 }
 
 /// dP/ds and dP/dt from grid differences: solves `[Pu Pv] = [Ps Pt]·J`, J = ∂(s,t)/∂(u,v).
@@ -646,9 +686,13 @@ pub fn st_tangents(pu: Vec3, pv: Vec3, su: f32, sv: f32, tu: f32, tv: f32) -> Op
 /// Visible fraction per grid point. Points whose (s,t) frame is degenerate fall back to the
 /// smooth surface's own test (lit iff the light is above it). Filtering: when a grid step
 /// covers more than a texel, the fraction is averaged over up to 4×4 samples of the footprint.
+/// With `p.curvature` > 0 and normal differences given, the horizon is corrected for the
+/// surface's curvature in the light's vertical plane (Max §6, [`curvature_drop`]) using each
+/// sample's raised height h = scale·F·|dP/ds × dP/dt|^{1/2}.
 pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) -> Vec<f32> {
     let n = g.s.len();
     let (w, h) = (table.width as f32, table.height as f32);
+    let curved = p.curvature > 0.0 && g.dndu.len() == n && g.dndv.len() == n;
     (0..n)
         .map(|i| {
             let (su, sv, tu, tv) = (g.dsdu[i], g.dsdv[i], g.dtdu[i], g.dtdv[i]);
@@ -658,6 +702,23 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
             let Some(lp) = standard_light(ps, pt, g.up[i], g.l[i]) else {
                 return if g.l[i].dot(g.up[i]) > 0.0 { 1.0 } else { 0.0 };
             };
+            // Curvature along the light's azimuth: C maps (lp.x, lp.y, 0) to the tangential
+            // part of L, the direction of Max's section plane T.
+            let (k_n, root_n) = if curved {
+                let k = st_tangents(g.dndu[i], g.dndv[i], su, sv, tu, tv)
+                    .map_or(0.0, |(ns, nt)| normal_curvature(ps, pt, ns, nt, lp.x, lp.y));
+                (k * p.curvature, ps.cross(pt).length().sqrt())
+            } else {
+                (0.0, 0.0)
+            };
+            let vis = |s: f32, t: f32| {
+                let drop = if k_n != 0.0 {
+                    curvature_drop(p.scale * table.height_at(s, t) * root_n, k_n)
+                } else {
+                    0.0
+                };
+                visibility_curved(table, s, t, lp, p.scale, p.penumbra, drop)
+            };
             let fw = p.width.max(0.0);
             let ext = ((su.abs() + sv.abs()) * w).max((tu.abs() + tv.abs()) * h) * fw;
             let k = if ext.is_finite() {
@@ -666,7 +727,7 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
                 1
             };
             if k == 1 {
-                return visibility(table, g.s[i], g.t[i], lp, p.scale, p.penumbra);
+                return vis(g.s[i], g.t[i]);
             }
             let mut acc = 0.0;
             for a in 0..k {
@@ -675,7 +736,7 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
                     let fv = ((b as f32 + 0.5) / k as f32 - 0.5) * fw;
                     let s = g.s[i] + fu * su + fv * sv;
                     let t = g.t[i] + fu * tu + fv * tv;
-                    acc += visibility(table, s, t, lp, p.scale, p.penumbra);
+                    acc += vis(s, t);
                 }
             }
             acc / (k * k) as f32
@@ -735,14 +796,25 @@ pub fn read_height_image(path: &Path) -> Result<(Vec<f32>, usize, usize), String
 }
 
 /// Tables by path, loaded once and shared by every thread (failures are remembered too).
+/// An entry is reloaded when the file's length or modification time changes, so a table
+/// rewritten by a later frame's MakeHorizon is seen.
 pub fn cached(path: &str) -> Result<Arc<HorizonTable>, String> {
-    type Cache = Mutex<HashMap<String, Result<Arc<HorizonTable>, String>>>;
+    type Stamp = Option<(u64, std::time::SystemTime)>;
+    type Cache = Mutex<HashMap<String, (Stamp, Result<Arc<HorizonTable>, String>)>>;
     static CACHE: OnceLock<Cache> = OnceLock::new();
+    let stamp: Stamp = std::fs::metadata(path)
+        .ok()
+        .and_then(|m| Some((m.len(), m.modified().ok()?)));
     let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
     let mut m = cache.lock().unwrap_or_else(|e| e.into_inner());
-    m.entry(path.to_string())
-        .or_insert_with(|| HorizonTable::read(Path::new(path)).map(Arc::new))
-        .clone()
+    if let Some((st, r)) = m.get(path) {
+        if *st == stamp {
+            return r.clone();
+        }
+    }
+    let r = HorizonTable::read(Path::new(path)).map(Arc::new);
+    m.insert(path.to_string(), (stamp, r.clone()));
+    r
 }
 
 #[cfg(test)]
@@ -786,6 +858,16 @@ mod tests {
         assert!((west - 0.05 / (56.0 / 64.0)).abs() < 1e-5, "{west}");
         // Along the ridge (north) nothing rises.
         assert_eq!(t.tan_at(10, 5, 2), 0.0);
+        // Reaches: the ridge is 8 texels east, 8 diagonal steps north-east, 56 west; none north.
+        let r = |k: usize| t.reach[(5 * 64 + 10) * 8 + k] * 64.0;
+        assert!(
+            (r(0) - 8.0).abs() < 1e-4 && (r(4) - 56.0).abs() < 1e-3,
+            "{} {}",
+            r(0),
+            r(4)
+        );
+        assert!((r(1) - 8.0 * 2f32.sqrt()).abs() < 1e-4);
+        assert_eq!(r(2), 0.0);
     }
 
     #[test]
@@ -845,6 +927,10 @@ mod tests {
         let b = t.to_bytes();
         assert_eq!(HorizonTable::from_bytes(&b).unwrap(), t);
         assert!(HorizonTable::from_bytes(&b[..b.len() - 1]).is_err());
+        // A version-1 file (no reaches) is rebuilt from its heights.
+        let mut v1 = b"ARBHZN1\0".to_vec();
+        v1.extend_from_slice(&b[8..b.len() - 4 * t.reach.len()]);
+        assert_eq!(HorizonTable::from_bytes(&v1).unwrap(), t);
         assert!(HorizonTable::from_bytes(b"nonsense").is_err());
     }
 
@@ -893,5 +979,110 @@ mod tests {
         let (ps, pt) = st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 0.0, 1.0).unwrap();
         assert!((ps - Vec3::X).length() < 1e-6 && (pt - Vec3::new(-1.0, 1.0, 0.0)).length() < 1e-6);
         assert!(st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 1.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn curvature_drop_h13() {
+        // H13: a sphere of radius 1 and h = 0.005 gives γ = √0.01 = 0.1 rad (5.73°).
+        assert!((curvature_drop(0.005, -1.0) - 0.1).abs() < 1e-6);
+        assert!((curvature_drop(0.005, 1.0) + 0.1).abs() < 1e-6); // concave: raised
+        assert_eq!(curvature_drop(0.0, -1.0), 0.0);
+        assert_eq!(curvature_drop(0.005, 0.0), 0.0);
+        assert_eq!(curvature_drop(f32::NAN, -1.0), 0.0);
+    }
+
+    /// Unit sphere P(u,v) = (cos u cos v, sin u cos v, sin v) at (u, v), outward normal.
+    fn sphere_frame(u: f32, v: f32) -> (Vec3, Vec3, Vec3, Vec3) {
+        let pu = Vec3::new(-u.sin() * v.cos(), u.cos() * v.cos(), 0.0);
+        let pv = Vec3::new(-u.cos() * v.sin(), -u.sin() * v.sin(), v.cos());
+        // n̂ = P on the unit sphere, so dn̂/du = P_u and dn̂/dv = P_v.
+        (pu, pv, pu, pv)
+    }
+
+    #[test]
+    fn normal_curvature_of_sphere_and_cylinder() {
+        let (pu, pv, nu, nv) = sphere_frame(0.3, 0.4);
+        for th in [0.0f32, 0.7, 1.9, 3.0, 4.4] {
+            let k = normal_curvature(pu, pv, nu, nv, th.cos(), th.sin());
+            assert!((k + 1.0).abs() < 1e-5, "θ {th}: {k}");
+        }
+        // Cylinder of radius 2: P = (2cos u, 2sin u, v), n̂ = (cos u, sin u, 0).
+        let u = 0.8f32;
+        let pu = Vec3::new(-2.0 * u.sin(), 2.0 * u.cos(), 0.0);
+        let nu = Vec3::new(-u.sin(), u.cos(), 0.0);
+        let (pv, nv) = (Vec3::Z, Vec3::ZERO);
+        assert!((normal_curvature(pu, pv, nu, nv, 1.0, 0.0) + 0.5).abs() < 1e-6);
+        assert!(normal_curvature(pu, pv, nu, nv, 0.0, 1.0).abs() < 1e-6);
+        // Euler: k(θ) = k1 cos²ψ + k2 sin²ψ with ψ the angle from the principal direction.
+        let k = normal_curvature(pu, pv, nu, nv, 0.5, 1.0); // w = (pu*0.5 + pv), |pu| = 2
+        assert!((k + 0.5 * 0.5).abs() < 1e-6, "{k}"); // cos²ψ = 1/2 for w = (1,1) in lengths
+                                                      // Seen from inside (normal towards the axis) the cylinder is concave.
+        assert!((normal_curvature(pu, pv, -nu, nv, 1.0, 0.0) - 0.5).abs() < 1e-6);
+    }
+
+    /// Visibility at one point of a unit sphere under a flat map of height `c`, for a light
+    /// `el` radians above the tangent plane towards azimuth `az` (in the (u,v) frame).
+    fn sphere_vis(c: f32, scale: f32, inside: bool, el: f32, az: f32, curvature: f32) -> f32 {
+        let table = HorizonTable::build(&[c; 16 * 16], 16, 16, 8).unwrap();
+        let (u, v) = (0.3f32, 0.2f32);
+        let (pu, pv, nu, nv) = sphere_frame(u, v);
+        let n = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
+        let (up, dn) = if inside { (-n, -1.0) } else { (n, 1.0) };
+        // Tangent direction towards the light: unit vectors along P_u and P_v.
+        let tdir = pu.normalize() * az.cos() + pv.normalize() * az.sin();
+        let l = up * el.sin() + tdir * el.cos();
+        let one = |x: f32| [x];
+        let (s, t) = (one(0.5), one(0.5));
+        let (l, up) = ([l], [up]);
+        // s = u, t = v: one grid step is one unit of each; tiny steps so no filtering.
+        let st = 1e-3;
+        let (pu, pv, nu, nv) = ([pu * st], [pv * st], [nu * st * dn], [nv * st * dn]);
+        let g = GridInputs {
+            s: &s,
+            t: &t,
+            l: &l,
+            up: &up,
+            dsdu: &one(st),
+            dsdv: &one(0.0),
+            dtdu: &one(0.0),
+            dtdv: &one(st),
+            dpdu: &pu,
+            dpdv: &pv,
+            dndu: &nu,
+            dndv: &nv,
+        };
+        let p = HorizonParams {
+            scale,
+            penumbra: 0.0,
+            width: 1.0,
+            curvature,
+        };
+        grid_visibility(&table, &g, &p)[0]
+    }
+
+    #[test]
+    fn curvature_correction_on_a_sphere() {
+        // |P_u × P_v| = cos v, so h = scale·c·√(cos v); pick scale so h = 0.005: γ = 0.1.
+        let scale = 0.005 / (0.5 * 0.2f32.cos().sqrt());
+        for az in [0.0f32, 1.0, 2.5, 4.0] {
+            // Convex: a raised point sees 0.1 rad below the tangent plane (β' = β + γ).
+            assert_eq!(
+                sphere_vis(0.5, scale, false, -0.095, az, 1.0),
+                1.0,
+                "az {az}"
+            );
+            assert_eq!(
+                sphere_vis(0.5, scale, false, -0.105, az, 1.0),
+                0.0,
+                "az {az}"
+            );
+            // Without the correction (or at base level, h = 0) the tangent plane is the horizon.
+            assert_eq!(sphere_vis(0.5, scale, false, -0.01, az, 0.0), 0.0);
+            assert_eq!(sphere_vis(0.0, scale, false, -0.01, az, 1.0), 0.0);
+            assert_eq!(sphere_vis(0.0, scale, false, 0.01, az, 1.0), 1.0);
+            // Concave (seen from inside): the horizon rises by γ (β' = β − γ).
+            assert_eq!(sphere_vis(0.5, scale, true, 0.095, az, 1.0), 0.0, "az {az}");
+            assert_eq!(sphere_vis(0.5, scale, true, 0.105, az, 1.0), 1.0, "az {az}");
+        }
     }
 }
