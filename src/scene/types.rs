@@ -545,6 +545,8 @@ pub enum TextureJobKind {
     LatLongEnvironment,
     CubeFaceEnvironment,
     Shadow,
+    /// `MakeHorizon` (arbor extension): Max horizon tables from a height picture.
+    Horizon,
 }
 
 /// One MakeTexture/MakeLatLongEnvironment/MakeCubeFaceEnvironment/MakeShadow request.
@@ -561,5 +563,7 @@ pub struct TextureJob {
     pub twidth: f32,
     /// Cube-face field of view in degrees.
     pub fov: f32,
+    /// Horizon-table azimuth directions (MakeHorizon: 8 or 16).
+    pub directions: usize,
     pub span: Span,
 }

@@ -795,6 +795,22 @@ pub fn read_height_image(path: &Path) -> Result<(Vec<f32>, usize, usize), String
     Ok((v, w, h))
 }
 
+/// Builds and writes the tables of a height picture (`MakeHorizon`, `arbor horizon`): the
+/// picture's luminance is the height; written to a temporary name and renamed, so a failure
+/// never leaves a half-written table.
+pub fn make_horizon(input: &Path, output: &Path, directions: usize) -> Result<(), String> {
+    let (f, w, h) = read_height_image(input)?;
+    let t = HorizonTable::build(&f, w, h, directions)?;
+    let mut tmp = output.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = std::path::PathBuf::from(tmp);
+    t.write(&tmp)?;
+    std::fs::rename(&tmp, output).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("{}: {e}", output.display())
+    })
+}
+
 /// Tables by path, loaded once and shared by every thread (failures are remembered too).
 /// An entry is reloaded when the file's length or modification time changes, so a table
 /// rewritten by a later frame's MakeHorizon is seen.
