@@ -97,6 +97,8 @@ pub struct HorizonTable {
     /// (s,t) distance from the texel centre to the profile point that sets `tans` (same
     /// order); 0 where the horizon is flat (tan 0).
     pub reach: Vec<f32>,
+    /// The largest height (bounds how far an occluder can matter).
+    pub max_height: f32,
 }
 
 /// Direction steps for a direction count (8 or 16).
@@ -148,6 +150,7 @@ impl HorizonTable {
             heights: heights.to_vec(),
             tans,
             reach,
+            max_height: heights.iter().copied().fold(f32::MIN, f32::max),
         })
     }
 
@@ -241,13 +244,14 @@ impl HorizonTable {
     /// by `scale`: the occluder search of the module header. Never above the true horizon of
     /// the (bilinear) height field; equal to the table on tabulated directions.
     pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
-        (scale.max(0.0) * self.horizon_tan(s, t, theta, f32::INFINITY)).atan()
+        (scale.max(0.0) * self.horizon_tan(s, t, theta, 0.0, f32::INFINITY)).atan()
     }
 
     /// tan(horizon elevation) of the unscaled map at (s, t) towards `theta` (see
-    /// [`HorizonTable::elevation`]); returns as soon as it reaches `stop` (the caller only
-    /// needs to know the light is hidden).
-    pub fn horizon_tan(&self, s: f32, t: f32, theta: f32, stop: f32) -> f32 {
+    /// [`HorizonTable::elevation`]). The caller only needs the answer between `need` and
+    /// `stop`: it returns as soon as it reaches `stop` (the light is hidden), and ignores
+    /// occluders too far away to rise to slope `need` (the light is seen above them).
+    pub fn horizon_tan(&self, s: f32, t: f32, theta: f32, need: f32, stop: f32) -> f32 {
         let (s, t) = (
             if s.is_finite() { s } else { 0.0 },
             if t.is_finite() { t } else { 0.0 },
@@ -261,6 +265,12 @@ impl HorizonTable {
         let unit = 1.0 / w.min(h);
         let u = (theta.cos(), theta.sin());
         let zp = self.height_at(s, t);
+        // Nothing farther than this rises to slope `need` above p.
+        let reach_max = if need > 0.0 {
+            ((self.max_height - zp) / need).min(2.0)
+        } else {
+            2.0
+        };
         let mut best = 0f32;
         let mut best_along = 0f32;
         // Height on p's own ray at distance `along`: the only thing ever compared.
@@ -288,7 +298,7 @@ impl HorizonTable {
             let spread = (dl.0 * dl.0 + dl.1 * dl.1).sqrt();
             // Candidates closer than half a texel to p all name p's own texel: start there.
             let mut d_start = 0.0f32;
-            while d_start <= 2.0 {
+            while d_start <= reach_max {
                 let mut d = d_start;
                 for _ in 0..3 {
                     let (qx, qy) = ((s + d * dl.0) * w, (t + d * dl.1) * h);
@@ -301,7 +311,7 @@ impl HorizonTable {
                     // The occluder q's θ_k ray meets, projected onto p's θ ray.
                     let (ox, oy) = ((cx + 0.5) / w + r * uk.0, (cy + 0.5) / h + r * uk.1);
                     let along = (ox - s) * u.0 + (oy - t) * u.1;
-                    if along <= 0.0 {
+                    if along <= 0.0 || along > reach_max + unit {
                         break;
                     }
                     sample(along, &mut best, &mut best_along);
@@ -401,6 +411,7 @@ impl HorizonTable {
             heights: heights.to_vec(),
             tans: f[nd + w * h..tans_end].to_vec(),
             reach: f[tans_end..].to_vec(),
+            max_height: heights.iter().copied().fold(f32::MIN, f32::max),
         })
     }
 
@@ -585,7 +596,14 @@ pub fn visibility_curved(
     } else {
         hidden_at.tan() / sc
     };
-    let hz = (sc * table.horizon_tan(s, t, theta, stop)).atan() - drop;
+    // Below this table elevation the light is fully seen: farther occluders do not matter.
+    let seen_below = el - half + drop;
+    let need = if seen_below > 0.0 && sc > 0.0 {
+        seen_below.tan() / sc
+    } else {
+        0.0
+    };
+    let hz = (sc * table.horizon_tan(s, t, theta, need, stop)).atan() - drop;
     if penumbra > 0.0 {
         penumbra_fraction((el - hz) / half)
     } else if el >= hz {
