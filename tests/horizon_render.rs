@@ -154,3 +154,71 @@ fn horizon_maps_are_found_on_the_texture_search_path() {
         .any(|(d, _)| d.message.contains("horizon map unavailable")));
     assert!(lost.exists());
 }
+
+/// Max §6 end to end: on a unit sphere under a flat map, points raised by h see a distant
+/// light up to γ = √(2h/R) past the smooth terminator; without the correction the terminator
+/// is where the light goes.
+#[test]
+fn curvature_correction_lights_raised_points_past_the_terminator() {
+    let dir = tmp("curv");
+    HorizonTable::build(&[1.0; 16 * 16], 16, 16, 8)
+        .unwrap()
+        .write(&dir.join("flat.hzn"))
+        .unwrap();
+    std::fs::write(
+        dir.join("hvis.sl"),
+        "surface hvis(string map = \"\"; float scale = 1, curvature = 1) {\n\
+         Ci = 0;\n\
+         illuminance(P) { Ci += horizon(map, s, t, L, \"scale\", scale, \"penumbra\", 0,\n\
+                                        \"curvature\", curvature); }\n\
+         Oi = 1;\n}\n",
+    )
+    .unwrap();
+    // Sphere: s = longitude / 2π, t = (latitude + 90°) / 180°, so at the equator
+    // |dP/ds × dP/dt| = 2π², and h = scale · F · |N|^½ = 0.005 for F = 1: γ = 0.1 rad.
+    let scale = 0.005 / (2.0 * std::f32::consts::PI.powi(2)).sqrt();
+    let frame = |png: &Path, curvature: f32| {
+        format!(
+            "FrameBegin 1\nDisplay \"{}\" \"png\" \"rgb\"\nFormat 240 240 1\nPixelSamples 2 2\n\
+             PixelFilter \"box\" 1 1\nProjection \"orthographic\"\nScreenWindow -1.2 1.2 -1.2 1.2\n\
+             Rotate -90 1 0 0\nTranslate 0 -5 0\n\
+             WorldBegin\n\
+             LightSource \"distantlight\" 1 \"from\" [1 0 0] \"to\" [0 0 0]\n\
+             Surface \"hvis\" \"string map\" [\"flat.hzn\"] \"float scale\" [{scale}] \"float curvature\" [{curvature}]\n\
+             Sphere 1 -1 1 360\nWorldEnd\nFrameEnd\n",
+            png.display()
+        )
+    };
+    let (on, off) = (dir.join("curved.png"), dir.join("flat.png"));
+    let diags = render(&dir, &format!("{}{}", frame(&on, 1.0), frame(&off, 0.0)));
+    assert!(!diags.has_errors(), "{:?}", diags.snapshot());
+    assert!(diags.snapshot().is_empty(), "{:?}", diags.snapshot());
+    // The camera looks down -y from +y: image x = world x, image up = world z. Read the
+    // equator row: x = cos ψ for the point ψ round from the light.
+    let row = |p: &Path| {
+        let img = image::open(p).unwrap().to_luma8();
+        let y = img.height() / 2;
+        (0..img.width())
+            .map(|i| {
+                let x = -1.2 + (i as f32 + 0.5) * 2.4 / img.width() as f32;
+                (x, img.get_pixel(i, y)[0] as f32 / 255.0)
+            })
+            .collect::<Vec<_>>()
+    };
+    let (curved, flat) = (row(&on), row(&off));
+    let band = |r: &[(f32, f32)], lo: f32, hi: f32| {
+        r.iter()
+            .filter(|(x, _)| (lo..=hi).contains(x))
+            .map(|&(_, v)| v)
+            .collect::<Vec<_>>()
+    };
+    // In front of the terminator: lit either way.
+    assert!(band(&curved, 0.05, 0.9).iter().all(|&v| v > 0.95));
+    assert!(band(&flat, 0.05, 0.9).iter().all(|&v| v > 0.95));
+    // Up to γ = 0.1 rad behind it (x down to cos(90° + 5.7°) = −0.0998): lit only when curved.
+    let (c, f) = (band(&curved, -0.08, -0.02), band(&flat, -0.08, -0.02));
+    assert!(c.len() >= 5 && c.iter().all(|&v| v > 0.95), "{c:?}");
+    assert!(f.iter().all(|&v| v < 0.05), "{f:?}");
+    // Beyond γ: dark either way.
+    assert!(band(&curved, -0.9, -0.13).iter().all(|&v| v < 0.05));
+}

@@ -559,11 +559,16 @@ pub fn visibility(
     scale: f32,
     penumbra: f32,
 ) -> f32 {
-    visibility_curved(table, s, t, lp, scale, penumbra, 0.0)
+    visibility_curved(table, s, t, lp, scale, penumbra, 0.0, 1.0)
 }
 
-/// [`visibility`] with Max's §6 curvature correction: the horizon is lowered by `drop`
-/// radians (γ of [`curvature_drop`]; negative on concave surfaces raises it).
+/// [`visibility`] on a real surface, comparing angles in the surface's own vertical plane
+/// through the light: `rho` converts standard-patch slopes to the surface's (`tan α_surface =
+/// rho · tan α_standard` along the light's azimuth, see [`grid_visibility`]), so the
+/// penumbra (the light's angular diameter) and Max's §6 curvature correction — the horizon
+/// lowered by `drop` radians (γ of [`curvature_drop`]; negative on concave surfaces raises
+/// it) — are true angles.
+#[allow(clippy::too_many_arguments)]
 pub fn visibility_curved(
     table: &HorizonTable,
     s: f32,
@@ -572,10 +577,16 @@ pub fn visibility_curved(
     scale: f32,
     penumbra: f32,
     drop: f32,
+    rho: f32,
 ) -> f32 {
     use std::f32::consts::FRAC_PI_2;
+    let rho = if rho.is_finite() && rho > 0.0 {
+        rho
+    } else {
+        1.0
+    };
     let horiz = (lp.x * lp.x + lp.y * lp.y).sqrt();
-    let el = lp.z.atan2(horiz);
+    let el = (rho * lp.z).atan2(horiz);
     if el.is_nan() {
         return 0.0;
     }
@@ -594,16 +605,16 @@ pub fn visibility_curved(
     let stop = if hidden_at >= FRAC_PI_2 || sc == 0.0 {
         f32::INFINITY
     } else {
-        hidden_at.tan() / sc
+        hidden_at.tan() / (sc * rho)
     };
     // Below this table elevation the light is fully seen: farther occluders do not matter.
     let seen_below = el - half + drop;
     let need = if seen_below > 0.0 && sc > 0.0 {
-        seen_below.tan() / sc
+        seen_below.tan() / (sc * rho)
     } else {
         0.0
     };
-    let hz = (sc * table.horizon_tan(s, t, theta, need, stop)).atan() - drop;
+    let hz = (rho * sc * table.horizon_tan(s, t, theta, need, stop)).atan() - drop;
     if penumbra > 0.0 {
         penumbra_fraction((el - hz) / half)
     } else if el >= hz {
@@ -720,14 +731,23 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
             let Some(lp) = standard_light(ps, pt, g.up[i], g.l[i]) else {
                 return if g.l[i].dot(g.up[i]) > 0.0 { 1.0 } else { 0.0 };
             };
-            // Curvature along the light's azimuth: C maps (lp.x, lp.y, 0) to the tangential
-            // part of L, the direction of Max's section plane T.
-            let (k_n, root_n) = if curved {
+            // C maps (lp.x, lp.y, 0) to the tangential part of L, the direction of Max's
+            // section plane T, and the standard patch's unit height to |N|^½: slopes in T
+            // are rho times those on the standard patch.
+            let root_n = ps.cross(pt).length().sqrt();
+            let wt = (ps * lp.x + pt * lp.y).length();
+            let rho = if wt > 1e-30 {
+                root_n * (lp.x * lp.x + lp.y * lp.y).sqrt() / wt
+            } else {
+                1.0
+            };
+            // Curvature of the section T.
+            let k_n = if curved {
                 let k = st_tangents(g.dndu[i], g.dndv[i], su, sv, tu, tv)
                     .map_or(0.0, |(ns, nt)| normal_curvature(ps, pt, ns, nt, lp.x, lp.y));
-                (k * p.curvature, ps.cross(pt).length().sqrt())
+                k * p.curvature
             } else {
-                (0.0, 0.0)
+                0.0
             };
             let vis = |s: f32, t: f32| {
                 let drop = if k_n != 0.0 {
@@ -735,7 +755,7 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
                 } else {
                     0.0
                 };
-                visibility_curved(table, s, t, lp, p.scale, p.penumbra, drop)
+                visibility_curved(table, s, t, lp, p.scale, p.penumbra, drop, rho)
             };
             let fw = p.width.max(0.0);
             let ext = ((su.abs() + sv.abs()) * w).max((tu.abs() + tv.abs()) * h) * fw;
@@ -1058,7 +1078,8 @@ mod tests {
     /// `el` radians above the tangent plane towards azimuth `az` (in the (u,v) frame).
     fn sphere_vis(c: f32, scale: f32, inside: bool, el: f32, az: f32, curvature: f32) -> f32 {
         let table = HorizonTable::build(&[c; 16 * 16], 16, 16, 8).unwrap();
-        let (u, v) = (0.3f32, 0.2f32);
+        // At latitude 1 rad |P_u| = cos 1 ≠ |P_v| = 1: standard-patch and true angles differ.
+        let (u, v) = (0.3f32, 1.0f32);
         let (pu, pv, nu, nv) = sphere_frame(u, v);
         let n = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
         let (up, dn) = if inside { (-n, -1.0) } else { (n, 1.0) };
@@ -1097,7 +1118,7 @@ mod tests {
     #[test]
     fn curvature_correction_on_a_sphere() {
         // |P_u × P_v| = cos v, so h = scale·c·√(cos v); pick scale so h = 0.005: γ = 0.1.
-        let scale = 0.005 / (0.5 * 0.2f32.cos().sqrt());
+        let scale = 0.005 / (0.5 * 1f32.cos().sqrt());
         for az in [0.0f32, 1.0, 2.5, 4.0] {
             // Convex: a raised point sees 0.1 rad below the tangent plane (β' = β + γ).
             assert_eq!(
