@@ -592,6 +592,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("MakeLatLongEnvironment", ["picturename": Str, "texturename": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.2", B::make_latlong),
     req!("MakeCubeFaceEnvironment", ["px": Str, "nx": Str, "py": Str, "ny": Str, "pz": Str, "nz": Str, "texturename": Str, "fov": Num, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.2", B::make_cube),
     req!("MakeShadow", ["picturename": Str, "texturename": Str], ALL, true, "8.3", B::make_shadow),
+    req!("MakeHorizon", ["picturename": Str, "horizonname": Str, "swrap": Str, "twrap": Str], ALL, true, "ext", B::make_horizon),
 ];
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! The texture-making requests (RISpec §8): MakeTexture, MakeBump (RISpec 3.0/3.1; 3.2
-//! dropped it), MakeLatLongEnvironment, MakeCubeFaceEnvironment and MakeShadow.
+//! dropped it), MakeLatLongEnvironment, MakeCubeFaceEnvironment and MakeShadow, and arbor's
+//! MakeHorizon (Max horizon tables).
 //!
 //! Input: a checked [`Call`]. Output: a [`TextureJob`] recorded on the scene of the next (or
 //! current) world block; the pipeline runs the jobs before rendering that frame, so a
@@ -50,6 +51,7 @@ impl Builder<'_> {
             swidth: 1.0,
             twidth: 1.0,
             fov: 90.0,
+            directions: 8,
             span: call.full_span(),
         }
     }
@@ -105,6 +107,67 @@ impl Builder<'_> {
         j.swidth = call.pos[9].num();
         j.twidth = call.pos[10].num();
         self.record_job(call, j);
+    }
+
+    /// `MakeHorizon picturename horizonname swrap twrap ["directions" n]` (arbor extension):
+    /// the picture's luminance is the height map; tables are periodic in s and t.
+    pub(super) fn make_horizon(&mut self, call: &Call<'_>) {
+        let mut j = Self::job(
+            call,
+            TextureJobKind::Horizon,
+            vec![call.pos[0].str().to_string()],
+            1,
+        );
+        for (i, axis) in [(2, "s"), (3, "t")] {
+            let w = call.pos[i].str();
+            if w != "periodic" {
+                self.report(
+                    Diag::warning(
+                        "scene::horizon-wrap",
+                        format!("`MakeHorizon`: {axis} wrap \"{w}\" is not supported; horizon tables are periodic"),
+                    )
+                    .label(call.pos_spans[i], "used as \"periodic\"")
+                    .help("horizon maps tile: give \"periodic\" \"periodic\" and a height map that tiles"),
+                );
+            }
+        }
+        j.swrap = "periodic".into();
+        j.twrap = "periodic".into();
+        let params = self.params(call, ParamUse::Shader);
+        for p in params.iter() {
+            if p.name != "directions" {
+                self.report(
+                    Diag::warning(
+                        "scene::texture-param",
+                        format!(
+                            "`MakeHorizon` takes only \"directions\"; \"{}\" is ignored",
+                            p.name
+                        ),
+                    )
+                    .label(p.span, "ignored"),
+                );
+            }
+        }
+        if let Some(d) = params.float("directions") {
+            if d == 8.0 || d == 16.0 {
+                j.directions = d as usize;
+            } else {
+                self.report(
+                    Diag::warning(
+                        "scene::horizon-directions",
+                        format!("`MakeHorizon`: {d} directions are not supported; using 8"),
+                    )
+                    .label(call.span(), "here")
+                    .help(
+                        "\"directions\" is 8 (rows, columns, diagonals) or 16 (plus knight steps)",
+                    ),
+                );
+            }
+        }
+        match self.world.as_mut() {
+            Some(w) => w.texture_jobs.push(j),
+            None => self.pending_texture_jobs.push(j),
+        }
     }
 
     pub(super) fn make_shadow(&mut self, call: &Call<'_>) {

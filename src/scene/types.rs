@@ -547,6 +547,8 @@ pub enum TextureJobKind {
     Shadow,
     /// MakeBump (RISpec 3.0/3.1; dropped from 3.2).
     Bump,
+    /// `MakeHorizon` (arbor extension): Max horizon tables from a height picture.
+    Horizon,
 }
 
 /// One MakeTexture/MakeLatLongEnvironment/MakeCubeFaceEnvironment/MakeShadow request.
@@ -563,5 +565,7 @@ pub struct TextureJob {
     pub twidth: f32,
     /// Cube-face field of view in degrees.
     pub fov: f32,
+    /// Horizon-table azimuth directions (MakeHorizon: 8 or 16).
+    pub directions: usize,
     pub span: Span,
 }

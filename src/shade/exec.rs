@@ -144,6 +144,12 @@ pub trait TextureLookup: Sync {
     ) -> bool {
         false
     }
+
+    /// The directories texture names are looked up in after the name as given (horizon
+    /// maps are found on the same path).
+    fn search_path(&self) -> &[std::path::PathBuf] {
+        &[]
+    }
 }
 
 #[derive(Clone, Debug, Default)]

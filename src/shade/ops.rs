@@ -2117,6 +2117,7 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
             "scale" => prm.scale = v,
             "penumbra" => prm.penumbra = v.max(0.0).to_radians(),
             "width" => prm.width = v,
+            "curvature" => prm.curvature = v,
             other => ex.warn(
                 span,
                 format!("horizon: unknown parameter \"{other}\" ignored"),
@@ -2125,7 +2126,9 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
         k += 2;
     }
     let fallback = if f == Builtin::Horizon { 1.0 } else { 0.0 };
-    let table = match hz::cached(&map) {
+    // Found like texture() names: as given, then on the texture search path.
+    let search = ex.env.textures.map_or(&[][..], |t| t.search_path());
+    let table = match hz::cached(&crate::texture::make::resolve(&map, search).to_string_lossy()) {
         Ok(t) => t,
         Err(e) => {
             ex.warn(
@@ -2161,6 +2164,16 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
     let (dsdu, dsdv) = (deriv_f(&s, nu, nv, 0, 1.0), deriv_f(&s, nu, nv, 1, 1.0));
     let (dtdu, dtdv) = (deriv_f(&t, nu, nv, 0, 1.0), deriv_f(&t, nu, nv, 1, 1.0));
     let (dpdu, dpdv) = (deriv_t(&p, nu, nv, 0, 1.0), deriv_t(&p, nu, nv, 1, 1.0));
+    // The unit normal's differences give the surface curvature (Max §6).
+    let (dndu, dndv) = if f == Builtin::Horizon && prm.curvature > 0.0 {
+        let nhat: Vec<Vec3> = up.iter().map(|u| u.normalize_or_zero()).collect();
+        (
+            deriv_t(&nhat, nu, nv, 0, 1.0),
+            deriv_t(&nhat, nu, nv, 1, 1.0),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     let g = hz::GridInputs {
         s: &s,
         t: &t,
@@ -2172,6 +2185,8 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
         dtdv: &dtdv,
         dpdu: &dpdu,
         dpdv: &dpdv,
+        dndu: &dndu,
+        dndv: &dndv,
     };
     Slot::VF(if f == Builtin::Horizon {
         hz::grid_visibility(&table, &g, &prm)

@@ -310,6 +310,7 @@ pub static SIGS: &[Sig] = sigs! {
     "horizon" 'f' "sffvsf" Horizon;
     "horizon" 'f' "sffvsfsf" Horizon;
     "horizon" 'f' "sffvsfsfsf" Horizon;
+    "horizon" 'f' "sffvsfsfsfsf" Horizon;
     "horizonheight" 'f' "sff" HorizonHeight;
     "horizonheight" 'f' "sffsf" HorizonHeight;
 };

@@ -1952,6 +1952,15 @@ impl<'a> Lowerer<'a> {
         let mut regs = Vec::new();
         let mut outs = Vec::new();
         let mut varying = always_varying(sig.f);
+        if matches!(sig.f, Builtin::Horizon | Builtin::HorizonHeight) {
+            // They read the surface frame (P, N, I) from the grid even when the shader
+            // never names those globals: keep them in the program.
+            for g in ["P", "N", "Ng", "I"] {
+                if let Some(v) = self.lookup(g) {
+                    self.mark_used(v.reg);
+                }
+            }
+        }
         for (i, (v, e)) in vals.iter().enumerate() {
             let (code, out) = codes
                 .get(i)

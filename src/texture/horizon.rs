@@ -15,14 +15,32 @@
 //! texels. Their true (s,t) azimuths are stored, so the θ interpolation stays exact for
 //! non-square maps.
 //!
-//! Lookup: the light is moved into the standard patch's frame by `C⁻¹` (C's columns are
-//! dP/ds, dP/dt and n̂·|dP/ds × dP/dt|^{1/2}, Max §5), the horizon elevation is bilinear in
-//! (s,t) and linear in azimuth, and the visible fraction is Max's disc-sun penumbra function.
+//! Besides the tangent, each entry keeps the *reach*: the (s,t) distance to the profile point
+//! that sets that horizon (0 when nothing rises above the texel).
 //!
-//! File format (`.hzn`, little-endian): magic `b"ARBHZN1\0"`, u32 width, u32 height,
+//! Lookup: the light is moved into the standard patch's frame by `C⁻¹` (C's columns are
+//! dP/ds, dP/dt and n̂·|dP/ds × dP/dt|^{1/2}, Max §5) and its elevation compared with the
+//! horizon towards its azimuth θ; the visible fraction is Max's disc-sun penumbra function.
+//! Max interpolates the horizon linearly in θ between the two nearest tabulated directions
+//! ([`HorizonTable::elevation_interpolated`]). That is exact for long ridges but not for
+//! isolated bumps: seen from a point in a bump's shadow, the bump spans a few degrees, so the
+//! rays 45° apart on either side of the light miss it, and the shadow splits into two faint
+//! copies along the tabulated directions (shadow-mask IoU 0.4–0.6 against ray-marched truth
+//! between directions). [`HorizonTable::elevation`] instead uses the two neighbouring
+//! directions' tables to *find* the occluders on the light's ray: a shadow cast along θ_k is
+//! the shadow along θ rotated about its occluder, so the texel q = p + D(û_θ − û_k) whose θ_k
+//! ray crosses p's θ ray at distance D names (by its reach) where an occluder lies; the true
+//! height is sampled there on p's own ray. D runs over a doubling sequence and is refined by
+//! a fixed-point step (D ← where q's occluder projects). Every sample is a point of the height
+//! field on the light ray, so the estimate never exceeds the true horizon (no false shadows);
+//! on tabulated directions it reduces to the table. The curvature correction of Max §6 lowers
+//! (convex) or raises (concave) the horizon by γ = √(2h/R) ([`curvature_drop`]).
+//!
+//! File format (`.hzn`, little-endian): magic `b"ARBHZN2\0"`, u32 width, u32 height,
 //! u32 ndirs, u32 flags (bit 0: periodic, always set), ndirs × f32 azimuth (radians, in
 //! [0, 2π), increasing), W·H f32 heights (row-major, row = t), W·H·ndirs f32 tangents
-//! (texel-major: the ndirs tangents of one texel are contiguous).
+//! (texel-major: the ndirs tangents of one texel are contiguous), W·H·ndirs f32 reaches (same
+//! order). Version-1 files (`ARBHZN1`, no reaches) are rebuilt from their heights on reading.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -30,7 +48,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{Mat3, Vec3};
 
-const MAGIC: &[u8; 8] = b"ARBHZN1\0";
+const MAGIC: &[u8; 8] = b"ARBHZN2\0";
+const MAGIC_V1: &[u8; 8] = b"ARBHZN1\0";
 
 /// Integer texel steps of the 8 tabulated directions (E, NE, N, NW, W, SW, S, SE).
 pub const DIRS8: [(i32, i32); 8] = [
@@ -75,6 +94,11 @@ pub struct HorizonTable {
     pub heights: Vec<f32>,
     /// tan(horizon elevation) per texel and direction: `tans[texel * ndirs + k]`, ≥ 0.
     pub tans: Vec<f32>,
+    /// (s,t) distance from the texel centre to the profile point that sets `tans` (same
+    /// order); 0 where the horizon is flat (tan 0).
+    pub reach: Vec<f32>,
+    /// The largest height (bounds how far an occluder can matter).
+    pub max_height: f32,
 }
 
 /// Direction steps for a direction count (8 or 16).
@@ -102,10 +126,14 @@ impl HorizonTable {
             return Err("height map holds a non-finite value".into());
         }
         let mut tans = vec![0f32; w * h * ndirs];
+        let mut reach = vec![0f32; w * h * ndirs];
         let mut sweep = Sweep::default();
         for (k, &(a, b)) in dirs.iter().enumerate() {
-            sweep.direction(heights, w, h, a, b, |texel, tan| {
-                tans[texel * ndirs + k] = tan.max(0.0)
+            sweep.direction(heights, w, h, a, b, |texel, tan, dist| {
+                if tan > 0.0 {
+                    tans[texel * ndirs + k] = tan;
+                    reach[texel * ndirs + k] = dist;
+                }
             });
         }
         let azimuths = dirs
@@ -121,6 +149,8 @@ impl HorizonTable {
             azimuths,
             heights: heights.to_vec(),
             tans,
+            reach,
+            max_height: heights.iter().copied().fold(f32::MIN, f32::max),
         })
     }
 
@@ -164,10 +194,9 @@ impl HorizonTable {
         (0..4).map(|c| self.heights[ix[c]] * wt[c]).sum()
     }
 
-    /// Horizon elevation (radians) at (s, t) towards azimuth `theta` (radians, from +s towards
-    /// +t), for bump heights multiplied by `scale`: bilinear in (s,t) per direction, then
-    /// linear in azimuth between the two nearest tabulated directions.
-    pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+    /// The tabulated directions around azimuth `theta`: (k0, k1, f) with θ at fraction f of
+    /// the way from azimuth k0 to k1 (wrapping past 2π).
+    fn bracket(&self, theta: f32) -> (usize, usize, f32) {
         let nd = self.ndirs();
         let th = if theta.is_finite() {
             theta.rem_euclid(std::f32::consts::TAU)
@@ -190,7 +219,17 @@ impl HorizonTable {
         if x < a0 {
             x += std::f32::consts::TAU;
         }
-        let f = ((x - a0) / (a1 - a0)).clamp(0.0, 1.0);
+        (k0, k1, ((x - a0) / (a1 - a0)).clamp(0.0, 1.0))
+    }
+
+    /// Max's lookup (§2): horizon elevation (radians) at (s, t) towards azimuth `theta`
+    /// (radians, from +s towards +t) for heights multiplied by `scale`, bilinear in (s,t) per
+    /// direction, then linear in azimuth between the two nearest tabulated directions. Exact
+    /// on tabulated directions and for long ridges; isolated bumps between directions are
+    /// missed (see the module header), so rendering uses [`HorizonTable::elevation`].
+    pub fn elevation_interpolated(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+        let nd = self.ndirs();
+        let (k0, k1, f) = self.bracket(theta);
         let (ix, wt) = self.corners(s, t);
         let (mut t0, mut t1) = (0.0, 0.0);
         for c in 0..4 {
@@ -201,14 +240,126 @@ impl HorizonTable {
         (1.0 - f) * (sc * t0).atan() + f * (sc * t1).atan()
     }
 
+    /// Horizon elevation (radians) at (s, t) towards azimuth `theta` for heights multiplied
+    /// by `scale`: the occluder search of the module header. Never above the true horizon of
+    /// the (bilinear) height field; equal to the table on tabulated directions.
+    pub fn elevation(&self, s: f32, t: f32, theta: f32, scale: f32) -> f32 {
+        (scale.max(0.0) * self.horizon_tan(s, t, theta, 0.0, f32::INFINITY)).atan()
+    }
+
+    /// tan(horizon elevation) of the unscaled map at (s, t) towards `theta` (see
+    /// [`HorizonTable::elevation`]). The caller only needs the answer between `need` and
+    /// `stop`: it returns as soon as it reaches `stop` (the light is hidden), and ignores
+    /// occluders too far away to rise to slope `need` (the light is seen above them).
+    pub fn horizon_tan(&self, s: f32, t: f32, theta: f32, need: f32, stop: f32) -> f32 {
+        let (s, t) = (
+            if s.is_finite() { s } else { 0.0 },
+            if t.is_finite() { t } else { 0.0 },
+        );
+        let theta = if theta.is_finite() { theta } else { 0.0 };
+        let nd = self.ndirs();
+        let (k0, k1, f) = self.bracket(theta);
+        let (w, h) = (self.width as f32, self.height as f32);
+        let (wi, hi) = (self.width as i64, self.height as i64);
+        // One texel: the search's length unit.
+        let unit = 1.0 / w.min(h);
+        let u = (theta.cos(), theta.sin());
+        let zp = self.height_at(s, t);
+        // Nothing farther than this rises to slope `need` above p.
+        let reach_max = if need > 0.0 {
+            ((self.max_height - zp) / need).min(2.0)
+        } else {
+            2.0
+        };
+        let mut best = 0f32;
+        let mut best_along = 0f32;
+        // Height on p's own ray at distance `along`: the only thing ever compared.
+        let sample = |along: f32, best: &mut f32, best_along: &mut f32| {
+            if along > 0.1 * unit {
+                let z = self.height_at(s + along * u.0, t + along * u.1);
+                let slope = (z - zp) / along;
+                if slope > *best {
+                    *best = slope;
+                    *best_along = along;
+                }
+            }
+        };
+        let ks: &[usize] = if f < 1e-6 {
+            &[k0]
+        } else if f > 1.0 - 1e-6 {
+            &[k1]
+        } else {
+            &[k0, k1]
+        };
+        for &k in ks {
+            let a = self.azimuths[k];
+            let uk = (a.cos(), a.sin());
+            let dl = (u.0 - uk.0, u.1 - uk.1);
+            let spread = (dl.0 * dl.0 + dl.1 * dl.1).sqrt();
+            // Candidates closer than half a texel to p all name p's own texel: start there.
+            let mut d_start = 0.0f32;
+            while d_start <= reach_max {
+                let mut d = d_start;
+                for _ in 0..3 {
+                    let (qx, qy) = ((s + d * dl.0) * w, (t + d * dl.1) * h);
+                    let (cx, cy) = (qx.floor(), qy.floor());
+                    let i = ((cy as i64).rem_euclid(hi) * wi + (cx as i64).rem_euclid(wi)) as usize;
+                    let r = self.reach[i * nd + k];
+                    if r <= 0.0 {
+                        break;
+                    }
+                    // The occluder q's θ_k ray meets, projected onto p's θ ray.
+                    let (ox, oy) = ((cx + 0.5) / w + r * uk.0, (cy + 0.5) / h + r * uk.1);
+                    let along = (ox - s) * u.0 + (oy - t) * u.1;
+                    if along <= 0.0 || along > reach_max + unit {
+                        break;
+                    }
+                    sample(along, &mut best, &mut best_along);
+                    if best >= stop {
+                        return best;
+                    }
+                    if (along - d).abs() < 0.5 * unit {
+                        break;
+                    }
+                    d = along;
+                }
+                d_start = if d_start == 0.0 {
+                    if spread * 2.0 < 1.0 {
+                        unit.max(0.5 * unit / spread.max(1e-6))
+                    } else {
+                        unit
+                    }
+                } else {
+                    d_start * 2.0
+                };
+            }
+        }
+        // The candidate rays cross p's near, not at, the occluder's crest: look around it.
+        if best_along > 0.0 {
+            let a0 = best_along;
+            for dd in [-1.0f32, -0.5, 0.5, 1.0] {
+                sample(a0 + dd * unit, &mut best, &mut best_along);
+            }
+        }
+        best
+    }
+
     /// Serialises to the `.hzn` format (module header).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(24 + 4 * (self.heights.len() + self.tans.len() + 16));
+        let mut out = Vec::with_capacity(
+            24 + 4 * (self.heights.len() + self.tans.len() + self.reach.len() + 16),
+        );
         out.extend_from_slice(MAGIC);
         for v in [self.width, self.height, self.ndirs(), 1] {
             out.extend_from_slice(&(v as u32).to_le_bytes());
         }
-        for v in self.azimuths.iter().chain(&self.heights).chain(&self.tans) {
+        for v in self
+            .azimuths
+            .iter()
+            .chain(&self.heights)
+            .chain(&self.tans)
+            .chain(&self.reach)
+        {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out
@@ -216,7 +367,8 @@ impl HorizonTable {
 
     /// Parses the `.hzn` format, checking sizes and values.
     pub fn from_bytes(b: &[u8]) -> Result<Self, String> {
-        if b.len() < 24 || &b[..8] != MAGIC {
+        let v1 = b.len() >= 8 && &b[..8] == MAGIC_V1;
+        if b.len() < 24 || (&b[..8] != MAGIC && !v1) {
             return Err("not an arbor horizon table (bad magic)".into());
         }
         let u = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as usize;
@@ -226,9 +378,10 @@ impl HorizonTable {
                 "bad horizon table header ({w}x{h}, {nd} directions)"
             ));
         }
+        let per_texel = if v1 { nd + 1 } else { 2 * nd + 1 };
         let n = w
             .checked_mul(h)
-            .and_then(|t| t.checked_mul(nd + 1))
+            .and_then(|t| t.checked_mul(per_texel))
             .and_then(|t| t.checked_add(nd))
             .ok_or("horizon table too large")?;
         if b.len() != 24 + 4 * n {
@@ -245,12 +398,20 @@ impl HorizonTable {
         if f.iter().any(|v| !v.is_finite()) {
             return Err("horizon table holds a non-finite value".into());
         }
+        let heights = &f[nd..nd + w * h];
+        if v1 {
+            // No reaches stored: rebuild (fast) from the heights it carries.
+            return Self::build(heights, w, h, nd);
+        }
+        let tans_end = nd + w * h * (nd + 1);
         Ok(HorizonTable {
             width: w,
             height: h,
             azimuths: f[..nd].to_vec(),
-            heights: f[nd..nd + w * h].to_vec(),
-            tans: f[nd + w * h..].to_vec(),
+            heights: heights.to_vec(),
+            tans: f[nd + w * h..tans_end].to_vec(),
+            reach: f[tans_end..].to_vec(),
+            max_height: heights.iter().copied().fold(f32::MIN, f32::max),
         })
     }
 
@@ -274,7 +435,8 @@ struct Sweep {
 }
 
 impl Sweep {
-    /// Calls `emit(texel, tan)` once per texel with the max slope ahead along step (a, b).
+    /// Calls `emit(texel, tan, dist)` once per texel with the max slope ahead along step
+    /// (a, b) and the (s,t) distance to the point that has it.
     fn direction(
         &mut self,
         f: &[f32],
@@ -282,7 +444,7 @@ impl Sweep {
         h: usize,
         a: i32,
         b: i32,
-        mut emit: impl FnMut(usize, f32),
+        mut emit: impl FnMut(usize, f32, f32),
     ) {
         // Knight steps sample the midpoint between texels too (sub = 2 samples per step).
         let sub = if a.abs() > 1 || b.abs() > 1 { 2 } else { 1 };
@@ -341,8 +503,11 @@ impl Sweep {
                     }
                 }
                 if j < m && j % sub == 0 {
-                    let tan = self.stack.last().map_or(0.0, |&q| slope(q));
-                    emit(self.texel[j / sub] as usize, tan);
+                    let (tan, dist) = self
+                        .stack
+                        .last()
+                        .map_or((0.0, 0.0), |&q| (slope(q), (q as usize - j) as f32 * ds));
+                    emit(self.texel[j / sub] as usize, tan, dist);
                 }
                 self.stack.push(j as u32);
             }
@@ -394,12 +559,64 @@ pub fn visibility(
     scale: f32,
     penumbra: f32,
 ) -> f32 {
+    visibility_curved(table, s, t, lp, scale, penumbra, 0.0, 1.0)
+}
+
+/// [`visibility`] on a real surface, comparing angles in the surface's own vertical plane
+/// through the light: `rho` converts standard-patch slopes to the surface's (`tan α_surface =
+/// rho · tan α_standard` along the light's azimuth, see [`grid_visibility`]), so the
+/// penumbra (the light's angular diameter) and Max's §6 curvature correction — the horizon
+/// lowered by `drop` radians (γ of [`curvature_drop`]; negative on concave surfaces raises
+/// it) — are true angles.
+#[allow(clippy::too_many_arguments)]
+pub fn visibility_curved(
+    table: &HorizonTable,
+    s: f32,
+    t: f32,
+    lp: Vec3,
+    scale: f32,
+    penumbra: f32,
+    drop: f32,
+    rho: f32,
+) -> f32 {
+    use std::f32::consts::FRAC_PI_2;
+    let rho = if rho.is_finite() && rho > 0.0 {
+        rho
+    } else {
+        1.0
+    };
     let horiz = (lp.x * lp.x + lp.y * lp.y).sqrt();
-    let el = lp.z.atan2(horiz);
+    let el = (rho * lp.z).atan2(horiz);
+    if el.is_nan() {
+        return 0.0;
+    }
     let theta = lp.y.atan2(lp.x);
-    let hz = table.elevation(s, t, theta, scale);
+    let drop = if drop.is_finite() { drop } else { 0.0 };
+    let half = if penumbra > 0.0 { 0.5 * penumbra } else { 0.0 };
+    // Table elevations lie in [0, π/2): decide without searching when they cannot matter.
+    let hidden_at = el + half + drop; // table elevation from which the light is fully hidden
+    if hidden_at <= 0.0 {
+        return 0.0;
+    }
+    if el - half + drop >= FRAC_PI_2 {
+        return 1.0;
+    }
+    let sc = scale.max(0.0);
+    let stop = if hidden_at >= FRAC_PI_2 || sc == 0.0 {
+        f32::INFINITY
+    } else {
+        hidden_at.tan() / (sc * rho)
+    };
+    // Below this table elevation the light is fully seen: farther occluders do not matter.
+    let seen_below = el - half + drop;
+    let need = if seen_below > 0.0 && sc > 0.0 {
+        seen_below.tan() / (sc * rho)
+    } else {
+        0.0
+    };
+    let hz = (rho * sc * table.horizon_tan(s, t, theta, need, stop)).atan() - drop;
     if penumbra > 0.0 {
-        penumbra_fraction((el - hz) / (0.5 * penumbra))
+        penumbra_fraction((el - hz) / half)
     } else if el >= hz {
         1.0
     } else {
@@ -416,6 +633,8 @@ pub struct HorizonParams {
     pub penumbra: f32,
     /// Filter footprint multiplier (like texture's "width").
     pub width: f32,
+    /// Weight of Max's §6 curvature correction (1: as the paper prescribes, 0: flat tables).
+    pub curvature: f32,
 }
 
 impl Default for HorizonParams {
@@ -424,12 +643,14 @@ impl Default for HorizonParams {
             scale: 1.0,
             penumbra: 0.5f32.to_radians(),
             width: 1.0,
+            curvature: 1.0,
         }
     }
 }
 
 /// One grid's inputs: per point s, t, P, the outward normal and the light vector, plus the
-/// per-grid-step differences of s, t and P along u and v (from the diced grid).
+/// per-grid-step differences of s, t, P and the unit normal along u and v (from the diced
+/// grid; the normal's differences give the curvature of Max §6, empty slices: none).
 pub struct GridInputs<'a> {
     pub s: &'a [f32],
     pub t: &'a [f32],
@@ -441,6 +662,42 @@ pub struct GridInputs<'a> {
     pub dtdv: &'a [f32],
     pub dpdu: &'a [Vec3],
     pub dpdv: &'a [Vec3],
+    pub dndu: &'a [Vec3],
+    pub dndv: &'a [Vec3],
+}
+
+/// Max §6: a point raised `h` above a surface whose section in the light's vertical plane
+/// has normal curvature `k` (1/R; negative = convex, with the normal on the bumps' side)
+/// sees past the smooth surface's tangent plane by the central angle γ ≈ √(2h/R). Returns
+/// the amount to lower the horizon elevation by: +γ on convex surfaces (β' = β + γ), −γ on
+/// concave ones (β' = β − γ); 0 for h ≤ 0 or k = 0.
+pub fn curvature_drop(h: f32, k: f32) -> f32 {
+    if !(h > 0.0) || !k.is_finite() {
+        return 0.0;
+    }
+    let g = (2.0 * h * k.abs()).sqrt().min(std::f32::consts::FRAC_PI_2);
+    if k < 0.0 {
+        g
+    } else {
+        -g
+    }
+}
+
+/// Normal curvature of the surface along the tangent `w = a·ps + b·pt` (ps, pt = dP/ds,
+/// dP/dt), from the unit normal's derivatives `ns`, `nt` (dn̂/ds, dn̂/dt): Weingarten's
+/// `k = −dn̂(w)·w / w·w`. A sphere of radius R with outward n̂ gives −1/R in every direction.
+pub fn normal_curvature(ps: Vec3, pt: Vec3, ns: Vec3, nt: Vec3, a: f32, b: f32) -> f32 {
+    let w = ps * a + pt * b;
+    let ww = w.length_squared();
+    if !(ww > 1e-30) {
+        return 0.0;
+    }
+    let k = -(ns * a + nt * b).dot(w) / ww;
+    if k.is_finite() {
+        k
+    } else {
+        0.0
+    }
 }
 
 /// dP/ds and dP/dt from grid differences: solves `[Pu Pv] = [Ps Pt]·J`, J = ∂(s,t)/∂(u,v).
@@ -458,9 +715,13 @@ pub fn st_tangents(pu: Vec3, pv: Vec3, su: f32, sv: f32, tu: f32, tv: f32) -> Op
 /// Visible fraction per grid point. Points whose (s,t) frame is degenerate fall back to the
 /// smooth surface's own test (lit iff the light is above it). Filtering: when a grid step
 /// covers more than a texel, the fraction is averaged over up to 4×4 samples of the footprint.
+/// With `p.curvature` > 0 and normal differences given, the horizon is corrected for the
+/// surface's curvature in the light's vertical plane (Max §6, [`curvature_drop`]) using each
+/// sample's raised height h = scale·F·|dP/ds × dP/dt|^{1/2}.
 pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) -> Vec<f32> {
     let n = g.s.len();
     let (w, h) = (table.width as f32, table.height as f32);
+    let curved = p.curvature > 0.0 && g.dndu.len() == n && g.dndv.len() == n;
     (0..n)
         .map(|i| {
             let (su, sv, tu, tv) = (g.dsdu[i], g.dsdv[i], g.dtdu[i], g.dtdv[i]);
@@ -470,6 +731,32 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
             let Some(lp) = standard_light(ps, pt, g.up[i], g.l[i]) else {
                 return if g.l[i].dot(g.up[i]) > 0.0 { 1.0 } else { 0.0 };
             };
+            // C maps (lp.x, lp.y, 0) to the tangential part of L, the direction of Max's
+            // section plane T, and the standard patch's unit height to |N|^½: slopes in T
+            // are rho times those on the standard patch.
+            let root_n = ps.cross(pt).length().sqrt();
+            let wt = (ps * lp.x + pt * lp.y).length();
+            let rho = if wt > 1e-30 {
+                root_n * (lp.x * lp.x + lp.y * lp.y).sqrt() / wt
+            } else {
+                1.0
+            };
+            // Curvature of the section T.
+            let k_n = if curved {
+                let k = st_tangents(g.dndu[i], g.dndv[i], su, sv, tu, tv)
+                    .map_or(0.0, |(ns, nt)| normal_curvature(ps, pt, ns, nt, lp.x, lp.y));
+                k * p.curvature
+            } else {
+                0.0
+            };
+            let vis = |s: f32, t: f32| {
+                let drop = if k_n != 0.0 {
+                    curvature_drop(p.scale * table.height_at(s, t) * root_n, k_n)
+                } else {
+                    0.0
+                };
+                visibility_curved(table, s, t, lp, p.scale, p.penumbra, drop, rho)
+            };
             let fw = p.width.max(0.0);
             let ext = ((su.abs() + sv.abs()) * w).max((tu.abs() + tv.abs()) * h) * fw;
             let k = if ext.is_finite() {
@@ -478,7 +765,7 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
                 1
             };
             if k == 1 {
-                return visibility(table, g.s[i], g.t[i], lp, p.scale, p.penumbra);
+                return vis(g.s[i], g.t[i]);
             }
             let mut acc = 0.0;
             for a in 0..k {
@@ -487,7 +774,7 @@ pub fn grid_visibility(table: &HorizonTable, g: &GridInputs, p: &HorizonParams) 
                     let fv = ((b as f32 + 0.5) / k as f32 - 0.5) * fw;
                     let s = g.s[i] + fu * su + fv * sv;
                     let t = g.t[i] + fu * tu + fv * tv;
-                    acc += visibility(table, s, t, lp, p.scale, p.penumbra);
+                    acc += vis(s, t);
                 }
             }
             acc / (k * k) as f32
@@ -546,15 +833,42 @@ pub fn read_height_image(path: &Path) -> Result<(Vec<f32>, usize, usize), String
     Ok((v, w, h))
 }
 
+/// Builds and writes the tables of a height picture (`MakeHorizon`, `arbor horizon`): the
+/// picture's luminance is the height; written to a temporary name and renamed, so a failure
+/// never leaves a half-written table.
+pub fn make_horizon(input: &Path, output: &Path, directions: usize) -> Result<(), String> {
+    let (f, w, h) = read_height_image(input)?;
+    let t = HorizonTable::build(&f, w, h, directions)?;
+    let mut tmp = output.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = std::path::PathBuf::from(tmp);
+    t.write(&tmp)?;
+    std::fs::rename(&tmp, output).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("{}: {e}", output.display())
+    })
+}
+
 /// Tables by path, loaded once and shared by every thread (failures are remembered too).
+/// An entry is reloaded when the file's length or modification time changes, so a table
+/// rewritten by a later frame's MakeHorizon is seen.
 pub fn cached(path: &str) -> Result<Arc<HorizonTable>, String> {
-    type Cache = Mutex<HashMap<String, Result<Arc<HorizonTable>, String>>>;
+    type Stamp = Option<(u64, std::time::SystemTime)>;
+    type Cache = Mutex<HashMap<String, (Stamp, Result<Arc<HorizonTable>, String>)>>;
     static CACHE: OnceLock<Cache> = OnceLock::new();
+    let stamp: Stamp = std::fs::metadata(path)
+        .ok()
+        .and_then(|m| Some((m.len(), m.modified().ok()?)));
     let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
     let mut m = cache.lock().unwrap_or_else(|e| e.into_inner());
-    m.entry(path.to_string())
-        .or_insert_with(|| HorizonTable::read(Path::new(path)).map(Arc::new))
-        .clone()
+    if let Some((st, r)) = m.get(path) {
+        if *st == stamp {
+            return r.clone();
+        }
+    }
+    let r = HorizonTable::read(Path::new(path)).map(Arc::new);
+    m.insert(path.to_string(), (stamp, r.clone()));
+    r
 }
 
 #[cfg(test)]
@@ -598,6 +912,16 @@ mod tests {
         assert!((west - 0.05 / (56.0 / 64.0)).abs() < 1e-5, "{west}");
         // Along the ridge (north) nothing rises.
         assert_eq!(t.tan_at(10, 5, 2), 0.0);
+        // Reaches: the ridge is 8 texels east, 8 diagonal steps north-east, 56 west; none north.
+        let r = |k: usize| t.reach[(5 * 64 + 10) * 8 + k] * 64.0;
+        assert!(
+            (r(0) - 8.0).abs() < 1e-4 && (r(4) - 56.0).abs() < 1e-3,
+            "{} {}",
+            r(0),
+            r(4)
+        );
+        assert!((r(1) - 8.0 * 2f32.sqrt()).abs() < 1e-4);
+        assert_eq!(r(2), 0.0);
     }
 
     #[test]
@@ -645,9 +969,10 @@ mod tests {
         let e1 = t.tan_at(10, 3, 1).atan();
         let e7 = t.tan_at(10, 3, 7).atan();
         let d = std::f32::consts::PI / 8.0;
-        assert!((t.elevation(s, tt, 0.0, 1.0) - e0).abs() < 1e-6);
-        assert!((t.elevation(s, tt, d, 1.0) - 0.5 * (e0 + e1)).abs() < 1e-6);
-        assert!((t.elevation(s, tt, -d, 1.0) - 0.5 * (e7 + e0)).abs() < 1e-6);
+        let e = |th: f32| t.elevation_interpolated(s, tt, th, 1.0);
+        assert!((e(0.0) - e0).abs() < 1e-6);
+        assert!((e(d) - 0.5 * (e0 + e1)).abs() < 1e-6);
+        assert!((e(-d) - 0.5 * (e7 + e0)).abs() < 1e-6);
     }
 
     #[test]
@@ -656,6 +981,10 @@ mod tests {
         let b = t.to_bytes();
         assert_eq!(HorizonTable::from_bytes(&b).unwrap(), t);
         assert!(HorizonTable::from_bytes(&b[..b.len() - 1]).is_err());
+        // A version-1 file (no reaches) is rebuilt from its heights.
+        let mut v1 = b"ARBHZN1\0".to_vec();
+        v1.extend_from_slice(&b[8..b.len() - 4 * t.reach.len()]);
+        assert_eq!(HorizonTable::from_bytes(&v1).unwrap(), t);
         assert!(HorizonTable::from_bytes(b"nonsense").is_err());
     }
 
@@ -704,5 +1033,111 @@ mod tests {
         let (ps, pt) = st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 0.0, 1.0).unwrap();
         assert!((ps - Vec3::X).length() < 1e-6 && (pt - Vec3::new(-1.0, 1.0, 0.0)).length() < 1e-6);
         assert!(st_tangents(Vec3::X, Vec3::Y, 1.0, 1.0, 1.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn curvature_drop_h13() {
+        // H13: a sphere of radius 1 and h = 0.005 gives γ = √0.01 = 0.1 rad (5.73°).
+        assert!((curvature_drop(0.005, -1.0) - 0.1).abs() < 1e-6);
+        assert!((curvature_drop(0.005, 1.0) + 0.1).abs() < 1e-6); // concave: raised
+        assert_eq!(curvature_drop(0.0, -1.0), 0.0);
+        assert_eq!(curvature_drop(0.005, 0.0), 0.0);
+        assert_eq!(curvature_drop(f32::NAN, -1.0), 0.0);
+    }
+
+    /// Unit sphere P(u,v) = (cos u cos v, sin u cos v, sin v) at (u, v), outward normal.
+    fn sphere_frame(u: f32, v: f32) -> (Vec3, Vec3, Vec3, Vec3) {
+        let pu = Vec3::new(-u.sin() * v.cos(), u.cos() * v.cos(), 0.0);
+        let pv = Vec3::new(-u.cos() * v.sin(), -u.sin() * v.sin(), v.cos());
+        // n̂ = P on the unit sphere, so dn̂/du = P_u and dn̂/dv = P_v.
+        (pu, pv, pu, pv)
+    }
+
+    #[test]
+    fn normal_curvature_of_sphere_and_cylinder() {
+        let (pu, pv, nu, nv) = sphere_frame(0.3, 0.4);
+        for th in [0.0f32, 0.7, 1.9, 3.0, 4.4] {
+            let k = normal_curvature(pu, pv, nu, nv, th.cos(), th.sin());
+            assert!((k + 1.0).abs() < 1e-5, "θ {th}: {k}");
+        }
+        // Cylinder of radius 2: P = (2cos u, 2sin u, v), n̂ = (cos u, sin u, 0).
+        let u = 0.8f32;
+        let pu = Vec3::new(-2.0 * u.sin(), 2.0 * u.cos(), 0.0);
+        let nu = Vec3::new(-u.sin(), u.cos(), 0.0);
+        let (pv, nv) = (Vec3::Z, Vec3::ZERO);
+        assert!((normal_curvature(pu, pv, nu, nv, 1.0, 0.0) + 0.5).abs() < 1e-6);
+        assert!(normal_curvature(pu, pv, nu, nv, 0.0, 1.0).abs() < 1e-6);
+        // Euler: k(θ) = k1 cos²ψ + k2 sin²ψ with ψ the angle from the principal direction.
+        let k = normal_curvature(pu, pv, nu, nv, 0.5, 1.0); // w = (pu*0.5 + pv), |pu| = 2
+        assert!((k + 0.5 * 0.5).abs() < 1e-6, "{k}"); // cos²ψ = 1/2 for w = (1,1) in lengths
+                                                      // Seen from inside (normal towards the axis) the cylinder is concave.
+        assert!((normal_curvature(pu, pv, -nu, nv, 1.0, 0.0) - 0.5).abs() < 1e-6);
+    }
+
+    /// Visibility at one point of a unit sphere under a flat map of height `c`, for a light
+    /// `el` radians above the tangent plane towards azimuth `az` (in the (u,v) frame).
+    fn sphere_vis(c: f32, scale: f32, inside: bool, el: f32, az: f32, curvature: f32) -> f32 {
+        let table = HorizonTable::build(&[c; 16 * 16], 16, 16, 8).unwrap();
+        // At latitude 1 rad |P_u| = cos 1 ≠ |P_v| = 1: standard-patch and true angles differ.
+        let (u, v) = (0.3f32, 1.0f32);
+        let (pu, pv, nu, nv) = sphere_frame(u, v);
+        let n = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
+        let (up, dn) = if inside { (-n, -1.0) } else { (n, 1.0) };
+        // Tangent direction towards the light: unit vectors along P_u and P_v.
+        let tdir = pu.normalize() * az.cos() + pv.normalize() * az.sin();
+        let l = up * el.sin() + tdir * el.cos();
+        let one = |x: f32| [x];
+        let (s, t) = (one(0.5), one(0.5));
+        let (l, up) = ([l], [up]);
+        // s = u, t = v: one grid step is one unit of each; tiny steps so no filtering.
+        let st = 1e-3;
+        let (pu, pv, nu, nv) = ([pu * st], [pv * st], [nu * st * dn], [nv * st * dn]);
+        let g = GridInputs {
+            s: &s,
+            t: &t,
+            l: &l,
+            up: &up,
+            dsdu: &one(st),
+            dsdv: &one(0.0),
+            dtdu: &one(0.0),
+            dtdv: &one(st),
+            dpdu: &pu,
+            dpdv: &pv,
+            dndu: &nu,
+            dndv: &nv,
+        };
+        let p = HorizonParams {
+            scale,
+            penumbra: 0.0,
+            width: 1.0,
+            curvature,
+        };
+        grid_visibility(&table, &g, &p)[0]
+    }
+
+    #[test]
+    fn curvature_correction_on_a_sphere() {
+        // |P_u × P_v| = cos v, so h = scale·c·√(cos v); pick scale so h = 0.005: γ = 0.1.
+        let scale = 0.005 / (0.5 * 1f32.cos().sqrt());
+        for az in [0.0f32, 1.0, 2.5, 4.0] {
+            // Convex: a raised point sees 0.1 rad below the tangent plane (β' = β + γ).
+            assert_eq!(
+                sphere_vis(0.5, scale, false, -0.095, az, 1.0),
+                1.0,
+                "az {az}"
+            );
+            assert_eq!(
+                sphere_vis(0.5, scale, false, -0.105, az, 1.0),
+                0.0,
+                "az {az}"
+            );
+            // Without the correction (or at base level, h = 0) the tangent plane is the horizon.
+            assert_eq!(sphere_vis(0.5, scale, false, -0.01, az, 0.0), 0.0);
+            assert_eq!(sphere_vis(0.0, scale, false, -0.01, az, 1.0), 0.0);
+            assert_eq!(sphere_vis(0.0, scale, false, 0.01, az, 1.0), 1.0);
+            // Concave (seen from inside): the horizon rises by γ (β' = β − γ).
+            assert_eq!(sphere_vis(0.5, scale, true, 0.095, az, 1.0), 0.0, "az {az}");
+            assert_eq!(sphere_vis(0.5, scale, true, 0.105, az, 1.0), 1.0, "az {az}");
+        }
     }
 }

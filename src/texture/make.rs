@@ -228,6 +228,7 @@ pub fn run_job(job: &TextureJob, search: &[PathBuf], diags: &Diagnostics) {
             make_cube(&inputs, &out, &o)
         }
         TextureJobKind::Shadow => make_shadow(&inputs[0], &out),
+        TextureJobKind::Horizon => super::horizon::make_horizon(&inputs[0], &out, job.directions),
     };
     if let Err(e) = r {
         diags.report(
@@ -256,6 +257,7 @@ mod tests {
             swidth: w,
             twidth: w,
             fov: 90.0,
+            directions: 8,
             span: Default::default(),
         }
     }

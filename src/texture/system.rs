@@ -397,6 +397,10 @@ impl TextureLookup for TextureSystem<'_> {
         true
     }
 
+    fn search_path(&self) -> &[PathBuf] {
+        &self.search
+    }
+
     fn info(&self, name: &str, query: &str) -> Option<InfoValue> {
         let tex = self.open(name)?;
         let h = &tex.header;
