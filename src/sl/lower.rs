@@ -162,6 +162,8 @@ struct Lowerer<'a> {
     /// Registers below this are globals; those read or written are kept in the program.
     globals_end: usize,
     used_globals: HashSet<Reg>,
+    /// Non-standard extensions already warned about in this shader (one warning each).
+    warned: HashSet<&'static str>,
 }
 
 fn ty_name(ty: BaseType, array: Option<usize>) -> String {
@@ -233,6 +235,7 @@ impl<'a> Lowerer<'a> {
             error_reg: 0,
             globals_end: 0,
             used_globals: HashSet::new(),
+            warned: HashSet::new(),
         };
         lw.error_reg = lw.const_float(0.0);
         lw
@@ -322,6 +325,69 @@ impl<'a> Lowerer<'a> {
     fn error(&mut self, d: Diag) -> Val {
         self.diags.push(d);
         self.error_val()
+    }
+
+    /// One warning per shader for a recognised non-standard extension.
+    fn warn_extension(&mut self, key: &'static str, span: Span, msg: &str) {
+        if self.warned.insert(key) {
+            self.diags.push(
+                Diag::warning("sl::extension", msg.to_string())
+                    .label(span, "non-standard")
+                    .help("this shader was written for another renderer; the result is the fallback value named above"),
+            );
+        }
+    }
+
+    /// Functions of other renderers (PRMan, BMRT, Pixie, Aqsis) that arbor cannot compute:
+    /// the arguments are type-checked, one warning names the function, and the call yields
+    /// the value a renderer without the feature gives (no occlusion, no indirect light,
+    /// nothing baked). None for any other name.
+    fn extension_call(&mut self, name: &str, args: &[Expr], span: Span) -> Option<Val> {
+        let (key, ty, value, what): (&'static str, BaseType, Const, &str) = match name {
+            "occlusion" => ("occlusion", BaseType::Float, Const::F(0.0), "0 (unoccluded)"),
+            "indirectdiffuse" => (
+                "indirectdiffuse",
+                BaseType::Color,
+                Const::T(Vec3::ZERO),
+                "black (no indirect light)",
+            ),
+            "transmission" => (
+                "transmission",
+                BaseType::Color,
+                Const::T(Vec3::ONE),
+                "white (nothing in the way)",
+            ),
+            "visibility" => (
+                "visibility",
+                BaseType::Color,
+                Const::T(Vec3::ONE),
+                "white (visible)",
+            ),
+            "caustic" => ("caustic", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "photonmap" => ("photonmap", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "subsurface" => ("subsurface", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "bake" => ("bake", BaseType::Float, Const::F(0.0), "0 (nothing written)"),
+            "bake3d" => ("bake3d", BaseType::Float, Const::F(0.0), "0 (nothing written)"),
+            "texture3d" => ("texture3d", BaseType::Float, Const::F(0.0), "0 (nothing read)"),
+            "rayhittest" => (
+                "rayhittest",
+                BaseType::Float,
+                Const::F(1.0e30),
+                "1e30 (every ray misses)",
+            ),
+            "isindirectray" => ("isindirectray", BaseType::Float, Const::F(0.0), "0"),
+            "iscameraray" => ("iscameraray", BaseType::Float, Const::F(1.0), "1"),
+            _ => return None,
+        };
+        for a in args {
+            self.expr(a, None);
+        }
+        self.warn_extension(
+            key,
+            span,
+            &format!("`{name}` is a non-standard extension arbor does not compute; it returns {what}"),
+        );
+        Some(self.const_val(value, ty))
     }
 
     fn error_val(&self) -> Val {
@@ -1256,6 +1322,36 @@ impl<'a> Lowerer<'a> {
                 }
             }
             None if name == "PI" => self.const_val(Const::F(std::f32::consts::PI), BaseType::Float),
+            None if name == "Ns" && self.kind == ShaderKind::Light => {
+                // PRMan's `Ns`: the normal at the illuminated point, which is what arbor
+                // binds to `N` in light shaders.
+                self.warn_extension(
+                    "Ns",
+                    span,
+                    "`Ns` is a PRMan extension; arbor reads the illuminated surface's normal `N`",
+                );
+                self.ident("N", span)
+            }
+            None if self.kind == ShaderKind::Imager
+                && matches!(name, "s" | "t" | "u" | "v" | "du" | "dv") =>
+            {
+                // RISpec gives imagers no surface parameters, but Aqsis' compiler accepts
+                // them (its `filmgrain` imager uses s and t).
+                let what: &'static str = match name {
+                    "s" => "s",
+                    "t" => "t",
+                    "u" => "u",
+                    "v" => "v",
+                    "du" => "du",
+                    _ => "dv",
+                };
+                self.warn_extension(
+                    what,
+                    span,
+                    &format!("`{name}` is not defined in imager shaders (RISpec); it reads 0 here"),
+                );
+                self.const_val(Const::F(0.0), BaseType::Float)
+            }
             None => {
                 let is_global = GLOBALS.iter().any(|g| g.0 == name);
                 let mut d = if is_global {
@@ -1881,6 +1977,9 @@ impl<'a> Lowerer<'a> {
                 }
             }
             _ => {}
+        }
+        if let Some(v) = self.extension_call(name, args, span) {
+            return v;
         }
         let sigs: Vec<&'static Sig> = builtins::overloads(name).collect();
         if sigs.is_empty() {

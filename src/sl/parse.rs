@@ -1401,12 +1401,6 @@ fn is_reserved(w: &str) -> bool {
                 | "illuminate"
                 | "solar"
                 | "gather"
-                | "surface"
-                | "displacement"
-                | "light"
-                | "volume"
-                | "imager"
-                | "transformation"
         )
 }
 
