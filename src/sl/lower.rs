@@ -94,7 +94,9 @@ fn global_access(kind: ShaderKind, name: &str) -> (bool, bool) {
         },
         Light => match name {
             "Cl" | "Ol" | "L" => rw,
-            "Ci" | "Oi" | "Cs" | "Os" | "alpha" | "I" => none,
+            // `I` is readable as a PRMan extension (warned where used): the illuminated
+            // surface's incident vector, which arbor binds for light shaders.
+            "Ci" | "Oi" | "Cs" | "Os" | "alpha" => none,
             _ => r,
         },
         Displacement => match name {
@@ -344,7 +346,12 @@ impl<'a> Lowerer<'a> {
     /// nothing baked). None for any other name.
     fn extension_call(&mut self, name: &str, args: &[Expr], span: Span) -> Option<Val> {
         let (key, ty, value, what): (&'static str, BaseType, Const, &str) = match name {
-            "occlusion" => ("occlusion", BaseType::Float, Const::F(0.0), "0 (unoccluded)"),
+            "occlusion" => (
+                "occlusion",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (unoccluded)",
+            ),
             "indirectdiffuse" => (
                 "indirectdiffuse",
                 BaseType::Color,
@@ -366,9 +373,24 @@ impl<'a> Lowerer<'a> {
             "caustic" => ("caustic", BaseType::Color, Const::T(Vec3::ZERO), "black"),
             "photonmap" => ("photonmap", BaseType::Color, Const::T(Vec3::ZERO), "black"),
             "subsurface" => ("subsurface", BaseType::Color, Const::T(Vec3::ZERO), "black"),
-            "bake" => ("bake", BaseType::Float, Const::F(0.0), "0 (nothing written)"),
-            "bake3d" => ("bake3d", BaseType::Float, Const::F(0.0), "0 (nothing written)"),
-            "texture3d" => ("texture3d", BaseType::Float, Const::F(0.0), "0 (nothing read)"),
+            "bake" => (
+                "bake",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing written)",
+            ),
+            "bake3d" => (
+                "bake3d",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing written)",
+            ),
+            "texture3d" => (
+                "texture3d",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing read)",
+            ),
             "rayhittest" => (
                 "rayhittest",
                 BaseType::Float,
@@ -385,7 +407,9 @@ impl<'a> Lowerer<'a> {
         self.warn_extension(
             key,
             span,
-            &format!("`{name}` is a non-standard extension arbor does not compute; it returns {what}"),
+            &format!(
+                "`{name}` is a non-standard extension arbor does not compute; it returns {what}"
+            ),
         );
         Some(self.const_val(value, ty))
     }
@@ -1301,6 +1325,13 @@ impl<'a> Lowerer<'a> {
                 if GLOBALS.iter().any(|g| g.0 == name)
                     && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg)
                 {
+                    if name == "I" && self.kind == ShaderKind::Light {
+                        self.warn_extension(
+                            "I",
+                            span,
+                            "`I` in a light shader is a PRMan extension; arbor gives the illuminated surface's incident vector",
+                        );
+                    }
                     if matches!(name, "L" | "Cl" | "Ol")
                         && matches!(self.kind, ShaderKind::Surface | ShaderKind::Volume)
                         && self.in_illuminance == 0
