@@ -103,8 +103,9 @@ fn three_lights(n: usize) -> Vec<LightResult> {
 }
 
 /// Runs a surface or displacement program over an 8×8 patch of the z = 5 plane facing the
-/// camera; returns every output triple (Ci, Oi, P, N as the kind writes them) that is not finite.
-fn run(prog: &Program) -> Vec<String> {
+/// camera; returns the outputs (Ci, Oi for surfaces; P, N for displacements) that are not
+/// finite, and the first output (Ci or P) at every point.
+fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
     const W: usize = 8;
     let n = W * W;
     let diags = Diagnostics::new();
@@ -175,6 +176,10 @@ fn run(prog: &Program) -> Vec<String> {
         &["P", "N"]
     };
     let mut bad = Vec::new();
+    let first = match prog.global(outs[0]) {
+        Some(g) => (0..n).map(|i| ex.regs[g.reg as usize].t().at(i)).collect(),
+        None => Vec::new(),
+    };
     for name in outs {
         let Some(g) = prog.global(name) else { continue };
         let slot = &ex.regs[g.reg as usize];
@@ -186,7 +191,7 @@ fn run(prog: &Program) -> Vec<String> {
             }
         }
     }
-    bad
+    (bad, first)
 }
 
 fn check_dir(
@@ -225,7 +230,7 @@ fn check_dir(
         }
         for prog in &c.progs {
             if matches!(prog.kind, ShaderKind::Surface | ShaderKind::Displacement) {
-                let bad = run(prog);
+                let (bad, _) = run(prog);
                 if !bad.is_empty() {
                     failures.push(format!("{rel}: non-finite output: {}", bad.join(", ")));
                 }
@@ -259,4 +264,107 @@ fn corpus_compiles_and_runs() {
         eprintln!("ARBOR_SL_CORPUS: {n} more shaders checked");
     }
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// Compiles `text`; returns the programs and every diagnostic as (code, is_error, message).
+fn compile_text(text: &str) -> (Vec<Program>, Vec<(&'static str, bool, String)>) {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let progs = compile_source(
+        "inline.sl",
+        text,
+        None,
+        &sources,
+        &diags,
+        &CompileOptions::default(),
+    );
+    let list = diags
+        .snapshot()
+        .into_iter()
+        .map(|(d, _)| (d.code, d.is_error(), d.message))
+        .collect();
+    (progs, list)
+}
+
+#[test]
+fn shader_kind_words_are_names_outside_definitions() {
+    // IDscartissue.sl: `color light = …` compiled with PRMan.
+    let (progs, diags) = compile_text(
+        "surface t() { color light = color(1, .3, .2); float surface = 0.5; \
+         Ci = light * surface; }",
+    );
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    assert!(diags.iter().all(|d| !d.1), "{diags:?}");
+}
+
+#[test]
+fn extensions_warn_once_and_give_their_fallback() {
+    let (progs, diags) = compile_text(
+        "surface t() { float o = occlusion(P, N, 16, \"maxdist\", 1); \
+         float o2 = occlusion(P, N, 4); color ind = indirectdiffuse(P, N, 8); \
+         Ci = color(1 - o - o2) + ind; }",
+    );
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    let occ: Vec<_> = diags
+        .iter()
+        .filter(|d| d.0 == "sl::extension" && d.2.contains("`occlusion`"))
+        .collect();
+    assert_eq!(occ.len(), 1, "one warning per extension: {diags:?}");
+    assert!(diags
+        .iter()
+        .any(|d| d.0 == "sl::extension" && d.2.contains("`indirectdiffuse`")));
+    assert!(diags.iter().all(|d| !d.1), "{diags:?}");
+    // Unoccluded and no indirect light: Ci = 1 everywhere.
+    let (bad, ci) = run(&progs[0]);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert_eq!(ci.len(), 64);
+    assert!(ci.iter().all(|c| *c == Vec3::ONE), "{ci:?}");
+}
+
+#[test]
+fn prman_light_extensions_are_accepted_with_warnings() {
+    // envlight-style `Ns`, softbox-style `I`, arealight-style `N = normalize(N)`.
+    let (progs, diags) = compile_text(
+        "light t() { N = normalize(N); vector r = reflect(I, Ns); \
+         solar(-N, 0) { Cl = color(xcomp(r)); } }",
+    );
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    assert!(diags.iter().all(|d| !d.1), "{diags:?}");
+    for what in ["`Ns`", "`I`", "`N`"] {
+        assert!(
+            diags
+                .iter()
+                .any(|d| d.0 == "sl::extension" && d.2.contains(what)),
+            "no warning naming {what}: {diags:?}"
+        );
+    }
+    // Still an error in a surface shader, where RISpec and every renderer forbid it.
+    let (_, diags) = compile_text("surface t() { Ns = N; Ci = 1; }");
+    assert!(diags.iter().any(|d| d.1), "{diags:?}");
+}
+
+#[test]
+fn imager_surface_parameters_read_zero_with_a_warning() {
+    // Aqsis' filmgrain imager reads s and t.
+    let (progs, diags) =
+        compile_text("imager t() { float g = float noise(s, t); Ci = Ci * (1 - 0.1 * g); }");
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    assert!(diags.iter().all(|d| !d.1), "{diags:?}");
+    assert_eq!(
+        diags.iter().filter(|d| d.0 == "sl::extension").count(),
+        2,
+        "{diags:?}"
+    );
+}
+
+#[test]
+fn a_missing_header_gives_one_diagnostic_and_no_cascade() {
+    let (progs, diags) = compile_text(
+        "#include \"no_such_header.h\"\nsurface t() { Ci = undefined_helper(s) + MACRO_FROM_HEADER; }",
+    );
+    assert!(progs.is_empty());
+    let errors: Vec<_> = diags.iter().filter(|d| d.1).collect();
+    assert_eq!(errors.len(), 1, "{diags:?}");
+    assert_eq!(errors[0].0, "sl::include");
+    assert!(errors[0].2.contains("no_such_header.h"));
 }

@@ -335,7 +335,7 @@ impl<'a> Lowerer<'a> {
             self.diags.push(
                 Diag::warning("sl::extension", msg.to_string())
                     .label(span, "non-standard")
-                    .help("this shader was written for another renderer; the result is the fallback value named above"),
+                    .help("written for another renderer: arbor accepts it as the message says"),
             );
         }
     }
@@ -1817,6 +1817,33 @@ impl<'a> Lowerer<'a> {
             ExprKind::Ident(name) => {
                 let Some(var) = self.lookup(name) else {
                     return self.ident(name, target.span);
+                };
+                // BMRT's and PRMan's light shaders may overwrite their geometric inputs (e.g.
+                // `N = normalize(N)` in arealight.sl); arbor keeps the change local to the light.
+                let light_local: Option<&'static str> = match name.as_str() {
+                    "N" => Some("N"),
+                    "Ng" => Some("Ng"),
+                    "P" => Some("P"),
+                    "s" => Some("s"),
+                    "t" => Some("t"),
+                    "u" => Some("u"),
+                    "v" => Some("v"),
+                    _ => None,
+                };
+                let is_global = self.scopes[0].get(name.as_str()).map(|g| g.reg) == Some(var.reg);
+                let var = match light_local {
+                    Some(key) if !var.writable && is_global && self.kind == ShaderKind::Light => {
+                        self.warn_extension(
+                            key,
+                            target.span,
+                            &format!("assigning `{name}` in a light shader is an extension of BMRT and PRMan; the new value stays local to this light"),
+                        );
+                        Var {
+                            writable: true,
+                            ..var
+                        }
+                    }
+                    _ => var,
                 };
                 if !var.writable {
                     return self.error(
