@@ -368,3 +368,25 @@ fn a_missing_header_gives_one_diagnostic_and_no_cascade() {
     assert_eq!(errors[0].0, "sl::include");
     assert!(errors[0].2.contains("no_such_header.h"));
 }
+
+#[test]
+fn random_into_a_uniform_variable_is_one_number_per_grid() {
+    // Aqsis' randgrid.sl: `uniform color c; c = color(random(), random(), random());`.
+    let (progs, diags) = compile_text(
+        "surface t() { uniform color c; c = color(random(), random(), random()); \
+         float v = random(); Ci = c; Oi = v; }",
+    );
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    assert!(
+        diags.iter().all(|d| d.0 != "sl::detail"),
+        "no demotion warning: {diags:?}"
+    );
+    let (bad, ci) = run(&progs[0]);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert!(
+        ci.iter().all(|c| *c == ci[0]),
+        "one colour per grid: {ci:?}"
+    );
+    assert!(ci[0].min_element() >= 0.0 && ci[0].max_element() < 1.0);
+    assert!(ci[0].x != ci[0].y, "each random() call is its own number");
+}

@@ -916,6 +916,18 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                     .collect(),
             );
         }
+        // A uniform result (stored into a `uniform` variable): one number per grid.
+        RandomF if !ex.prog.regs[dst as usize].varying => {
+            out = Slot::F(pn_hash(ex.env.seed, span.start, u32::MAX, 0));
+        }
+        RandomT if !ex.prog.regs[dst as usize].varying => {
+            let (seed, base) = (ex.env.seed, span.start);
+            out = Slot::T(Vec3::new(
+                pn_hash(seed, base, u32::MAX, 0),
+                pn_hash(seed, base, u32::MAX, 1),
+                pn_hash(seed, base, u32::MAX, 2),
+            ));
+        }
         RandomF => {
             let seed = ex.env.seed;
             let base = span.start;

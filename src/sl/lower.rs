@@ -166,6 +166,11 @@ struct Lowerer<'a> {
     used_globals: HashSet<Reg>,
     /// Non-standard extensions already warned about in this shader (one warning each).
     warned: HashSet<&'static str>,
+    /// Lowering the value stored into a variable declared `uniform`: `random()` there gives one
+    /// number per grid (RISpec §15.1; Aqsis' randgrid.sl colours each grid this way).
+    uniform_target: bool,
+    /// Declarations written `uniform` (their `candidate` is set too, for demotion).
+    explicit_uniform: HashSet<Span>,
 }
 
 fn ty_name(ty: BaseType, array: Option<usize>) -> String {
@@ -238,6 +243,8 @@ impl<'a> Lowerer<'a> {
             globals_end: 0,
             used_globals: HashSet::new(),
             warned: HashSet::new(),
+            uniform_target: false,
+            explicit_uniform: HashSet::new(),
         };
         lw.error_reg = lw.const_float(0.0);
         lw
@@ -327,6 +334,12 @@ impl<'a> Lowerer<'a> {
     fn error(&mut self, d: Diag) -> Val {
         self.diags.push(d);
         self.error_val()
+    }
+
+    /// Whether values stored into `var` are uniform by declaration (`uniform` locals and
+    /// parameters), not merely uniform so far by inference.
+    fn is_uniform_target(&self, var: &Var) -> bool {
+        !var.varying && (var.candidate.is_none() || self.explicit_uniform.contains(&var.decl_span))
     }
 
     /// One warning per shader for a recognised non-standard extension.
@@ -647,7 +660,10 @@ impl<'a> Lowerer<'a> {
                 );
             }
             _ => {
+                let saved = self.uniform_target;
+                self.uniform_target = self.is_uniform_target(var);
                 let v = self.expr(e, Some(var.ty));
+                self.uniform_target = saved;
                 let v = self.coerce(v, var.ty, e.span);
                 self.store_reg(var, var.reg, v, e.span);
             }
@@ -736,6 +752,7 @@ impl<'a> Lowerer<'a> {
                         // under deeper varying control flow is demoted to varying with a
                         // warning (PRMan/BMRT-era shaders rely on this), not rejected.
                         Some(Detail::Uniform) => {
+                            self.explicit_uniform.insert(v.span);
                             let demoted = self.forced.contains(&v.span);
                             if demoted {
                                 self.diags.push(
@@ -1863,7 +1880,10 @@ impl<'a> Lowerer<'a> {
                             .label(span, "assignment"),
                     );
                 }
+                let saved = self.uniform_target;
+                self.uniform_target = self.is_uniform_target(&var);
                 let v = self.assign_value(op, &var_val(&var), value, span);
+                self.uniform_target = saved;
                 let v = self.coerce(v, var.ty, value.span);
                 self.store(&var, v, span);
                 self.mark_written(var.reg);
@@ -2108,7 +2128,8 @@ impl<'a> Lowerer<'a> {
         let (codes, _) = builtins::parse_args(sig.args);
         let mut regs = Vec::new();
         let mut outs = Vec::new();
-        let mut varying = always_varying(sig.f);
+        let mut varying = always_varying(sig.f)
+            && !(self.uniform_target && matches!(sig.f, Builtin::RandomF | Builtin::RandomT));
         for (i, (v, e)) in vals.iter().enumerate() {
             let (code, out) = codes
                 .get(i)
