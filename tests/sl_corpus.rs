@@ -390,3 +390,17 @@ fn random_into_a_uniform_variable_is_one_number_per_grid() {
     assert!(ci[0].min_element() >= 0.0 && ci[0].max_element() < 1.0);
     assert!(ci[0].x != ci[0].y, "each random() call is its own number");
 }
+
+#[test]
+fn random_in_a_loop_differs_on_every_pass() {
+    // glass.sl jitters each of its samples×samples rays with `random()` inside the loops.
+    let (progs, diags) = compile_text(
+        "surface t() { float i, a = 0, b = 0; for (i = 0; i < 2; i += 1) { \
+         float r = random(); if (i == 0) a = r; else b = r; } Ci = color(a, b, 0); }",
+    );
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    let (bad, ci) = run(&progs[0]);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert!(ci.iter().all(|c| c.x != c.y), "same number twice: {ci:?}");
+    assert!(ci.iter().any(|c| c.x != ci[0].x), "per point too: {ci:?}");
+}
