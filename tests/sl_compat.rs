@@ -340,7 +340,7 @@ fn diagnostics_of_broken_shaders() {
         "#include \"no_such_header.h\"\nsurface a() { Ci = 1; }\n",
         "surface b() { Ci = undefined_fn(1); }\n",
         "surface c() { uniform float x = s; Ci = comp(x); }\n",
-        "imager d() { Ci = s; }\n",
+        "imager d() { Ci = N; }\n",
         "surface e() { float x = 1 Ci = x; }\n",
     ];
     let mut all = String::new();

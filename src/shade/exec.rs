@@ -224,6 +224,12 @@ pub struct Exec<'a> {
 const MAX_ITERATIONS: u64 = 1 << 26;
 
 impl<'a> Exec<'a> {
+    /// Loop iterations run so far in this execution (deterministic for a program and grid):
+    /// lets `random()` inside a loop give new numbers on every iteration.
+    pub fn loop_iterations(&self) -> u64 {
+        self.iterations
+    }
+
     /// A register file with constants set and every other register zeroed.
     pub fn new(prog: &'a Program, n: usize, env: &'a Env<'a>) -> Exec<'a> {
         let mut regs: Vec<Slot> = prog

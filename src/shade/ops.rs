@@ -916,14 +916,26 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                     .collect(),
             );
         }
+        // A uniform result (stored into a `uniform` variable): one number per grid.
+        RandomF if !ex.prog.regs[dst as usize].varying => {
+            out = Slot::F(pn_hash(ex.env.seed, random_site(ex, span), u32::MAX, 0));
+        }
+        RandomT if !ex.prog.regs[dst as usize].varying => {
+            let (seed, base) = (ex.env.seed, random_site(ex, span));
+            out = Slot::T(Vec3::new(
+                pn_hash(seed, base, u32::MAX, 0),
+                pn_hash(seed, base, u32::MAX, 1),
+                pn_hash(seed, base, u32::MAX, 2),
+            ));
+        }
         RandomF => {
             let seed = ex.env.seed;
-            let base = span.start;
+            let base = random_site(ex, span);
             out = Slot::VF((0..n).map(|i| pn_hash(seed, base, i as u32, 0)).collect());
         }
         RandomT => {
             let seed = ex.env.seed;
-            let base = span.start;
+            let base = random_site(ex, span);
             out = Slot::VT(
                 (0..n)
                     .map(|i| {
@@ -1530,6 +1542,13 @@ fn iper(p: Vec3) -> IVec3 {
         pn::period_from_float(p.y),
         pn::period_from_float(p.z),
     )
+}
+
+/// The hash site of a `random()` call: its place in the source, and how many loop iterations
+/// ran before it, so a call inside a loop (stratified sampling in glass.sl) differs per pass.
+fn random_site(ex: &Exec, span: crate::diag::Span) -> u32 {
+    let it = ex.loop_iterations();
+    span.start ^ (it as u32).wrapping_mul(0x9E37_79B9) ^ ((it >> 32) as u32)
 }
 
 fn pn_hash(seed: u32, site: u32, i: u32, k: u32) -> f32 {

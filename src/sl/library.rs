@@ -77,7 +77,16 @@ pub fn compile_source(
 ) -> Vec<Program> {
     let file = sources.add(name, text);
     let resolver = Resolver { opts };
+    let before = diags.snapshot().len();
     let pre = preprocess(file, path, sources, &opts.defines, &resolver, diags);
+    // A missing header leaves names undefined everywhere; its one diagnostic says it all, so
+    // the cascade of unknown names it would cause is not compiled and reported.
+    let missing_include = diags.snapshot()[before..]
+        .iter()
+        .any(|(d, _)| d.is_error() && d.code == "sl::include");
+    if missing_include {
+        return Vec::new();
+    }
     let span = |a: usize, b: usize| pre.span(a, b);
     let Some(ast) = crate::sl::parse::parse(&pre.text, &span, diags) else {
         return Vec::new();

@@ -94,7 +94,9 @@ fn global_access(kind: ShaderKind, name: &str) -> (bool, bool) {
         },
         Light => match name {
             "Cl" | "Ol" | "L" => rw,
-            "Ci" | "Oi" | "Cs" | "Os" | "alpha" | "I" => none,
+            // `I` is readable as a PRMan extension (warned where used): the illuminated
+            // surface's incident vector, which arbor binds for light shaders.
+            "Ci" | "Oi" | "Cs" | "Os" | "alpha" => none,
             _ => r,
         },
         Displacement => match name {
@@ -162,6 +164,13 @@ struct Lowerer<'a> {
     /// Registers below this are globals; those read or written are kept in the program.
     globals_end: usize,
     used_globals: HashSet<Reg>,
+    /// Non-standard extensions already warned about in this shader (one warning each).
+    warned: HashSet<&'static str>,
+    /// Lowering the value stored into a variable declared `uniform`: `random()` there gives one
+    /// number per grid (RISpec §15.1; Aqsis' randgrid.sl colours each grid this way).
+    uniform_target: bool,
+    /// Declarations written `uniform` (their `candidate` is set too, for demotion).
+    explicit_uniform: HashSet<Span>,
 }
 
 fn ty_name(ty: BaseType, array: Option<usize>) -> String {
@@ -233,6 +242,9 @@ impl<'a> Lowerer<'a> {
             error_reg: 0,
             globals_end: 0,
             used_globals: HashSet::new(),
+            warned: HashSet::new(),
+            uniform_target: false,
+            explicit_uniform: HashSet::new(),
         };
         lw.error_reg = lw.const_float(0.0);
         lw
@@ -322,6 +334,97 @@ impl<'a> Lowerer<'a> {
     fn error(&mut self, d: Diag) -> Val {
         self.diags.push(d);
         self.error_val()
+    }
+
+    /// Whether values stored into `var` are uniform by declaration (`uniform` locals and
+    /// parameters), not merely uniform so far by inference.
+    fn is_uniform_target(&self, var: &Var) -> bool {
+        !var.varying && (var.candidate.is_none() || self.explicit_uniform.contains(&var.decl_span))
+    }
+
+    /// One warning per shader for a recognised non-standard extension.
+    fn warn_extension(&mut self, key: &'static str, span: Span, msg: &str) {
+        if self.warned.insert(key) {
+            self.diags.push(
+                Diag::warning("sl::extension", msg.to_string())
+                    .label(span, "non-standard")
+                    .help("written for another renderer: arbor accepts it as the message says"),
+            );
+        }
+    }
+
+    /// Functions of other renderers (PRMan, BMRT, Pixie, Aqsis) that arbor cannot compute:
+    /// the arguments are type-checked, one warning names the function, and the call yields
+    /// the value a renderer without the feature gives (no occlusion, no indirect light,
+    /// nothing baked). None for any other name.
+    fn extension_call(&mut self, name: &str, args: &[Expr], span: Span) -> Option<Val> {
+        let (key, ty, value, what): (&'static str, BaseType, Const, &str) = match name {
+            "occlusion" => (
+                "occlusion",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (unoccluded)",
+            ),
+            "indirectdiffuse" => (
+                "indirectdiffuse",
+                BaseType::Color,
+                Const::T(Vec3::ZERO),
+                "black (no indirect light)",
+            ),
+            "transmission" => (
+                "transmission",
+                BaseType::Color,
+                Const::T(Vec3::ONE),
+                "white (nothing in the way)",
+            ),
+            "visibility" => (
+                "visibility",
+                BaseType::Color,
+                Const::T(Vec3::ONE),
+                "white (visible)",
+            ),
+            "caustic" => ("caustic", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "photonmap" => ("photonmap", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "subsurface" => ("subsurface", BaseType::Color, Const::T(Vec3::ZERO), "black"),
+            "bake" => (
+                "bake",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing written)",
+            ),
+            "bake3d" => (
+                "bake3d",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing written)",
+            ),
+            "texture3d" => (
+                "texture3d",
+                BaseType::Float,
+                Const::F(0.0),
+                "0 (nothing read)",
+            ),
+            "rayhittest" => (
+                "rayhittest",
+                BaseType::Float,
+                Const::F(1.0e30),
+                "1e30 (every ray misses)",
+            ),
+            "isindirectray" => ("isindirectray", BaseType::Float, Const::F(0.0), "0"),
+            "iscameraray" => ("iscameraray", BaseType::Float, Const::F(1.0), "1"),
+            _ => return None,
+        };
+        for a in args {
+            self.expr(a, None);
+        }
+        self.warn_extension(
+            key,
+            span,
+            &format!(
+                "`{name}` is a non-standard extension arbor does not compute; it returns {what}"
+            ),
+        );
+        Some(self.const_val(value, ty))
     }
 
     fn error_val(&self) -> Val {
@@ -557,7 +660,10 @@ impl<'a> Lowerer<'a> {
                 );
             }
             _ => {
+                let saved = self.uniform_target;
+                self.uniform_target = self.is_uniform_target(var);
                 let v = self.expr(e, Some(var.ty));
+                self.uniform_target = saved;
                 let v = self.coerce(v, var.ty, e.span);
                 self.store_reg(var, var.reg, v, e.span);
             }
@@ -646,6 +752,7 @@ impl<'a> Lowerer<'a> {
                         // under deeper varying control flow is demoted to varying with a
                         // warning (PRMan/BMRT-era shaders rely on this), not rejected.
                         Some(Detail::Uniform) => {
+                            self.explicit_uniform.insert(v.span);
                             let demoted = self.forced.contains(&v.span);
                             if demoted {
                                 self.diags.push(
@@ -1235,6 +1342,13 @@ impl<'a> Lowerer<'a> {
                 if GLOBALS.iter().any(|g| g.0 == name)
                     && self.scopes[0].get(name).map(|g| g.reg) == Some(var.reg)
                 {
+                    if name == "I" && self.kind == ShaderKind::Light {
+                        self.warn_extension(
+                            "I",
+                            span,
+                            "`I` in a light shader is a PRMan extension; arbor gives the illuminated surface's incident vector",
+                        );
+                    }
                     if matches!(name, "L" | "Cl" | "Ol")
                         && matches!(self.kind, ShaderKind::Surface | ShaderKind::Volume)
                         && self.in_illuminance == 0
@@ -1256,6 +1370,36 @@ impl<'a> Lowerer<'a> {
                 }
             }
             None if name == "PI" => self.const_val(Const::F(std::f32::consts::PI), BaseType::Float),
+            None if name == "Ns" && self.kind == ShaderKind::Light => {
+                // PRMan's `Ns`: the normal at the illuminated point, which is what arbor
+                // binds to `N` in light shaders.
+                self.warn_extension(
+                    "Ns",
+                    span,
+                    "`Ns` is a PRMan extension; arbor reads the illuminated surface's normal `N`",
+                );
+                self.ident("N", span)
+            }
+            None if self.kind == ShaderKind::Imager
+                && matches!(name, "s" | "t" | "u" | "v" | "du" | "dv") =>
+            {
+                // RISpec gives imagers no surface parameters, but Aqsis' compiler accepts
+                // them (its `filmgrain` imager uses s and t).
+                let what: &'static str = match name {
+                    "s" => "s",
+                    "t" => "t",
+                    "u" => "u",
+                    "v" => "v",
+                    "du" => "du",
+                    _ => "dv",
+                };
+                self.warn_extension(
+                    what,
+                    span,
+                    &format!("`{name}` is not defined in imager shaders (RISpec); it reads 0 here"),
+                );
+                self.const_val(Const::F(0.0), BaseType::Float)
+            }
             None => {
                 let is_global = GLOBALS.iter().any(|g| g.0 == name);
                 let mut d = if is_global {
@@ -1691,6 +1835,33 @@ impl<'a> Lowerer<'a> {
                 let Some(var) = self.lookup(name) else {
                     return self.ident(name, target.span);
                 };
+                // BMRT's and PRMan's light shaders may overwrite their geometric inputs (e.g.
+                // `N = normalize(N)` in arealight.sl); arbor keeps the change local to the light.
+                let light_local: Option<&'static str> = match name.as_str() {
+                    "N" => Some("N"),
+                    "Ng" => Some("Ng"),
+                    "P" => Some("P"),
+                    "s" => Some("s"),
+                    "t" => Some("t"),
+                    "u" => Some("u"),
+                    "v" => Some("v"),
+                    _ => None,
+                };
+                let is_global = self.scopes[0].get(name.as_str()).map(|g| g.reg) == Some(var.reg);
+                let var = match light_local {
+                    Some(key) if !var.writable && is_global && self.kind == ShaderKind::Light => {
+                        self.warn_extension(
+                            key,
+                            target.span,
+                            &format!("assigning `{name}` in a light shader is an extension of BMRT and PRMan; the new value stays local to this light"),
+                        );
+                        Var {
+                            writable: true,
+                            ..var
+                        }
+                    }
+                    _ => var,
+                };
                 if !var.writable {
                     return self.error(
                         Diag::error("sl::readonly", format!("`{name}` cannot be assigned here"))
@@ -1709,7 +1880,10 @@ impl<'a> Lowerer<'a> {
                             .label(span, "assignment"),
                     );
                 }
+                let saved = self.uniform_target;
+                self.uniform_target = self.is_uniform_target(&var);
                 let v = self.assign_value(op, &var_val(&var), value, span);
+                self.uniform_target = saved;
                 let v = self.coerce(v, var.ty, value.span);
                 self.store(&var, v, span);
                 self.mark_written(var.reg);
@@ -1882,6 +2056,9 @@ impl<'a> Lowerer<'a> {
             }
             _ => {}
         }
+        if let Some(v) = self.extension_call(name, args, span) {
+            return v;
+        }
         let sigs: Vec<&'static Sig> = builtins::overloads(name).collect();
         if sigs.is_empty() {
             let mut candidates: Vec<String> =
@@ -1951,7 +2128,8 @@ impl<'a> Lowerer<'a> {
         let (codes, _) = builtins::parse_args(sig.args);
         let mut regs = Vec::new();
         let mut outs = Vec::new();
-        let mut varying = always_varying(sig.f);
+        let mut varying = always_varying(sig.f)
+            && !(self.uniform_target && matches!(sig.f, Builtin::RandomF | Builtin::RandomT));
         if matches!(sig.f, Builtin::Horizon | Builtin::HorizonHeight) {
             // They read the surface frame (P, N, I) from the grid even when the shader
             // never names those globals: keep them in the program.

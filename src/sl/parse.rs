@@ -1234,9 +1234,12 @@ fn brace_help(opens: usize, closes: usize) -> String {
 /// The identifier-like word ending at `end` (start and text; empty if none).
 fn word_before(text: &str, end: usize) -> (usize, &str) {
     let head = &text[..end];
+    // Step past the whole separator character: it may be several bytes long.
     let start = head
-        .rfind(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-        .map_or(0, |i| i + 1);
+        .char_indices()
+        .rev()
+        .find(|&(_, c)| !(c.is_ascii_alphanumeric() || c == '_'))
+        .map_or(0, |(i, c)| i + c.len_utf8());
     (start, &head[start..])
 }
 
@@ -1401,12 +1404,6 @@ fn is_reserved(w: &str) -> bool {
                 | "illuminate"
                 | "solar"
                 | "gather"
-                | "surface"
-                | "displacement"
-                | "light"
-                | "volume"
-                | "imager"
-                | "transformation"
         )
 }
 
