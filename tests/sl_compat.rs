@@ -394,3 +394,37 @@ fn assignments_from_temporaries_move_only_where_safe() {
         );
     }
 }
+
+/// `break` inside a function counts only the function's own loops: one in a function called
+/// from a loop (with no loop of its own) is an error, one in the function's loop is fine.
+#[test]
+fn break_in_a_function_does_not_reach_the_callers_loop() {
+    let (_, rendered, err) = compile(
+        r#"float f(float x) { if (x > 0.5) break; return x; }
+        surface brk() {
+            float i, a = 0;
+            for (i = 0; i < 4; i += 1) { a += f(s); }
+            Ci = a;
+        }"#,
+    );
+    assert!(err, "expected an error:\n{rendered}");
+    assert!(
+        rendered.contains("sl::control") && rendered.contains("function `f`"),
+        "{rendered}"
+    );
+    let (prog, _) = compile_ok(
+        r#"float g(float x) {
+            float k, acc = 0;
+            for (k = 0; k < 10; k += 1) { if (k >= x) break; acc += 1; }
+            return acc;
+        }
+        surface ok() {
+            float i, a = 0;
+            for (i = 0; i < 2; i += 1) { a += g(3); }
+            Ci = a;
+            Oi = 1;
+        }"#,
+    );
+    let (ci, _) = run(&prog, 4);
+    assert!(ci.iter().all(|c| (c.x - 6.0).abs() < 1e-6), "{ci:?}");
+}

@@ -826,13 +826,17 @@ impl<'a> Lowerer<'a> {
             StmtKind::Break(n) | StmtKind::Continue(n) => {
                 let n = (*n).max(1);
                 if n as usize > self.loops.len() {
-                    self.diags.push(
-                        Diag::error(
-                            "sl::control",
-                            format!("`break`/`continue` {n} is outside {n} loops"),
-                        )
-                        .label(s.span, "here"),
-                    );
+                    let mut d = Diag::error(
+                        "sl::control",
+                        format!("`break`/`continue` {n} is outside {n} loops"),
+                    )
+                    .label(s.span, "here");
+                    if let Some(f) = self.inline_stack.last() {
+                        d = d.help(format!(
+                            "inside function `{f}` only its own loops count; use `return` to leave the function"
+                        ));
+                    }
+                    self.diags.push(d);
                     return;
                 }
                 let frame = &self.loops[self.loops.len() - n as usize];
@@ -2522,8 +2526,12 @@ impl<'a> Lowerer<'a> {
             span: def.span,
         });
         self.inline_stack.push(name.to_string());
+        // `break`/`continue` in the body count only the function's own loops: the caller's
+        // loops are not reachable from inside a function.
+        let caller_loops = std::mem::take(&mut self.loops);
         // Nested functions defined in the body are visible inside it.
         let (body, ()) = self.with_block(|lw| lw.block_stmts(&def.body));
+        self.loops = caller_loops;
         self.inline_stack.pop();
         self.fn_frames.pop();
         if forced_fn {
