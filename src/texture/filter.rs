@@ -181,7 +181,10 @@ fn trilinear(
     wsum
 }
 
-const EWA_CUT: f32 = 6.0;
+/// The Gaussian is cut at Q = 9 (3σ): with the minor σ at ½–1 texel on the chosen level, a
+/// tighter cut leaves the truncated kernel's centroid off the centre by a visible fraction of
+/// a texel (slopes taken from it are then off by a few percent).
+const EWA_CUT: f32 = 9.0;
 const MAX_ANISO: f32 = 16.0;
 /// Variance of the pixel Gaussian per unit footprint axis (σ ≈ 0.35 of a micropolygon).
 const PIXEL_VAR: f32 = 0.125;
@@ -256,10 +259,11 @@ pub fn ewa_setup(
         }
         lmin_eff = want_min;
     }
-    // Level where the minor σ is 1–2 texels.
+    // Level where the minor σ is ½–1 texel (with the reconstruction term, ≥ 0.6 texel: enough
+    // to reconstruct; one level finer quadruples the texels visited for little gain).
     let sig_min = lmin_eff.sqrt();
-    let level = if sig_min > 1.0 {
-        (sig_min.log2().floor() as usize).min(levels.len() - 1)
+    let level = if sig_min > 0.5 {
+        ((sig_min.log2().floor() + 1.0) as usize).min(levels.len() - 1)
     } else {
         0
     };
