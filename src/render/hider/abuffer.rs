@@ -723,139 +723,120 @@ fn fragment_grid(b: &mut Bucket, rect: PixelRect, w: usize, g: &ShadedGrid, mask
     let cfg = b.cfg;
     let nu = g.nu;
     let aw = g.aov_width;
-    let wx0 = (rect.x0 as f32).max(g.bound[0]);
-    let wy0 = (rect.y0 as f32).max(g.bound[1]);
-    let wx1 = (rect.x1 as f32).min(g.bound[2]);
-    let wy1 = (rect.y1 as f32).min(g.bound[3]);
-    if !(wx0 < wx1 && wy0 < wy1) {
+    let Some(win) = g.window(&rect) else {
         return;
-    }
+    };
+    let [wx0, wy0, wx1, wy1] = win;
     let rw = rect.width();
     let mut aov = vec![0f32; aw];
-    for j in 0..g.nv.saturating_sub(1) {
-        if !g
-            .row_bounds
-            .get(j)
-            .is_some_and(|rb| super::overlaps(rb, wx0, wy0, wx1, wy1))
-        {
+    let mut visible = Vec::new();
+    g.micropolygons_in(win, &mut visible);
+    for &(m, k, [x0, y0, x1, y1]) in &visible {
+        let corner = [k, k + 1, k + nu + 1, k + nu];
+        let poly = corner.map(|c| g.xy[c]);
+        let px0 = floor_i32(x0.max(wx0)).max(rect.x0);
+        let px1 = floor_i32(x1.min(wx1)).min(rect.x1 - 1);
+        let py0 = floor_i32(y0.max(wy0)).max(rect.y0);
+        let py1 = floor_i32(y1.min(wy1)).min(rect.y1 - 1);
+        if px0 > px1 || py0 > py1 {
             continue;
         }
-        for i in 0..nu.saturating_sub(1) {
-            let m = j * (nu - 1) + i;
-            if !g.live[m] {
-                continue;
-            }
-            let [x0, y0, x1, y1] = g.mp_bounds[m];
-            if !(x0.max(wx0) <= x1.min(wx1) && y0.max(wy0) <= y1.min(wy1)) {
-                continue;
-            }
-            let k = j * nu + i;
-            let corner = [k, k + 1, k + nu + 1, k + nu];
-            let poly = corner.map(|c| g.xy[c]);
-            let px0 = floor_i32(x0.max(wx0)).max(rect.x0);
-            let px1 = floor_i32(x1.min(wx1)).min(rect.x1 - 1);
-            let py0 = floor_i32(y0.max(wy0)).max(rect.y0);
-            let py1 = floor_i32(y1.min(wy1)).min(rect.y1 - 1);
-            if px0 > px1 || py0 > py1 {
-                continue;
-            }
-            rasterize(&poly, w, px0, px1, py0, py1, masks);
-            // Depth: the affine plane of one non-degenerate half, clamped to the corner range.
-            let q = corner.map(|c| g.depth[c]);
-            let (qlo, qhi) = (
-                q.iter().fold(f32::INFINITY, |a, &b| a.min(b)),
-                q.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)),
-            );
-            let plane = plane_of(&poly, &q);
-            let mean = |f: &dyn Fn(usize) -> [f32; 3]| {
-                let mut s = [0f32; 3];
-                for &c in &corner {
-                    let v = f(c);
-                    for t in 0..3 {
-                        s[t] += 0.25 * v[t];
-                    }
+        rasterize(&poly, w, px0, px1, py0, py1, masks);
+        // Depth: the affine plane of one non-degenerate half, clamped to the corner range.
+        let q = corner.map(|c| g.depth[c]);
+        let (qlo, qhi) = (
+            q.iter().fold(f32::INFINITY, |a, &b| a.min(b)),
+            q.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)),
+        );
+        let plane = plane_of(&poly, &q);
+        let mean = |f: &dyn Fn(usize) -> [f32; 3]| {
+            let mut s = [0f32; 3];
+            for &c in &corner {
+                let v = f(c);
+                for t in 0..3 {
+                    s[t] += 0.25 * v[t];
                 }
-                s
-            };
-            let flat_c = mean(&|c| g.ci[c]);
-            let flat_o = mean(&|c| g.oi[c]);
-            let npx = (px1 - px0 + 1) as usize;
-            let sub = m as u32;
-            for py in py0..=py1 {
-                for px in px0..=px1 {
-                    let mask = masks[(py - py0) as usize * npx + (px - px0) as usize];
-                    b.micro_pixels += 1;
-                    if is_zero(&mask) {
+            }
+            s
+        };
+        let flat_c = mean(&|c| g.ci[c]);
+        let flat_o = mean(&|c| g.oi[c]);
+        let npx = (px1 - px0 + 1) as usize;
+        let sub = m as u32;
+        for py in py0..=py1 {
+            for px in px0..=px1 {
+                let mask = masks[(py - py0) as usize * npx + (px - px0) as usize];
+                b.micro_pixels += 1;
+                if is_zero(&mask) {
+                    continue;
+                }
+                // The covered part lies in pixel ∩ micropolygon bound.
+                let (cx0, cx1) = ((px as f32).max(x0), ((px + 1) as f32).min(x1));
+                let (cy0, cy1) = ((py as f32).max(y0), ((py + 1) as f32).min(y1));
+                let (mut lo, mut hi) = (qlo, qhi);
+                if let Some([q0, dx, dy, ox, oy]) = plane {
+                    let e = |x: f32, y: f32| q0 + dx * (x - ox) + dy * (y - oy);
+                    let v = [e(cx0, cy0), e(cx1, cy0), e(cx0, cy1), e(cx1, cy1)];
+                    let vlo = v.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+                    let vhi = v.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+                    lo = vlo.clamp(qlo, qhi);
+                    hi = vhi.clamp(qlo, qhi);
+                }
+                let (zmin, zmax) = if cfg.perspective {
+                    (1.0 / hi, 1.0 / lo)
+                } else {
+                    (lo, hi)
+                };
+                if !(zmax >= cfg.near && zmin <= cfg.far) || zmin.is_nan() || zmax.is_nan() {
+                    continue;
+                }
+                let (cx, cy) = (0.5 * (cx0 + cx1), 0.5 * (cy0 + cy1));
+                if !cfg.clip_planes.is_empty() {
+                    let p = cfg.camera_point(cx, cy, 0.5 * (zmin + zmax));
+                    if cfg
+                        .clip_planes
+                        .iter()
+                        .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
+                    {
                         continue;
                     }
-                    // The covered part lies in pixel ∩ micropolygon bound.
-                    let (cx0, cx1) = ((px as f32).max(x0), ((px + 1) as f32).min(x1));
-                    let (cy0, cy1) = ((py as f32).max(y0), ((py + 1) as f32).min(y1));
-                    let (mut lo, mut hi) = (qlo, qhi);
-                    if let Some([q0, dx, dy, ox, oy]) = plane {
-                        let e = |x: f32, y: f32| q0 + dx * (x - ox) + dy * (y - oy);
-                        let v = [e(cx0, cy0), e(cx1, cy0), e(cx0, cy1), e(cx1, cy1)];
-                        let vlo = v.iter().fold(f32::INFINITY, |a, &b| a.min(b));
-                        let vhi = v.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-                        lo = vlo.clamp(qlo, qhi);
-                        hi = vhi.clamp(qlo, qhi);
-                    }
-                    let (zmin, zmax) = if cfg.perspective {
-                        (1.0 / hi, 1.0 / lo)
-                    } else {
-                        (lo, hi)
-                    };
-                    if !(zmax >= cfg.near && zmin <= cfg.far) || zmin.is_nan() || zmax.is_nan() {
-                        continue;
-                    }
-                    let (cx, cy) = (0.5 * (cx0 + cx1), 0.5 * (cy0 + cy1));
-                    if !cfg.clip_planes.is_empty() {
-                        let p = cfg.camera_point(cx, cy, 0.5 * (zmin + zmax));
-                        if cfg
-                            .clip_planes
-                            .iter()
-                            .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
-                        {
-                            continue;
-                        }
-                    }
-                    let (c, o) = if g.smooth {
-                        let wts = weights_at(&poly, cx, cy);
-                        let mut c = [0f32; 3];
-                        let mut o = [0f32; 3];
-                        for (vi, &gi) in corner.iter().enumerate() {
-                            for t in 0..3 {
-                                c[t] += wts[vi] * g.ci[gi][t];
-                                o[t] += wts[vi] * g.oi[gi][t];
-                            }
-                        }
-                        for t in 0..aw {
-                            aov[t] = (0..4).map(|vi| wts[vi] * g.aov[corner[vi] * aw + t]).sum();
-                        }
-                        (c, o)
-                    } else {
-                        for t in 0..aw {
-                            aov[t] = corner.iter().map(|&c| 0.25 * g.aov[c * aw + t]).sum();
-                        }
-                        (flat_c, flat_o)
-                    };
-                    let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;
-                    b.insert(
-                        pix,
-                        Frag {
-                            mask,
-                            zmin,
-                            zmax,
-                            key: g.key,
-                            sub,
-                            next: NONE,
-                            matte: g.matte,
-                            c,
-                            o,
-                        },
-                        &aov,
-                    );
                 }
+                let (c, o) = if g.smooth {
+                    let wts = weights_at(&poly, cx, cy);
+                    let mut c = [0f32; 3];
+                    let mut o = [0f32; 3];
+                    for (vi, &gi) in corner.iter().enumerate() {
+                        for t in 0..3 {
+                            c[t] += wts[vi] * g.ci[gi][t];
+                            o[t] += wts[vi] * g.oi[gi][t];
+                        }
+                    }
+                    for t in 0..aw {
+                        aov[t] = (0..4).map(|vi| wts[vi] * g.aov[corner[vi] * aw + t]).sum();
+                    }
+                    (c, o)
+                } else {
+                    for t in 0..aw {
+                        aov[t] = corner.iter().map(|&c| 0.25 * g.aov[c * aw + t]).sum();
+                    }
+                    (flat_c, flat_o)
+                };
+                let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;
+                b.insert(
+                    pix,
+                    Frag {
+                        mask,
+                        zmin,
+                        zmax,
+                        key: g.key,
+                        sub,
+                        next: NONE,
+                        matte: g.matte,
+                        c,
+                        o,
+                    },
+                    &aov,
+                );
             }
         }
     }

@@ -240,6 +240,39 @@ impl ShadedGrid {
         }
     }
 
+    /// Where this grid is sampled in bucket `rect`: the region clipped by the grid's bound
+    /// as (x0, y0, x1, y1), or None when they do not meet.
+    pub fn window(&self, rect: &PixelRect) -> Option<[f32; 4]> {
+        let w = [
+            (rect.x0 as f32).max(self.bound[0]),
+            (rect.y0 as f32).max(self.bound[1]),
+            (rect.x1 as f32).min(self.bound[2]),
+            (rect.y1 as f32).min(self.bound[3]),
+        ];
+        (w[0] < w[2] && w[1] < w[3]).then_some(w)
+    }
+
+    /// The live micropolygons whose raster bound meets window `w`, as (micropolygon index,
+    /// index of its first corner point, bound), into `out` (cleared first). Rows whose bound
+    /// misses the window are skipped whole.
+    pub fn micropolygons_in(&self, w: [f32; 4], out: &mut Vec<(usize, usize, [f32; 4])>) {
+        out.clear();
+        let [x0, y0, x1, y1] = w;
+        let cols = self.nu.saturating_sub(1);
+        for (j, rb) in self.row_bounds.iter().enumerate() {
+            if !overlaps(rb, x0, y0, x1, y1) {
+                continue;
+            }
+            for i in 0..cols {
+                let m = j * cols + i;
+                let mb = self.mp_bounds[m];
+                if self.live[m] && overlaps(&mb, x0, y0, x1, y1) {
+                    out.push((m, j * self.nu + i, mb));
+                }
+            }
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         !(self.bound[0] <= self.bound[2] && self.bound[1] <= self.bound[3])
     }

@@ -220,156 +220,136 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
     let nu = g.nu;
     let aw = g.aov_width;
     // Sampling window: the bucket region clipped by the grid's own bound.
-    let wx0 = (rect.x0 as f32).max(g.bound[0]);
-    let wy0 = (rect.y0 as f32).max(g.bound[1]);
-    let wx1 = (rect.x1 as f32).min(g.bound[2]);
-    let wy1 = (rect.y1 as f32).min(g.bound[3]);
-    if !(wx0 < wx1 && wy0 < wy1) {
+    let Some(win) = g.window(&rect) else {
         return;
-    }
+    };
+    let [wx0, wy0, wx1, wy1] = win;
     let mut mean_aov = vec![0f32; aw];
     let mut interp_aov = vec![0f32; aw];
-    for j in 0..g.nv.saturating_sub(1) {
-        if !g
-            .row_bounds
-            .get(j)
-            .is_some_and(|rb| super::overlaps(rb, wx0, wy0, wx1, wy1))
-        {
+    let mut visible = Vec::new();
+    g.micropolygons_in(win, &mut visible);
+    for &(m, k, mb) in &visible {
+        let corner = [k, k + 1, k + nu + 1, k + nu];
+        let (x0, y0, x1, y1) = (
+            mb[0].max(wx0),
+            mb[1].max(wy0),
+            mb[2].min(wx1),
+            mb[3].min(wy1),
+        );
+        if !(x0 <= x1 && y0 <= y1) {
             continue;
         }
-        for i in 0..nu.saturating_sub(1) {
-            let m = j * (nu - 1) + i;
-            if !g.live[m] {
-                continue;
+        // Constant shading: one colour per micropolygon, the mean of its corners.
+        let mut cc = [0f32; 3];
+        let mut co = [0f32; 3];
+        for &c in &corner {
+            for q in 0..3 {
+                cc[q] += g.ci[c][q] * 0.25;
+                co[q] += g.oi[c][q] * 0.25;
             }
-            let mb = g.mp_bounds[m];
-            if !super::overlaps(&mb, wx0, wy0, wx1, wy1) {
-                continue;
-            }
-            let k = j * nu + i;
-            let corner = [k, k + 1, k + nu + 1, k + nu];
-            let (x0, y0, x1, y1) = (
-                mb[0].max(wx0),
-                mb[1].max(wy0),
-                mb[2].min(wx1),
-                mb[3].min(wy1),
-            );
-            if !(x0 <= x1 && y0 <= y1) {
-                continue;
-            }
-            // Constant shading: one colour per micropolygon, the mean of its corners.
-            let mut cc = [0f32; 3];
-            let mut co = [0f32; 3];
+        }
+        if aw > 0 {
+            mean_aov.iter_mut().for_each(|v| *v = 0.0);
             for &c in &corner {
-                for q in 0..3 {
-                    cc[q] += g.ci[c][q] * 0.25;
-                    co[q] += g.oi[c][q] * 0.25;
+                for q in 0..aw {
+                    mean_aov[q] += g.aov[c * aw + q] * 0.25;
                 }
             }
-            if aw > 0 {
-                mean_aov.iter_mut().for_each(|v| *v = 0.0);
-                for &c in &corner {
-                    for q in 0..aw {
-                        mean_aov[q] += g.aov[c * aw + q] * 0.25;
-                    }
-                }
+        }
+        // Two triangles sharing the diagonal corner[0]–corner[2].
+        for (t, tri) in [
+            [corner[0], corner[1], corner[2]],
+            [corner[0], corner[2], corner[3]],
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut v = [g.xy[tri[0]], g.xy[tri[1]], g.xy[tri[2]]];
+            let mut idx = tri;
+            let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
+                - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+            if area == 0.0 || !area.is_finite() {
+                continue;
             }
-            // Two triangles sharing the diagonal corner[0]–corner[2].
-            for (t, tri) in [
-                [corner[0], corner[1], corner[2]],
-                [corner[0], corner[2], corner[3]],
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                let mut v = [g.xy[tri[0]], g.xy[tri[1]], g.xy[tri[2]]];
-                let mut idx = tri;
-                let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
-                    - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
-                if area == 0.0 || !area.is_finite() {
-                    continue;
-                }
-                if area < 0.0 {
-                    v.swap(1, 2);
-                    idx.swap(1, 2);
-                }
-                let area = area.abs();
-                let tx0 = v[0][0].min(v[1][0]).min(v[2][0]).max(x0);
-                let tx1 = v[0][0].max(v[1][0]).max(v[2][0]).min(x1);
-                let ty0 = v[0][1].min(v[1][1]).min(v[2][1]).max(y0);
-                let ty1 = v[0][1].max(v[1][1]).max(v[2][1]).min(y1);
-                if !(tx0 <= tx1 && ty0 <= ty1) {
-                    continue;
-                }
-                let px0 = floor_i32(tx0).max(rect.x0);
-                let px1 = floor_i32(tx1).min(rect.x1 - 1);
-                let py0 = floor_i32(ty0).max(rect.y0);
-                let py1 = floor_i32(ty1).min(rect.y1 - 1);
-                let sub = (m as u32) << 1 | t as u32;
-                let inv_area = 1.0 / area;
-                let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
-                for py in py0..=py1 {
-                    for px in px0..=px1 {
-                        let base = ((py - rect.y0) as usize * rect.width()
-                            + (px - rect.x0) as usize)
-                            * spp;
-                        for s in base..base + spp {
-                            let pos = buf.positions[s];
-                            if pos[0] < tx0 || pos[0] > tx1 || pos[1] < ty0 || pos[1] > ty1 {
-                                continue;
-                            }
-                            b.tested += 1;
-                            let e0 = edge(v[1], v[2], pos);
-                            if !inside(e0) {
-                                continue;
-                            }
-                            let e1 = edge(v[2], v[0], pos);
-                            if !inside(e1) {
-                                continue;
-                            }
-                            let e2 = edge(v[0], v[1], pos);
-                            if !inside(e2) {
-                                continue;
-                            }
-                            let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
-                            let w0 = 1.0 - w1 - w2;
-                            // Relative to vertex 0, so a constant depth stays exact.
-                            let q = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
-                            let z = if cfg.perspective { 1.0 / q } else { q };
-                            if !(z >= cfg.near && z <= cfg.far) {
-                                continue;
-                            }
-                            if !cfg.clip_planes.is_empty() {
-                                let p = cfg.camera_point(pos[0], pos[1], z);
-                                if cfg
-                                    .clip_planes
-                                    .iter()
-                                    .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
-                                {
-                                    continue;
-                                }
-                            }
-                            let (c, o, aov): ([f32; 3], [f32; 3], &[f32]) = if g.smooth {
-                                let w = [w0, w1, w2];
-                                let mut c = [0f32; 3];
-                                let mut o = [0f32; 3];
-                                for (vi, &gi) in idx.iter().enumerate() {
-                                    for q in 0..3 {
-                                        c[q] += w[vi] * g.ci[gi][q];
-                                        o[q] += w[vi] * g.oi[gi][q];
-                                    }
-                                }
-                                for q in 0..aw {
-                                    interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
-                                        + w1 * g.aov[idx[1] * aw + q]
-                                        + w2 * g.aov[idx[2] * aw + q];
-                                }
-                                (c, o, &interp_aov)
-                            } else {
-                                (cc, co, &mean_aov)
-                            };
-                            b.insert(s, z, g.key, sub, c, o, g.matte, aov);
+            if area < 0.0 {
+                v.swap(1, 2);
+                idx.swap(1, 2);
+            }
+            let area = area.abs();
+            let tx0 = v[0][0].min(v[1][0]).min(v[2][0]).max(x0);
+            let tx1 = v[0][0].max(v[1][0]).max(v[2][0]).min(x1);
+            let ty0 = v[0][1].min(v[1][1]).min(v[2][1]).max(y0);
+            let ty1 = v[0][1].max(v[1][1]).max(v[2][1]).min(y1);
+            if !(tx0 <= tx1 && ty0 <= ty1) {
+                continue;
+            }
+            let px0 = floor_i32(tx0).max(rect.x0);
+            let px1 = floor_i32(tx1).min(rect.x1 - 1);
+            let py0 = floor_i32(ty0).max(rect.y0);
+            let py1 = floor_i32(ty1).min(rect.y1 - 1);
+            let sub = (m as u32) << 1 | t as u32;
+            let inv_area = 1.0 / area;
+            let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
+            for py in py0..=py1 {
+                for px in px0..=px1 {
+                    let base =
+                        ((py - rect.y0) as usize * rect.width() + (px - rect.x0) as usize) * spp;
+                    for s in base..base + spp {
+                        let pos = buf.positions[s];
+                        if pos[0] < tx0 || pos[0] > tx1 || pos[1] < ty0 || pos[1] > ty1 {
+                            continue;
                         }
+                        b.tested += 1;
+                        let e0 = edge(v[1], v[2], pos);
+                        if !inside(e0) {
+                            continue;
+                        }
+                        let e1 = edge(v[2], v[0], pos);
+                        if !inside(e1) {
+                            continue;
+                        }
+                        let e2 = edge(v[0], v[1], pos);
+                        if !inside(e2) {
+                            continue;
+                        }
+                        let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
+                        let w0 = 1.0 - w1 - w2;
+                        // Relative to vertex 0, so a constant depth stays exact.
+                        let q = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
+                        let z = if cfg.perspective { 1.0 / q } else { q };
+                        if !(z >= cfg.near && z <= cfg.far) {
+                            continue;
+                        }
+                        if !cfg.clip_planes.is_empty() {
+                            let p = cfg.camera_point(pos[0], pos[1], z);
+                            if cfg
+                                .clip_planes
+                                .iter()
+                                .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
+                            {
+                                continue;
+                            }
+                        }
+                        let (c, o, aov): ([f32; 3], [f32; 3], &[f32]) = if g.smooth {
+                            let w = [w0, w1, w2];
+                            let mut c = [0f32; 3];
+                            let mut o = [0f32; 3];
+                            for (vi, &gi) in idx.iter().enumerate() {
+                                for q in 0..3 {
+                                    c[q] += w[vi] * g.ci[gi][q];
+                                    o[q] += w[vi] * g.oi[gi][q];
+                                }
+                            }
+                            for q in 0..aw {
+                                interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
+                                    + w1 * g.aov[idx[1] * aw + q]
+                                    + w2 * g.aov[idx[2] * aw + q];
+                            }
+                            (c, o, &interp_aov)
+                        } else {
+                            (cc, co, &mean_aov)
+                        };
+                        b.insert(s, z, g.key, sub, c, o, g.matte, aov);
                     }
                 }
             }
