@@ -526,8 +526,11 @@ WorldBegin WorldEnd
 
 #[test]
 fn lights_outside_the_world_and_illuminate_by_name() {
+    // RenderMan Companion / Aqsis scenes declare lights before WorldBegin: they live in
+    // camera space and shine in the world (PRMan and Aqsis accept this).
     let b = build(
-        r#"LightSource "pointlight" 1
+        r#"Translate 0 0 5
+LightSource "pointlight" 1 "from" [0 0 1]
 WorldBegin
 LightSource "spotlight" "key" "coneangle" 0.5
 AttributeBegin
@@ -540,14 +543,72 @@ WorldEnd
 "#,
     );
     let e = b.errors();
-    assert_eq!(e.len(), 2, "{e:#?}");
-    assert!(e[0].contains("scene.rib:1:1") && e[0].contains("outside `WorldBegin`"));
-    assert!(e[1].contains("no light has handle fill"));
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("no light has handle fill"));
     let s = b.one();
+    assert_eq!(s.lights.len(), 2);
+    assert_eq!(s.lights[0].handle, "1");
+    assert_eq!(s.lights[1].handle, "key");
+    // camera_from_world is Translate 0 0 5 and the light was declared under the same
+    // transform, so its shader space is the world: world_from_shader = identity.
+    let wfs = s.lights[0].shader.world_from_shader;
+    assert!(wfs.abs_diff_eq(Mat4::IDENTITY, 1e-5), "{wfs:?}");
+    assert_eq!(s.primitives[0].attributes.lights_on, vec![0]);
+    assert_eq!(s.primitives[1].attributes.lights_on, vec![0, 1]);
+}
+
+#[test]
+fn lights_before_world_in_camera_space_and_scoped_to_their_frame() {
+    let b = build(
+        r#"FrameBegin 1
+LightSource "distantlight" 1
+Translate 0 0 5
+WorldBegin
+Sphere 1 -1 1 360
+WorldEnd
+FrameEnd
+FrameBegin 2
+WorldBegin
+Sphere 1 -1 1 360
+WorldEnd
+FrameEnd
+AreaLightSource "arealight" 2
+"#,
+    );
+    let e = b.errors();
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("outside `WorldBegin`"), "{e:#?}");
+    assert_eq!(b.scenes.len(), 2);
+    let s = &b.scenes[0];
     assert_eq!(s.lights.len(), 1);
-    assert_eq!(s.lights[0].handle, "key");
-    assert!(s.primitives[0].attributes.lights_on.is_empty());
-    assert_eq!(s.primitives[1].attributes.lights_on, vec![0]);
+    // Declared at camera space = identity; world_from_camera = Translate 0 0 -5.
+    let p = s.lights[0]
+        .shader
+        .world_from_shader
+        .transform_point3(Vec3::ZERO);
+    assert!(close(p, Vec3::new(0.0, 0.0, -5.0)), "{p:?}");
+    assert_eq!(s.primitives[0].attributes.lights_on, vec![0]);
+    // The light belonged to frame 1 only.
+    assert!(b.scenes[1].lights.is_empty());
+    assert!(b.scenes[1].primitives[0].attributes.lights_on.is_empty());
+}
+
+#[test]
+fn empty_brackets_are_empty_subdivision_tag_lists() {
+    // Exporters write `[] [] [] []` for "no tags"; `[]` reads as an empty number array.
+    let b = build(
+        r#"WorldBegin
+SubdivisionMesh "catmull-clark" [4] [0 1 2 3] [] [] [] [] "P" [0 0 0 1 0 0 1 1 0 0 1 0]
+WorldEnd
+"#,
+    );
+    b.clean();
+    let s = b.one();
+    assert_eq!(s.primitives.len(), 1);
+    assert!(matches!(
+        &*s.primitives[0].geometry,
+        Geometry::SubdivisionMesh { .. }
+    ));
 }
 
 #[test]

@@ -191,6 +191,16 @@ pub struct Builder<'a> {
     pub(super) aborted: bool,
     /// Texture-making requests waiting for the next world block.
     pub(super) pending_texture_jobs: Vec<TextureJob>,
+    /// LightSource requests given before WorldBegin (shader space kept as camera_from_shader).
+    pub(super) pending_lights: Vec<PendingLight>,
+}
+
+/// A light declared before WorldBegin: added to every following world until its frame ends.
+#[derive(Clone, Debug)]
+pub(super) struct PendingLight {
+    pub light: Light,
+    /// Declared inside FrameBegin…FrameEnd (dropped at FrameEnd).
+    pub in_frame: bool,
 }
 
 impl<'a> Builder<'a> {
@@ -225,6 +235,7 @@ impl<'a> Builder<'a> {
             error_mode: ErrorMode::Print,
             aborted: false,
             pending_texture_jobs: Vec::new(),
+            pending_lights: Vec::new(),
         }
     }
 
@@ -530,6 +541,7 @@ impl<'a> Builder<'a> {
             self.clip_camera = o.clip_camera;
         }
         self.restore_attrs(b.saved);
+        self.pending_lights.retain(|p| !p.in_frame);
         self.frame = None;
     }
 
@@ -635,6 +647,22 @@ impl<'a> Builder<'a> {
         });
         self.light_handles.clear();
         self.gs.ctm = Mat4::IDENTITY;
+        for p in self.pending_lights.clone() {
+            let mut light = p.light;
+            let mut shader = (*light.shader).clone();
+            shader.world_from_shader = wfc * shader.world_from_shader;
+            light.shader = Arc::new(shader);
+            let Some(scene) = self.world.as_mut() else {
+                break;
+            };
+            let idx = scene.lights.len();
+            self.light_handles.insert(light.handle.clone(), idx);
+            scene.lights.push(light);
+            let a = self.attrs();
+            if !a.lights_on.contains(&idx) {
+                a.lights_on.push(idx);
+            }
+        }
     }
 
     pub(super) fn world_end(&mut self, call: &Call<'_>) {

@@ -334,6 +334,9 @@ pub fn check_args<'r>(
             },
             ArgKind::Strs => match v.to_strings() {
                 Some(s) => PArg::Strs(s),
+                // An empty `[]` reads as a number array; as a string array it is simply
+                // empty (exporters write `SubdivisionMesh ... [] [] [] []` for no tags).
+                None if v.is_array() && v.len() == 0 => PArg::Strs(Vec::new()),
                 None => return Err(mismatch()),
             },
             ArgKind::Matrix => {
