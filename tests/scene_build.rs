@@ -895,3 +895,31 @@ fn format_defaults_and_aspect_rules() {
     assert_eq!(o1.effective_frame_aspect(), 4.0);
     assert_eq!(o1.effective_screen_window(), [-4.0, 4.0, -1.0, 1.0]);
 }
+
+#[test]
+fn attributes_inside_object_definitions_warn_by_name() {
+    // K-3D writes Color/Opacity inside ObjectBegin; instances take the attributes current at
+    // ObjectInstance, so the definition's Color is dropped with a warning naming it.
+    let b = build(
+        r#"WorldBegin
+ObjectBegin 1
+  AttributeBegin
+    Color [0.1 0.5 0.5]
+    Opacity 0.8 0.8 0.8
+    Polygon "P" [0 0 0 1 0 0 1 1 0]
+  AttributeEnd
+ObjectEnd
+Color [1 0 0]
+ObjectInstance 1
+WorldEnd
+"#,
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let w = b.warnings();
+    assert_eq!(w.len(), 2, "{w:#?}");
+    assert!(w[0].0.contains("`Color` inside `ObjectBegin`"), "{w:#?}");
+    assert!(w[1].0.contains("`Opacity` inside `ObjectBegin`"), "{w:#?}");
+    let s = b.one();
+    assert_eq!(s.primitives.len(), 1);
+    assert_eq!(s.primitives[0].attributes.color, Vec3::new(1.0, 0.0, 0.0));
+}

@@ -333,7 +333,25 @@ impl<'a> Builder<'a> {
         };
         let ncomps = self.colors.as_ref().map_or(3, |c| c.n);
         match table::check_args(r, spec, ncomps) {
-            Ok(call) => (spec.handler)(self, &call),
+            Ok(call) => {
+                if self.defining.is_some()
+                    && (spec.section.starts_with("4.2.") || spec.name == "Attribute")
+                {
+                    // Exporters (K-3D) put Color/Opacity/Surface inside object definitions;
+                    // arbor keeps only geometry and transforms there, so say so.
+                    let d = Diag::warning(
+                        "scene::object-attribute",
+                        format!(
+                            "`{}` inside `ObjectBegin`…`ObjectEnd` is ignored: instances use the attributes current at `ObjectInstance`",
+                            spec.name
+                        ),
+                    )
+                    .label(call.span(), "ignored")
+                    .help("set it before `ObjectInstance` instead (RISpec 3.2 §5.7)");
+                    self.report(d);
+                }
+                (spec.handler)(self, &call)
+            }
             Err(d) => self.report(d),
         }
     }
