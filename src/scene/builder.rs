@@ -272,7 +272,11 @@ impl<'a> Builder<'a> {
             format!("`{}` is not implemented yet; ignored", call.name()),
         )
         .label(call.span(), "ignored")
-        .help(format!("RISpec 3.2 §{}", call.spec.section));
+        .help(if call.spec.section == "ext" {
+            "a renderer extension, not part of RISpec 3.2".to_string()
+        } else {
+            format!("RISpec 3.2 §{}", call.spec.section)
+        });
         self.report(d);
     }
 

@@ -497,6 +497,14 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Resource", ["handle": Str, "type": Str], ALL, true, "ext", B::unimplemented),
     req!("ResourceBegin", [], ALL, false, "ext", B::unimplemented),
     req!("ResourceEnd", [], ALL, false, "ext", B::unimplemented),
+    // Later PRMan / 3Delight shading requests seen in exported RIB: recognised so a scene
+    // using them renders with a named warning instead of an unknown-request error.
+    req!("ShaderLayer", ["type": Str, "name": Str, "layername": Str], ALL, true, "ext", B::unimplemented),
+    req!("ConnectShaderLayers", ["type": Str, "layer1": Str, "variable1": Str, "layer2": Str, "variable2": Str], ALL, false, "ext", B::unimplemented),
+    req!("Shader", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Integrator", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Bxdf", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Pattern", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
     req!("Declare", ["name": Str, "declaration": Str], ALL, false, "4", B::declare),
     req!("ErrorHandler", ["handler": Str], ALL, false, "9", B::error_handler),
     req!("ReadArchive", ["filename": Str], ALL, true, "8", B::read_archive),
