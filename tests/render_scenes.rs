@@ -341,3 +341,24 @@ fn a_user_imager_shader_runs_over_the_image() {
     );
     assert!((r[0] - 1.0).abs() < 1e-5 && r[1].abs() < 1e-5, "{r:?}");
 }
+
+#[test]
+fn float_noise_in_the_projective_column_is_not_a_projective_transform() {
+    // mtor writes camera matrices like this one (Maya export): the ~1e-10 entries in the
+    // fourth column are rounding noise, not a perspective divide.
+    let (films, report, errors) = render(
+        r#"Format 16 12 1
+        Projection "perspective" "fov" [40]
+        WorldBegin
+        ConcatTransform [1 0 0 -3.368e-010  0 1 0 -3.50205e-012  0 0 1 9.40705e-011  0 0 5 1]
+        Surface "constant"
+        Sphere 1 -1 1 360
+        WorldEnd"#,
+        &Settings::default(),
+    );
+    assert!(!errors, "{report}");
+    assert!(!report.contains("projective"), "{report}");
+    let f = &films[0];
+    // The sphere (radius 1 at distance 5, fov 40) covers the centre pixel.
+    assert!(px(f, 8, 6)[3] > 0.99, "{:?}", px(f, 8, 6));
+}

@@ -157,7 +157,10 @@ pub fn surfaces_for(
         invalid("the primitive's transform is singular or not finite");
         return Vec::new();
     }
-    if m.row(3) != glam::Vec4::W {
+    // Exporters (mtor, MayaMan) write camera matrices with ~1e-10 in the projective column:
+    // only a bottom row that differs from (0 0 0 1) beyond float noise is projective.
+    let r3 = m.row(3);
+    if r3.truncate().abs().max_element() > 1e-6 || (r3.w - 1.0).abs() > 1e-5 {
         diags.report(
             Diag::warning(
                 "geom::projective_transform",

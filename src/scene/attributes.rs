@@ -12,7 +12,7 @@ use glam::Vec3;
 
 use crate::diag::Diag;
 
-use super::builder::Builder;
+use super::builder::{BlockKind, Builder, PendingLight};
 use super::params::ParamUse;
 use super::table::{Call, PArg};
 use super::types::*;
@@ -130,7 +130,7 @@ impl Builder<'_> {
     }
 
     fn add_light(&mut self, call: &Call<'_>, area: bool) {
-        if self.world.is_none() {
+        if self.world.is_none() && area {
             let d = Diag::error(
                 "scene::light-outside-world",
                 format!("`{}` outside `WorldBegin`…`WorldEnd`", call.name()),
@@ -163,7 +163,23 @@ impl Builder<'_> {
             self.report(d);
             return;
         }
-        let shader = Arc::new(self.shader_ref(call));
+        let mut shader = self.shader_ref(call);
+        if self.world.is_none() {
+            // RenderMan Companion style: a light before WorldBegin lives in camera space and
+            // shines in every world of its frame (or of the whole file outside frames).
+            shader.world_from_shader = self.camera_from_current();
+            let in_frame = self.blocks.iter().any(|b| b.kind == BlockKind::Frame);
+            self.pending_lights.push(PendingLight {
+                light: Light {
+                    shader: Arc::new(shader),
+                    handle,
+                    area,
+                },
+                in_frame,
+            });
+            return;
+        }
+        let shader = Arc::new(shader);
         let Some(scene) = self.world.as_mut() else {
             return;
         };

@@ -191,6 +191,16 @@ pub struct Builder<'a> {
     pub(super) aborted: bool,
     /// Texture-making requests waiting for the next world block.
     pub(super) pending_texture_jobs: Vec<TextureJob>,
+    /// LightSource requests given before WorldBegin (shader space kept as camera_from_shader).
+    pub(super) pending_lights: Vec<PendingLight>,
+}
+
+/// A light declared before WorldBegin: added to every following world until its frame ends.
+#[derive(Clone, Debug)]
+pub(super) struct PendingLight {
+    pub light: Light,
+    /// Declared inside FrameBegin…FrameEnd (dropped at FrameEnd).
+    pub in_frame: bool,
 }
 
 impl<'a> Builder<'a> {
@@ -225,6 +235,7 @@ impl<'a> Builder<'a> {
             error_mode: ErrorMode::Print,
             aborted: false,
             pending_texture_jobs: Vec::new(),
+            pending_lights: Vec::new(),
         }
     }
 
@@ -261,7 +272,11 @@ impl<'a> Builder<'a> {
             format!("`{}` is not implemented yet; ignored", call.name()),
         )
         .label(call.span(), "ignored")
-        .help(format!("RISpec 3.2 §{}", call.spec.section));
+        .help(if call.spec.section == "ext" {
+            "a renderer extension, not part of RISpec 3.2".to_string()
+        } else {
+            format!("RISpec 3.2 §{}", call.spec.section)
+        });
         self.report(d);
     }
 
@@ -322,7 +337,25 @@ impl<'a> Builder<'a> {
         };
         let ncomps = self.colors.as_ref().map_or(3, |c| c.n);
         match table::check_args(r, spec, ncomps) {
-            Ok(call) => (spec.handler)(self, &call),
+            Ok(call) => {
+                if self.defining.is_some()
+                    && (spec.section.starts_with("4.2.") || spec.name == "Attribute")
+                {
+                    // Exporters (K-3D) put Color/Opacity/Surface inside object definitions;
+                    // arbor keeps only geometry and transforms there, so say so.
+                    let d = Diag::warning(
+                        "scene::object-attribute",
+                        format!(
+                            "`{}` inside `ObjectBegin`…`ObjectEnd` is ignored: instances use the attributes current at `ObjectInstance`",
+                            spec.name
+                        ),
+                    )
+                    .label(call.span(), "ignored")
+                    .help("set it before `ObjectInstance` instead (RISpec 3.2 §5.7)");
+                    self.report(d);
+                }
+                (spec.handler)(self, &call)
+            }
             Err(d) => self.report(d),
         }
     }
@@ -530,6 +563,7 @@ impl<'a> Builder<'a> {
             self.clip_camera = o.clip_camera;
         }
         self.restore_attrs(b.saved);
+        self.pending_lights.retain(|p| !p.in_frame);
         self.frame = None;
     }
 
@@ -635,6 +669,22 @@ impl<'a> Builder<'a> {
         });
         self.light_handles.clear();
         self.gs.ctm = Mat4::IDENTITY;
+        for p in self.pending_lights.clone() {
+            let mut light = p.light;
+            let mut shader = (*light.shader).clone();
+            shader.world_from_shader = wfc * shader.world_from_shader;
+            light.shader = Arc::new(shader);
+            let Some(scene) = self.world.as_mut() else {
+                break;
+            };
+            let idx = scene.lights.len();
+            self.light_handles.insert(light.handle.clone(), idx);
+            scene.lights.push(light);
+            let a = self.attrs();
+            if !a.lights_on.contains(&idx) {
+                a.lights_on.push(idx);
+            }
+        }
     }
 
     pub(super) fn world_end(&mut self, call: &Call<'_>) {

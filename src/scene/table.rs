@@ -334,6 +334,9 @@ pub fn check_args<'r>(
             },
             ArgKind::Strs => match v.to_strings() {
                 Some(s) => PArg::Strs(s),
+                // An empty `[]` reads as a number array; as a string array it is simply
+                // empty (exporters write `SubdivisionMesh ... [] [] [] []` for no tags).
+                None if v.is_array() && v.len() == 0 => PArg::Strs(Vec::new()),
                 None => return Err(mismatch()),
             },
             ArgKind::Matrix => {
@@ -494,6 +497,14 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Resource", ["handle": Str, "type": Str], ALL, true, "ext", B::unimplemented),
     req!("ResourceBegin", [], ALL, false, "ext", B::unimplemented),
     req!("ResourceEnd", [], ALL, false, "ext", B::unimplemented),
+    // Later PRMan / 3Delight shading requests seen in exported RIB: recognised so a scene
+    // using them renders with a named warning instead of an unknown-request error.
+    req!("ShaderLayer", ["type": Str, "name": Str, "layername": Str], ALL, true, "ext", B::unimplemented),
+    req!("ConnectShaderLayers", ["type": Str, "layer1": Str, "variable1": Str, "layer2": Str, "variable2": Str], ALL, false, "ext", B::unimplemented),
+    req!("Shader", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Integrator", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Bxdf", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
+    req!("Pattern", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
     req!("Declare", ["name": Str, "declaration": Str], ALL, false, "4", B::declare),
     req!("ErrorHandler", ["handler": Str], ALL, false, "9", B::error_handler),
     req!("ReadArchive", ["filename": Str], ALL, true, "8", B::read_archive),
