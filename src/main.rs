@@ -148,7 +148,7 @@ struct RenderArgs {
     /// Bucket size in pixels.
     #[arg(long)]
     bucket: Option<u32>,
-    /// Output file replacing the first Display's (format from the extension: .png .tif .exr).
+    /// Output file replacing the first picture Display's (depth passes keep theirs; format from the extension).
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Print time per stage and counts (grids, micropolygons, samples…).

@@ -222,13 +222,18 @@ pub fn render_paths(
             } else {
                 film
             };
-            // -o replaces the first display of the first frame only.
-            let override_path = if first_display {
+            // -o replaces the first display of the first frame that makes a picture: depth
+            // passes (zfile/shadow displays) of multi-pass files keep their files, since
+            // later frames' MakeShadow reads them.
+            let depth_pass = options.displays.first().is_some_and(|d| {
+                matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow")
+            });
+            let override_path = if first_display && !depth_pass {
+                first_display = false;
                 settings.output.clone()
             } else {
                 None
             };
-            first_display = false;
             match crate::film::output::write_displays_with_matrices(
                 &film,
                 &options,

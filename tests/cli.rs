@@ -216,3 +216,30 @@ fn multipass_examples_render_from_their_folders() {
     let (under, beside) = (shadow.get_pixel(160, 142)[0], shadow.get_pixel(100, 150)[0]);
     assert!(under < 40 && beside > 120, "under {under}, beside {beside}");
 }
+
+/// `-o` on a multi-pass file replaces the beauty picture, not the depth pass that a later
+/// frame's MakeShadow reads.
+#[test]
+fn output_override_skips_depth_passes() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples");
+    let dir = tmpdir("override-multipass");
+    std::fs::copy(
+        root.join("shadows/spotshadow.rib"),
+        dir.join("spotshadow.rib"),
+    )
+    .unwrap();
+    let out = arbor()
+        .args(["render", "spotshadow.rib", "-o", "beauty.png"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        dir.join("spot.z").exists() && dir.join("spot.tex").exists(),
+        "{err}"
+    );
+    assert!(!dir.join("spotshadow.png").exists());
+    let img = image::open(dir.join("beauty.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (320, 240));
+}
