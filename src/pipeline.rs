@@ -178,6 +178,7 @@ pub fn render_paths(
                 textures: Some(&textures),
                 aovs: aovs.iter().map(|a| a.name.clone()).collect(),
             };
+            system.preload_lights(scene);
             let stats = Stats::default();
             let bar = if settings.progress {
                 Some(progress_bar())
@@ -345,6 +346,7 @@ pub fn render_text(
             textures: None,
             aovs: aovs.iter().map(|a| a.name.clone()).collect(),
         };
+        system.preload_lights(scene);
         let opts = RenderOptions {
             threads: settings.threads,
             bucket_size: settings.bucket_size,

@@ -243,3 +243,17 @@ fn output_override_skips_depth_passes() {
     let img = image::open(dir.join("beauty.png")).unwrap();
     assert_eq!((img.width(), img.height()), (320, 240));
 }
+
+/// A missing light shader is reported even when no surface asks for lights (constant).
+#[test]
+fn a_missing_light_shader_is_reported_even_when_unused() {
+    let dir = tmpdir("missing-light");
+    let rib = "Display \"x.png\" \"file\" \"rgb\"\nFormat 16 16 1\nWorldBegin\n\
+               LightSource \"nosuchlight\" 1\nSurface \"constant\"\nSphere 1 -1 1 360\nWorldEnd\n";
+    let (code, err) = run_stdin(&["render", "-"], rib, &dir);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("nosuchlight") && err.contains("not found"),
+        "{err}"
+    );
+}

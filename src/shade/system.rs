@@ -88,6 +88,17 @@ struct RunCtx<'s> {
 }
 
 impl<'a> ShadeSystem<'a> {
+    /// Loads every light shader the scene declares, so a missing or broken one is reported
+    /// even when no surface ends up asking for lights (they are otherwise loaded lazily).
+    pub fn preload_lights(&self, scene: &Scene) {
+        let mut seen = std::collections::HashSet::new();
+        for light in &scene.lights {
+            if seen.insert(light.shader.name.as_str()) {
+                let _ = self.program(&light.shader, ShaderKind::Light);
+            }
+        }
+    }
+
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
         let p = self.library.get(&sref.name, self.sources, self.diags)?;
         let ok = match kind {
