@@ -57,27 +57,17 @@ impl Builder<'_> {
     }
 
     pub(super) fn make_texture(&mut self, call: &Call<'_>) {
-        let mut j = Self::job(
-            call,
-            TextureJobKind::Texture,
-            vec![call.pos[0].str().to_string()],
-            1,
-        );
-        j.swrap = call.pos[2].str().to_string();
-        j.twrap = call.pos[3].str().to_string();
-        j.filter = call.pos[4].str().to_string();
-        j.swidth = call.pos[5].num();
-        j.twidth = call.pos[6].num();
-        self.record_job(call, j);
+        self.make_plain(call, TextureJobKind::Texture);
     }
 
     pub(super) fn make_bump(&mut self, call: &Call<'_>) {
-        let mut j = Self::job(
-            call,
-            TextureJobKind::Bump,
-            vec![call.pos[0].str().to_string()],
-            1,
-        );
+        self.make_plain(call, TextureJobKind::Bump);
+    }
+
+    /// MakeTexture and MakeBump share their arguments:
+    /// `picturename texturename swrap twrap filter swidth twidth`.
+    fn make_plain(&mut self, call: &Call<'_>, kind: TextureJobKind) {
+        let mut j = Self::job(call, kind, vec![call.pos[0].str().to_string()], 1);
         j.swrap = call.pos[2].str().to_string();
         j.twrap = call.pos[3].str().to_string();
         j.filter = call.pos[4].str().to_string();

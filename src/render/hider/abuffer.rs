@@ -1128,6 +1128,16 @@ fn opaque(f: &Frag, zt: f32) -> bool {
 mod tests {
     use super::*;
 
+    /// A small deterministic generator of floats in [0, 1) for the randomised tests.
+    fn lcg(mut s: u64) -> impl FnMut() -> f32 {
+        move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
     fn mask_of(poly: &[[f32; 2]], w: usize) -> Mask {
         let mut masks = Vec::new();
         rasterize(poly, w, 0, 0, 0, 0, &mut masks);
@@ -1170,13 +1180,7 @@ mod tests {
 
     #[test]
     fn masks_are_symmetric_and_area_accurate() {
-        let mut s = 12345u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = lcg(12345);
         for w in [4usize, 8, 16] {
             let mut worst = 0f32;
             for _ in 0..300 {
@@ -1345,13 +1349,7 @@ mod tests {
     fn shared_edges_of_a_jittered_grid_tile_exactly() {
         // Micropolygons of a jittered 5×5-point grid over 2×2 pixels: adjacent ones share
         // edges, so their masks must be disjoint and their union the outline's mask.
-        let mut s = 777u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = lcg(777);
         for w in [4usize, 8, 16] {
             for _ in 0..40 {
                 let mut pts = [[0f32; 2]; 25];
@@ -1394,13 +1392,7 @@ mod tests {
         // Triangles around a shared vertex, corners of at least 45° (usual micropolygons):
         // the guard rows keep their paths from crossing near the vertex, so the masks are
         // disjoint and tile the fan's outline. (Narrower corners can overlap by a cell.)
-        let mut s = 99u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = lcg(99);
         for w in [4usize, 8, 16] {
             for _ in 0..300 {
                 let v = [0.5 + rnd(), 0.5 + rnd()];
