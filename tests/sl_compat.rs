@@ -428,3 +428,24 @@ fn break_in_a_function_does_not_reach_the_callers_loop() {
     let (ci, _) = run(&prog, 4);
     assert!(ci.iter().all(|c| (c.x - 6.0).abs() < 1e-6), "{ci:?}");
 }
+
+/// `clamp(x, lo, hi)` with `lo > hi` behaves as the C macro of Aqsis and BMRT
+/// (`x < lo ? lo : x > hi ? hi : x`), and a smoke-style marching loop that steps by
+/// `clamp(ss, 0.005, end - d)` reaches its end instead of stepping by zero forever.
+#[test]
+fn clamp_with_crossed_bounds_keeps_marching_loops_moving() {
+    assert_eq!(value("clamp(0.001, 0.005, 0.0)"), 0.005);
+    assert_eq!(value("clamp(0.25, 0.005, 0.001)"), 0.001);
+    assert_eq!(value("clamp(0.5, 0, 1)"), 0.5);
+    assert_eq!(value("comp(clamp(color(0.001), color(0.005), color(0)), 1)"), 0.005);
+    let (prog, _) = compile_ok(
+        "volume march(float stepsize = 0.25; float end = 3.7;) {
+             float d = 0.1, ss = min(stepsize, end - d), steps = 0;
+             while (d <= end) { ss = clamp(ss, 0.005, end - d); d += ss; steps += 1; }
+             Ci = color(steps, d, 0);
+         }",
+    );
+    let (ci, _) = run(&prog, 3);
+    assert!(ci[0].x > 10.0 && ci[0].x < 40.0, "steps {}", ci[0].x);
+    assert!(ci[0].y > 3.7 && ci[0].y < 3.71, "d {}", ci[0].y);
+}

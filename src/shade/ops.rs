@@ -40,6 +40,17 @@ fn safe_div3(a: Vec3, b: Vec3) -> Vec3 {
 }
 
 #[inline]
+/// SL `clamp` as the renderers of the era wrote it (see the `ClampF` op).
+pub fn clamp_like_c(x: f32, lo: f32, hi: f32) -> f32 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
 fn normalize(v: Vec3) -> Vec3 {
     let l = v.length();
     if l > 0.0 {
@@ -748,7 +759,10 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 r
             });
         }
-        ClampF => f3!(|x: f32, a: f32, b: f32| x.max(a).min(b)),
+        // `x < lo ? lo : x > hi ? hi : x` (the C macro Aqsis and BMRT use): when lo > hi a value
+        // below lo still comes back as lo, so marching loops that step by
+        // `clamp(step, minstep, end - d)` keep moving instead of stepping by zero forever.
+        ClampF => f3!(clamp_like_c),
         ClampT => {
             let (x, a, b) = (
                 arg(ex, args, 0).t(),
@@ -756,7 +770,12 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 2).t(),
             );
             write_t(&mut out, n, varying_any!(), |i| {
-                x.at(i).max(a.at(i)).min(b.at(i))
+                let (x, a, b) = (x.at(i), a.at(i), b.at(i));
+                Vec3::new(
+                    clamp_like_c(x.x, a.x, b.x),
+                    clamp_like_c(x.y, a.y, b.y),
+                    clamp_like_c(x.z, a.z, b.z),
+                )
             });
         }
         MixF => f3!(|a: f32, b: f32, t: f32| a * (1.0 - t) + b * t),
