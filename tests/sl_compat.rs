@@ -449,3 +449,33 @@ fn clamp_with_crossed_bounds_keeps_marching_loops_moving() {
     assert!(ci[0].x > 10.0 && ci[0].x < 40.0, "steps {}", ci[0].x);
     assert!(ci[0].y > 3.7 && ci[0].y < 3.71, "d {}", ci[0].y);
 }
+
+/// A function declared to return `uniform` that updates an outer uniform under varying control
+/// flow (Advanced RenderMan's lensflare `urand()` called inside `illuminance`) compiles: the
+/// outer variable and the return value are demoted to varying with warnings, not rejected.
+#[test]
+fn uniform_function_updating_a_demoted_uniform_compiles() {
+    let src = "surface t() { uniform float n = 0;
+                 uniform float next() { extern uniform float n; n += 1; return n * 10; }
+                 float x = 0;
+                 if (s > 0.3) { uniform float y = next(); x = y + next(); }
+                 Ci = x; }";
+    let (prog, rendered) = compile_ok(src);
+    assert!(rendered.contains("declared to return a uniform value"), "{rendered}");
+    let (ci, _) = run(&prog, 5);
+    let want = [0.0, 0.0, 30.0, 30.0, 30.0];
+    for (c, w) in ci.iter().zip(want) {
+        assert!((c.x - w).abs() < 1e-5, "{:?}", ci);
+    }
+}
+
+/// `specularbrdf` (and so `specular`) use the exponent 8/roughness of PRMan, BMRT and Aqsis,
+/// not RISpec's reference 1/roughness: H at 22.5° from N with roughness 0.5 gives cos^16.
+#[test]
+fn specular_exponent_is_eight_over_roughness() {
+    let v = value(
+        "comp(specularbrdf(normalize(vector(1, 0, 1)), normal(0, 0, 1), vector(0, 0, 1), 0.5), 0)",
+    );
+    let want = (22.5f32.to_radians().cos()).powf(16.0);
+    assert!((v - want).abs() < 1e-4, "{v} vs {want}");
+}

@@ -123,6 +123,31 @@ impl<'a> ShadeSystem<'a> {
         Some(p)
     }
 
+    /// A surface shader that could not be had (not found, or broken) is stood in for by the
+    /// standard `plastic` when its instance gives plastic's specular parameters, else `matte`,
+    /// with the parameters the two share (`Ka`, `Kd`, …): the scene keeps its lighting design
+    /// (a missing `RCMatte` under a spotlight still shows the spot) where `defaultsurface`
+    /// would light everything from the eye.
+    fn stand_in_surface(&self, s: &Arc<ShaderRef>) -> Option<(Arc<Program>, Arc<ShaderRef>)> {
+        let specular = ["Ks", "roughness", "specularcolor"]
+            .iter()
+            .any(|n| s.params.get(n).is_some());
+        let name = if specular { "plastic" } else { "matte" };
+        let prog = self.library.get(name, self.sources, self.diags)?;
+        self.diags.report(
+            Diag::warning(
+                "shade::stand-in",
+                format!(
+                    "surface `{}` is not available: `{name}` stands in for it, with the \
+                     parameters they share",
+                    s.name
+                ),
+            )
+            .label(s.span, "named here"),
+        );
+        Some((prog, s.clone()))
+    }
+
     fn default_surface(&self) -> Option<Arc<Program>> {
         self.library.get("defaultsurface", self.sources, self.diags)
     }
@@ -271,7 +296,8 @@ impl<'a> ShadeSystem<'a> {
         let surface = match &p.attributes.surface {
             Some(s) => self
                 .program(s, ShaderKind::Surface)
-                .map(|prog| (prog, s.clone())),
+                .map(|prog| (prog, s.clone()))
+                .or_else(|| self.stand_in_surface(s)),
             None => None,
         };
         let (prog, sref) = match surface {

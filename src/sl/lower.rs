@@ -2494,10 +2494,29 @@ impl<'a> Lowerer<'a> {
         let ret = if def.ret.base == BaseType::Void {
             None
         } else {
+            let demoted = self.forced.contains(&def.name_span);
             let varying = match def.ret.detail {
                 Some(Detail::Varying) => true,
-                Some(Detail::Uniform) => false,
-                None => self.forced.contains(&def.name_span),
+                // Declared `uniform` but returning a value made varying (a uniform global it
+                // updates was demoted, as in Advanced RenderMan's lensflare `urand`): the
+                // result is varying with a warning, like an explicitly uniform local.
+                Some(Detail::Uniform) => {
+                    if demoted {
+                        self.diags.push(
+                            Diag::warning(
+                                "sl::detail",
+                                format!(
+                                    "function `{name}` is declared to return a uniform value \
+                                     but returns a varying one; it is treated as varying"
+                                ),
+                            )
+                            .label(def.name_span, "declared uniform here")
+                            .help("declare the return type `varying` (or leave the detail out)"),
+                        );
+                    }
+                    demoted
+                }
+                None => demoted,
             };
             let reg = self.new_reg(Kind::of(def.ret.base), varying);
             Some(Var {
@@ -2506,7 +2525,7 @@ impl<'a> Lowerer<'a> {
                 varying,
                 reg,
                 writable: true,
-                candidate: if def.ret.detail.is_none() {
+                candidate: if def.ret.detail != Some(Detail::Varying) {
                     Some(def.name_span)
                 } else {
                     None
