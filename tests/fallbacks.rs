@@ -77,3 +77,30 @@ fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
     assert_eq!(px[0], 0);
     assert_eq!(px[w * w - 1], 0);
 }
+
+/// A displacement that leaves the surface's displacement bound is cut off at the bound (so
+/// that every bucket size gives the same picture): arbor says so once, naming the shader and
+/// the attribute that fixes it; with the bound declared there is no warning and no crack.
+#[test]
+fn displacement_past_its_bound_is_reported() {
+    let dir = tmp("dispbound");
+    let out = dir.join("out.png").display().to_string();
+    let shader = "displacement bumpy(float amp = 0.3) { \
+                  P += amp * (noise(s * 40, t * 40) - 0.5) * normalize(N); \
+                  N = calculatenormal(P); }";
+    let scene = |bound: &str| {
+        format!(
+            "Display \"{out}\" \"png\" \"rgba\"\nFormat 64 64 1\nPixelSamples 2 2\n\
+             Projection \"perspective\" \"fov\" 40\nTranslate 0 0 6\nWorldBegin\n\
+             Surface \"constant\"\n{bound}Displacement \"bumpy\"\n\
+             Patch \"bilinear\" \"P\" [-3 -3 0  3 -3 0  -3 3 0  3 3 0]\nWorldEnd\n"
+        )
+    };
+    let (log, _, _) = render(&dir, &scene(""), Some(("bumpy", shader)));
+    assert!(log.contains("render::displacementbound") && log.contains("`bumpy`"), "{log}");
+    let declared = "Attribute \"displacementbound\" \"sphere\" [0.2]\n";
+    let (log, px, _) = render(&dir, &scene(declared), None);
+    assert!(!log.contains("render::displacementbound"), "{log}");
+    // Every pixel is covered by the (white, constant) plane: no cracks.
+    assert!(px.iter().all(|&v| v == 255), "a crack: {}", px.iter().filter(|&&v| v < 255).count());
+}

@@ -277,6 +277,36 @@ impl Frame<'_> {
         })
     }
 
+    /// A grid is sampled only inside the bound of the surface it was diced from (widened by
+    /// the displacement bound), so that every bucket size gives the same picture. When the
+    /// displacement shader moves micropolygons past it, the parts outside are cut off, which
+    /// shows as cracks along grid edges: say so once per shader, with the fix.
+    fn check_displacement_bound(&self, prim: usize, sg: &ShadedGrid, clip: &[f32; 4]) {
+        let Some(d) = self.scene.primitives[prim].attributes.displacement.as_ref() else {
+            return;
+        };
+        let mut b = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+        for rb in &sg.row_bounds {
+            b = [b[0].min(rb[0]), b[1].min(rb[1]), b[2].max(rb[2]), b[3].max(rb[3])];
+        }
+        // Half a pixel of slack: filters and jitter hide less than that.
+        let out = (clip[0] - b[0]).max(clip[1] - b[1]).max(b[2] - clip[2]).max(b[3] - clip[3]);
+        if out > 0.5 {
+            self.diags.report(
+                Diag::warning(
+                    "render::displacementbound",
+                    format!(
+                        "displacement shader `{}` moves points outside the surface's \
+                         displacement bound; what lies outside is cut off (cracks along grid edges)",
+                        d.name
+                    ),
+                )
+                .label(d.span, "displacement shader named here")
+                .help("declare the largest displacement: Attribute \"displacementbound\" \"sphere\" [d] (in object space)"),
+            );
+        }
+    }
+
     /// The bucket row a surface first needs (at least `min_row`), or None when culled.
     fn place(&self, w: &Work, min_row: usize) -> Option<usize> {
         let b = self.widened_bound(w)?;
@@ -420,6 +450,7 @@ impl Frame<'_> {
                     return (Outcome::Nothing, Vec::new());
                 }
                 let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+                self.check_displacement_bound(prim, &sg, &clip);
                 if sg.is_empty() {
                     return (Outcome::Nothing, Vec::new());
                 }
