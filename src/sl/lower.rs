@@ -2463,12 +2463,13 @@ impl<'a> Lowerer<'a> {
                 } else {
                     self.coerce(*v, f.ty.base, a.span)
                 };
+                // The body is inlined, so the parameter simply takes the argument's detail.
                 if f.ty.detail == Some(Detail::Uniform) && cv.varying {
                     self.diags.push(
-                        Diag::error(
+                        Diag::warning(
                             "sl::detail",
                             format!(
-                                "parameter `{}` is uniform but the argument is varying",
+                                "parameter `{}` is uniform but the argument is varying; it is treated as varying",
                                 f.name
                             ),
                         )
@@ -2496,7 +2497,25 @@ impl<'a> Lowerer<'a> {
         } else {
             let varying = match def.ret.detail {
                 Some(Detail::Varying) => true,
-                Some(Detail::Uniform) => false,
+                // Like an explicitly uniform local: a `uniform float f()` that returns a
+                // varying value (or is called under varying control flow and assigns its
+                // result there) is demoted with a warning, as PRMan-era compilers accepted.
+                Some(Detail::Uniform) => {
+                    let demoted = self.forced.contains(&def.name_span);
+                    if demoted {
+                        self.diags.push(
+                            Diag::warning(
+                                "sl::detail",
+                                format!(
+                                    "function `{name}` is declared to return uniform but returns a varying value; it is treated as varying"
+                                ),
+                            )
+                            .label(def.name_span, "declared uniform here")
+                            .help("declare the return type `varying` (or leave the detail out)"),
+                        );
+                    }
+                    demoted
+                }
                 None => self.forced.contains(&def.name_span),
             };
             let reg = self.new_reg(Kind::of(def.ret.base), varying);
@@ -2506,7 +2525,7 @@ impl<'a> Lowerer<'a> {
                 varying,
                 reg,
                 writable: true,
-                candidate: if def.ret.detail.is_none() {
+                candidate: if def.ret.detail != Some(Detail::Varying) {
                     Some(def.name_span)
                 } else {
                     None
