@@ -286,3 +286,57 @@ surface flare(float seed = 7;)
     assert!(!err && n == 1, "{log}");
     assert!(log.contains("declared to return uniform"), "{log}");
 }
+
+#[test]
+fn option_shadow_bias_is_the_default_bias_of_shadow() {
+    use arbor::pipeline::{render_paths, Settings};
+    let dir = tmpdir("bias");
+    // A light whose shadow() call names no bias: the scene's Option "shadow" decides.
+    std::fs::write(
+        dir.join("nobiaslight.sl"),
+        "light nobiaslight(string shadowname = \"\";) {\n\
+         solar(vector \"world\" (0, -1, 0), 0) { Cl = 1 - shadow(shadowname, Ps); } }\n",
+    )
+    .unwrap();
+    let (z, tex) = (dir.join("l.z"), dir.join("l.tex"));
+    let cam = "Projection \"orthographic\"\nScreenWindow -2 2 -2 2\n\
+               ConcatTransform [1 0 0 0  0 0 -1 0  0 1 0 0  0 0 0 1]\nTranslate 0 -10 0\n";
+    let floor = "Polygon \"P\" [-2 0 -2  2 0 -2  2 0 2  -2 0 2]";
+    let beauty = |n: u32, opt: &str, png: &PathBuf| {
+        format!(
+            "FrameBegin {n}\nDisplay \"{}\" \"png\" \"rgb\"\nFormat 8 8 1\n{opt}\n{cam}WorldBegin\n\
+             LightSource \"nobiaslight\" 1 \"shadowname\" [\"{}\"]\nSurface \"matte\"\n{floor}\nWorldEnd\nFrameEnd\n",
+            png.display(),
+            tex.display()
+        )
+    };
+    let (far, near) = (dir.join("far.png"), dir.join("near.png"));
+    // The occluder is 1 unit above the floor: a bias of 3 lifts the shadow off the floor,
+    // a bias of 0.05 keeps it.
+    let rib = format!(
+        "FrameBegin 1\nDisplay \"{}\" \"zfile\" \"z\"\nFormat 32 32 1\nPixelSamples 1 1\n{cam}\
+         WorldBegin\nPolygon \"P\" [-1 1 -1  1 1 -1  1 1 1  -1 1 1]\n{floor}\nWorldEnd\nFrameEnd\n\
+         MakeShadow \"{}\" \"{}\"\n{}{}",
+        z.display(),
+        z.display(),
+        tex.display(),
+        beauty(2, "Option \"shadow\" \"bias\" [3]", &far),
+        beauty(3, "Option \"shadow\" \"bias0\" [0.04] \"bias1\" [0.06]", &near),
+    );
+    let path = dir.join("scene.rib");
+    std::fs::write(&path, rib).unwrap();
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let stdlib = concat!(env!("CARGO_MANIFEST_DIR"), "/stdlib/shaders").to_string();
+    let settings = Settings {
+        threads: 1,
+        shader_paths: vec![dir.display().to_string(), stdlib],
+        ..Default::default()
+    };
+    render_paths(&[path], &settings, &sources, &diags);
+    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    let centre = |p: &PathBuf| image::open(p).unwrap().to_rgb8().get_pixel(4, 4)[0];
+    assert!(centre(&far) > 200, "bias 3: {}", centre(&far));
+    assert!(centre(&near) < 60, "bias 0.05: {}", centre(&near));
+    let _ = std::fs::remove_dir_all(&dir);
+}
