@@ -315,13 +315,8 @@ impl Frame<'_> {
             return (Outcome::Nothing, Vec::new());
         };
         let mut decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
-        if let (true, Decision::Dice { nu, nv }) = (info.binary, decision) {
-            let (bu, bv) = (nu.next_power_of_two(), nv.next_power_of_two());
-            decision = if bu * bv > self.view.max_grid {
-                Decision::Split { eye: false }
-            } else {
-                Decision::Dice { nu: bu, nv: bv }
-            };
+        if info.binary {
+            decision = crate::render::dice::binary(decision, self.view.max_grid);
         }
         match decision {
             Decision::Broken => {
