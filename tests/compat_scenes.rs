@@ -78,7 +78,11 @@ WorldEnd
 #[test]
 fn known_renderer_settings_are_typed_and_quiet() {
     let b = build(RENDERER_SETTINGS);
-    assert!(b.of(Severity::Error).is_empty(), "{:#?}", b.of(Severity::Error));
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
     assert!(
         b.of(Severity::Warning).is_empty(),
         "{:#?}",
@@ -128,7 +132,11 @@ fn prman_requests_arbor_lacks_warn_by_name() {
     let b = build(
         "Format 8 8 1\nWorldBegin\nGeometricRepresentation \"lines\"\nGeometricApproximation \"flatness\" 0.5\nSystem \"echo hi\"\nSphere 1 -1 1 360\nWorldEnd\n",
     );
-    assert!(b.of(Severity::Error).is_empty(), "{:#?}", b.of(Severity::Error));
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
     let w = b.of(Severity::Warning);
     for name in [
         "`GeometricRepresentation`",
@@ -145,10 +153,18 @@ fn a_geometry_only_file_is_one_archive_warning() {
     let b = build(
         "AttributeBegin\nPatch \"bilinear\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\nPatch \"bilinear\" \"P\" [0 0 1 1 0 1 0 1 1 1 1 1]\nSphere 1 -1 1 360\nAttributeEnd\n",
     );
-    assert!(b.of(Severity::Error).is_empty(), "{:#?}", b.of(Severity::Error));
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
     let w = b.of(Severity::Warning);
     assert_eq!(w.len(), 1, "{w:#?}");
-    assert!(w[0].contains("archive-only") && w[0].contains("3 requests"), "{}", w[0]);
+    assert!(
+        w[0].contains("archive-only") && w[0].contains("3 requests"),
+        "{}",
+        w[0]
+    );
     assert!(b.scenes.is_empty());
 }
 
@@ -166,7 +182,11 @@ fn latin1_rib_names_and_comments_decode() {
     let b = build_bytes(
         b"# sc\xe8ne d'\xe9t\xe9\nFormat 8 8 1\nWorldBegin\nAttribute \"identifier\" \"name\" [\"th\xe9i\xe8re\"]\nSphere 1 -1 1 360\nWorldEnd\n",
     );
-    assert!(b.of(Severity::Error).is_empty(), "{:#?}", b.of(Severity::Error));
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
     assert_eq!(
         b.scenes[0].primitives[0].attributes.identifier.as_deref(),
         Some("th\u{e9}i\u{e8}re")
@@ -207,8 +227,19 @@ fn latin1_shaders_and_headers_compile() {
 fn compile(name: &str, text: &str) -> (usize, String, bool) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
-    let progs = compile_source(name, text, None, &sources, &diags, &CompileOptions::default());
-    (progs.len(), diags.render_plain(&sources), diags.has_errors())
+    let progs = compile_source(
+        name,
+        text,
+        None,
+        &sources,
+        &diags,
+        &CompileOptions::default(),
+    );
+    (
+        progs.len(),
+        diags.render_plain(&sources),
+        diags.has_errors(),
+    )
 }
 
 #[test]
@@ -321,7 +352,11 @@ fn option_shadow_bias_is_the_default_bias_of_shadow() {
         z.display(),
         tex.display(),
         beauty(2, "Option \"shadow\" \"bias\" [3]", &far),
-        beauty(3, "Option \"shadow\" \"bias0\" [0.04] \"bias1\" [0.06]", &near),
+        beauty(
+            3,
+            "Option \"shadow\" \"bias0\" [0.04] \"bias1\" [0.06]",
+            &near
+        ),
     );
     let path = dir.join("scene.rib");
     std::fs::write(&path, rib).unwrap();

@@ -150,7 +150,11 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("shade:frequency", "uniform string", Ignored),
     ("shade:relativeshadingrate", "uniform float", Ignored),
     ("shade:strategy", "uniform string", Ignored),
-    ("shade:volumeintersectionstrategy", "uniform string", Ignored),
+    (
+        "shade:volumeintersectionstrategy",
+        "uniform string",
+        Ignored,
+    ),
     ("irradiance:shadingrate", "uniform float", Ignored),
     ("irradiance:maxerror", "uniform float", Ignored),
     ("irradiance:maxpixeldist", "uniform float", Ignored),

@@ -1829,7 +1829,11 @@ fn texture_call(
         samples: 16.0,
         swidth: 1.0,
         twidth: 1.0,
-        bias: if f == Shadow { default_shadow_bias(ex) } else { 0.0 },
+        bias: if f == Shadow {
+            default_shadow_bias(ex)
+        } else {
+            0.0
+        },
         ..Default::default()
     };
     let mut k = coord0 + ncoord_regs;
