@@ -108,6 +108,8 @@ impl SourceMap {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Severity {
+    /// Shown only with `-v`: something recognised and deliberately not acted on.
+    Note,
     Warning,
     Error,
 }
@@ -135,6 +137,16 @@ impl Diag {
     pub fn warning(code: &'static str, message: impl Into<String>) -> Diag {
         Diag {
             severity: Severity::Warning,
+            code,
+            message: message.into(),
+            labels: vec![],
+            help: None,
+        }
+    }
+    /// A note: shown only at `-v` (a known renderer-specific setting arbor does not use).
+    pub fn note(code: &'static str, message: impl Into<String>) -> Diag {
+        Diag {
+            severity: Severity::Note,
             code,
             message: message.into(),
             labels: vec![],
@@ -187,6 +199,7 @@ impl Diag {
     /// Plain one-line rendering: `file:line:col: error[code]: message`.
     pub fn to_line(&self, sources: &SourceMap) -> String {
         let sev = match self.severity {
+            Severity::Note => "note",
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
@@ -244,6 +257,7 @@ impl miette::Diagnostic for Reportable {
     }
     fn severity(&self) -> Option<miette::Severity> {
         Some(match self.severity {
+            Severity::Note => miette::Severity::Advice,
             Severity::Warning => miette::Severity::Warning,
             Severity::Error => miette::Severity::Error,
         })

@@ -5,6 +5,7 @@
 //! → [`geom`] split/dice → [`shade`] grids → hiders → [`film`] filter and write.
 
 pub mod diag;
+pub mod encoding;
 pub mod film;
 pub mod geom;
 pub mod num;

@@ -217,18 +217,25 @@ fn parse_frames(s: &str) -> Option<(i32, i32)> {
     }
 }
 
-/// Prints every diagnostic (warnings only unless quiet) and returns whether errors occurred.
-fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool) -> bool {
+/// Prints every diagnostic (warnings only unless quiet, notes only when verbose) and returns
+/// whether errors occurred.
+fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool, verbose: bool) -> bool {
     let all = diags.snapshot();
     let mut errors = 0;
     let mut warnings = 0;
     for (d, count) in &all {
-        if d.severity == Severity::Error {
-            errors += 1;
-        } else {
-            warnings += 1;
-            if quiet {
-                continue;
+        match d.severity {
+            Severity::Error => errors += 1,
+            Severity::Warning => {
+                warnings += 1;
+                if quiet {
+                    continue;
+                }
+            }
+            Severity::Note => {
+                if quiet || !verbose {
+                    continue;
+                }
             }
         }
         eprintln!("{:?}", d.to_report(sources, *count));
@@ -277,7 +284,7 @@ fn main() -> ExitCode {
                 a.files.clone()
             };
             let written = pipeline::render_paths(&files, &s, &sources, &diags);
-            let failed = report(&diags, &sources, cli.quiet);
+            let failed = report(&diags, &sources, cli.quiet, cli.verbose);
             if !cli.quiet {
                 for w in &written {
                     eprintln!("wrote {}", w.display());
@@ -297,7 +304,7 @@ fn main() -> ExitCode {
                     .map(|e| e == "sl" || e == "h")
                     .unwrap_or(false);
                 if is_sl {
-                    match std::fs::read_to_string(f) {
+                    match arbor::encoding::read_text(f) {
                         Ok(text) => {
                             let opts = CompileOptions {
                                 include_dirs: s.include_dirs.clone(),
@@ -361,7 +368,7 @@ fn main() -> ExitCode {
                     }
                 }
             }
-            if report(&diags, &sources, cli.quiet) {
+            if report(&diags, &sources, cli.quiet, cli.verbose) {
                 ExitCode::from(1)
             } else {
                 ExitCode::SUCCESS
@@ -375,7 +382,7 @@ fn main() -> ExitCode {
                 search_paths: s.shader_paths.iter().map(PathBuf::from).collect(),
             };
             let prog = if a.shader.ends_with(".sl") {
-                match std::fs::read_to_string(&a.shader) {
+                match arbor::encoding::read_text(std::path::Path::new(&a.shader)) {
                     Ok(text) => compile_source(
                         &a.shader,
                         &text,
@@ -399,7 +406,7 @@ fn main() -> ExitCode {
                     .get(&a.shader, &sources, &diags)
                     .map(|p| (*p).clone())
             };
-            let failed = report(&diags, &sources, cli.quiet);
+            let failed = report(&diags, &sources, cli.quiet, cli.verbose);
             match prog {
                 Some(p) => {
                     println!("{} \"{}\"", p.kind.name(), p.name);
@@ -458,7 +465,7 @@ fn main() -> ExitCode {
             };
             let start = std::time::Instant::now();
             let written = arbor::swatch::render_swatch(&req, &sources, &diags);
-            let failed = report(&diags, &sources, cli.quiet);
+            let failed = report(&diags, &sources, cli.quiet, cli.verbose);
             if !cli.quiet {
                 for w in &written {
                     eprintln!(
@@ -502,7 +509,7 @@ fn main() -> ExitCode {
                     diags.report(Diag::error("texture::horizon", e).help(
                         "the input must be a readable height image; --directions is 8 or 16",
                     ));
-                    report(&diags, &sources, cli.quiet);
+                    report(&diags, &sources, cli.quiet, cli.verbose);
                     ExitCode::from(1)
                 }
             }
@@ -511,7 +518,7 @@ fn main() -> ExitCode {
         Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {
             Ok(reqs) => {
                 print!("{}", arbor::rib::format::format_requests(&reqs));
-                if report(&diags, &sources, cli.quiet) {
+                if report(&diags, &sources, cli.quiet, cli.verbose) {
                     ExitCode::from(1)
                 } else {
                     ExitCode::SUCCESS
@@ -519,7 +526,7 @@ fn main() -> ExitCode {
             }
             Err(d) => {
                 diags.report(d);
-                report(&diags, &sources, cli.quiet);
+                report(&diags, &sources, cli.quiet, cli.verbose);
                 ExitCode::from(1)
             }
         },

@@ -146,7 +146,13 @@ pub fn render_paths(
     let mut first_display = true;
     for path in paths {
         let scenes = load_scenes(path, settings, sources, diags);
-        if scenes.is_empty() && !diags.has_errors() {
+        let archive_only = || {
+            diags
+                .snapshot()
+                .iter()
+                .any(|(d, _)| d.code == "scene::archive-only")
+        };
+        if scenes.is_empty() && !diags.has_errors() && !archive_only() {
             diags.report(Diag::warning(
                 "render::empty",
                 format!("`{}` contains no world block to render", path.display()),

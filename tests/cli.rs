@@ -257,3 +257,42 @@ fn a_missing_light_shader_is_reported_even_when_unused() {
         "{err}"
     );
 }
+
+#[test]
+fn ignored_renderer_settings_show_only_with_verbose() {
+    let dir = tmpdir("notes");
+    let rib = "Format 8 8 1\nWorldBegin\nAttribute \"render\" \"casts_shadows\" \"opaque\"\nSphere 1 -1 1 360\nWorldEnd\n";
+    std::fs::write(dir.join("n.rib"), rib).unwrap();
+    let quiet = arbor()
+        .args(["check", "n.rib"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(quiet.status.success());
+    let q = String::from_utf8_lossy(&quiet.stderr);
+    assert!(!q.contains("casts_shadows"), "{q}");
+    let loud = arbor()
+        .args(["-v", "check", "n.rib"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(loud.status.success());
+    let l = String::from_utf8_lossy(&loud.stderr);
+    assert!(
+        l.contains("casts_shadows") && l.contains("scene::ignored-setting"),
+        "{l}"
+    );
+    // A geometry-only archive: one warning, exit 0.
+    std::fs::write(dir.join("a.rib"), "Sphere 1 -1 1 360\nCone 1 1 360\n").unwrap();
+    let a = arbor()
+        .args(["render", "a.rib"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(a.status.success());
+    let e = String::from_utf8_lossy(&a.stderr);
+    assert!(
+        e.contains("looks like an archive") && !e.contains("outside `WorldBegin`"),
+        "{e}"
+    );
+}

@@ -782,9 +782,12 @@ fn advanced_renderman_style_scene() {
     let b = build(ADVANCED);
     let w = b.warnings();
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
-    // Only the undeclared renderer-specific attribute warns.
-    assert_eq!(w.len(), 1, "{w:#?}");
+    // Only the undeclared renderer-specific attribute and the unused approximation hint warn.
+    assert_eq!(w.len(), 2, "{w:#?}");
     assert!(w[0].0.contains("\"bogus\" is not declared"));
+    assert!(w[1]
+        .0
+        .contains("`GeometricApproximation \"flatness\"` is not used"));
     let s = b.one();
     let o = &s.options;
     assert_eq!(o.user_floats("limits:bucketsize"), Some(&[16.0, 16.0][..]));

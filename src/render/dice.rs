@@ -200,9 +200,42 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     }
 }
 
+/// Attribute "dice" "binary": dicing rates rounded up to powers of two (neighbouring grids
+/// then share more vertices, hiding cracks); a grid that would outgrow `max_grid` splits.
+pub fn binary(d: Decision, max_grid: usize) -> Decision {
+    match d {
+        Decision::Dice { nu, nv } => {
+            let (bu, bv) = (nu.next_power_of_two(), nv.next_power_of_two());
+            if bu * bv > max_grid {
+                Decision::Split { eye: false }
+            } else {
+                Decision::Dice { nu: bu, nv: bv }
+            }
+        }
+        other => other,
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    #[test]
+    fn binary_dicing_rounds_to_powers_of_two() {
+        assert_eq!(
+            binary(Decision::Dice { nu: 5, nv: 8 }, 256),
+            Decision::Dice { nu: 8, nv: 8 }
+        );
+        assert_eq!(
+            binary(Decision::Dice { nu: 1, nv: 17 }, 256),
+            Decision::Dice { nu: 1, nv: 32 }
+        );
+        assert_eq!(
+            binary(Decision::Dice { nu: 9, nv: 17 }, 256),
+            Decision::Split { eye: false }
+        );
+        assert_eq!(binary(Decision::Cull, 256), Decision::Cull);
+    }
     use crate::shade::Grid;
 
     /// A bilinear quad in camera space: corners p00, p10, p01, p11 (u along p00→p10).

@@ -110,6 +110,9 @@ struct PrimInfo {
     matte: bool,
     smooth: bool,
     one_sided: bool,
+    /// Attribute "dice" "binary": grids are diced a power of two on each side (adjacent
+    /// grids then share vertices more often, which hides cracks).
+    binary: bool,
 }
 
 fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnostics) -> PrimInfo {
@@ -159,6 +162,11 @@ fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnosti
         matte: a.matte,
         smooth: a.smooth_shading,
         one_sided: a.sides == 1,
+        binary: a
+            .user
+            .get("dice:binary")
+            .and_then(|p| p.data.floats().first().copied())
+            .is_some_and(|v| v != 0.0),
     }
 }
 
@@ -336,7 +344,10 @@ impl Frame<'_> {
         let Some(bound) = self.widened_bound(&w) else {
             return (Outcome::Nothing, Vec::new());
         };
-        let decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
+        let mut decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
+        if info.binary {
+            decision = crate::render::dice::binary(decision, self.view.max_grid);
+        }
         match decision {
             Decision::Broken => {
                 self.diags.report(

@@ -36,7 +36,7 @@ pub(crate) fn transcode(b: &[u8]) -> (String, Vec<Issue>) {
         strings: HashMap::new(),
     };
     t.run();
-    // Always valid: ASCII, escaped strings and `copy_text`'s checked UTF-8.
+    // Always valid: ASCII, escaped strings and `copy_text`'s UTF-8.
     let text = match String::from_utf8(t.out) {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
@@ -88,13 +88,19 @@ impl<'a> Transcoder<'a> {
         }
     }
 
-    /// Copies string or comment text up to `end`; bytes that are not UTF-8 become U+FFFD so
-    /// the decoded text is valid UTF-8 and issue offsets stay exact.
+    /// Copies string or comment text up to `end`: UTF-8 when the piece is valid UTF-8, else
+    /// Latin-1 (an 8-bit RIB file's accented names and comments), so the decoded text is valid
+    /// UTF-8 and issue offsets (into the output) stay exact.
     fn copy_text(&mut self, end: usize) {
-        for chunk in self.b[self.i..end].utf8_chunks() {
-            self.out.extend_from_slice(chunk.valid().as_bytes());
-            for _ in chunk.invalid() {
-                self.out.extend_from_slice("\u{FFFD}".as_bytes());
+        let piece = &self.b[self.i..end];
+        match std::str::from_utf8(piece) {
+            Ok(s) => self.out.extend_from_slice(s.as_bytes()),
+            Err(_) => {
+                let mut buf = [0u8; 4];
+                for &c in piece {
+                    self.out
+                        .extend_from_slice(char::from(c).encode_utf8(&mut buf).as_bytes());
+                }
             }
         }
         self.i = end;
@@ -412,10 +418,10 @@ mod tests {
     }
 
     #[test]
-    fn invalid_utf8_in_strings_becomes_replacement() {
-        let (t, i) = transcode(b"A \"\xFFx\" # \xFE\n");
+    fn latin1_in_strings_and_comments_is_decoded() {
+        let (t, i) = transcode(b"A \"caf\xE9\" # \xFE\n");
         assert!(i.is_empty());
-        assert_eq!(t, "A \"\u{FFFD}x\" # \u{FFFD}\n");
+        assert_eq!(t, "A \"caf\u{E9}\" # \u{FE}\n");
     }
 
     #[test]

@@ -304,6 +304,14 @@ impl Builder<'_> {
     pub(super) fn geometric_approximation(&mut self, call: &Call<'_>) {
         let kind = call.pos[0].str().to_string();
         let v = call.pos[1].num();
+        // arbor dices by ShadingRate alone: flatness, motionfactor, focusfactor… are hints it
+        // does not take (one warning per kind).
+        let d = Diag::warning(
+            "scene::unimplemented",
+            format!("`GeometricApproximation \"{kind}\"` is not used by arbor (grids follow `ShadingRate`); ignored"),
+        )
+        .label(call.span(), "ignored");
+        self.report(d);
         self.attrs().geometric_approximation.insert(kind, v);
     }
 
@@ -402,6 +410,7 @@ impl Builder<'_> {
         let cat = call.pos[0].str().to_string();
         let params = self.params(call, ParamUse::Category(&cat));
         for p in params.0 {
+            self.note_if_ignored("Attribute", &cat, &p);
             let key = format!("{cat}:{}", p.name);
             match key.as_str() {
                 "displacementbound:sphere" => {

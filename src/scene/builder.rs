@@ -193,6 +193,9 @@ pub struct Builder<'a> {
     pub(super) pending_texture_jobs: Vec<TextureJob>,
     /// LightSource requests given before WorldBegin (shader space kept as camera_from_shader).
     pub(super) pending_lights: Vec<PendingLight>,
+    /// Geometry met before any `WorldBegin`: held back, because a file that never opens a
+    /// world is a geometry archive (one warning at the end), not a scene with N errors.
+    pub(super) orphans: Vec<Diag>,
 }
 
 /// A light declared before WorldBegin: added to every following world until its frame ends.
@@ -236,6 +239,7 @@ impl<'a> Builder<'a> {
             aborted: false,
             pending_texture_jobs: Vec::new(),
             pending_lights: Vec::new(),
+            orphans: Vec::new(),
         }
     }
 
@@ -278,6 +282,24 @@ impl<'a> Builder<'a> {
             format!("RISpec 3.2 §{}", call.spec.section)
         });
         self.report(d);
+    }
+
+    /// A note (shown at `-v`) for a known renderer-specific Option/Attribute arbor does not
+    /// act on; the value is still stored for `attribute()`/`option()`.
+    pub(super) fn note_if_ignored(&mut self, request: &str, cat: &str, p: &Param) {
+        let key = format!("{cat}:{}", p.name);
+        if let Some((_, super::known::Use::Ignored)) = super::known::lookup(&key) {
+            let d = Diag::note(
+                "scene::ignored-setting",
+                format!(
+                    "`{request} \"{cat}\" \"{}\"` is {}; arbor ignores it",
+                    p.name,
+                    super::known::why_ignored(cat)
+                ),
+            )
+            .label(p.span, "recognised, no effect");
+            self.report(d);
+        }
     }
 
     /// For requests handled by the driver itself (conditionals, ArchiveBegin) or that need
@@ -391,6 +413,24 @@ impl<'a> Builder<'a> {
             } else {
                 self.gs = b.saved;
             }
+        }
+        if let Some(first) = self.orphans.first() {
+            // Aqsis and Pixie report every request here as out of context; one message says
+            // what the file is.
+            let n = self.orphans.len();
+            let mut d = Diag::warning(
+                "scene::archive-only",
+                format!(
+                    "this file holds geometry ({n} request{}) but never opens `WorldBegin`: it looks like an archive meant for `ReadArchive`; nothing is rendered",
+                    if n == 1 { "" } else { "s" }
+                ),
+            )
+            .help("render a scene that reads it inside its world: `WorldBegin` … `ReadArchive \"this.rib\"` … `WorldEnd`");
+            if let Some(sp) = first.primary_span() {
+                d = d.label(sp, "first geometry, outside any world");
+            }
+            self.orphans.clear();
+            self.report(d);
         }
         if !self.pending_texture_jobs.is_empty() {
             // Texture jobs after the last world block: a scene that only runs them.
@@ -626,6 +666,10 @@ impl<'a> Builder<'a> {
             return;
         }
         self.world_count += 1;
+        // The file is a scene after all: geometry before its first world was an error.
+        for d in std::mem::take(&mut self.orphans) {
+            self.report(d);
+        }
         let number = self.frame.unwrap_or(self.world_count);
         self.frame_active = self
             .ctx

@@ -28,7 +28,11 @@ impl Builder<'_> {
             )
             .label(call.span(), "geometry belongs to the world")
             .help("move it after `WorldBegin`, or into an `ObjectBegin` block");
-            self.report(d);
+            if self.world_count == 0 {
+                self.orphans.push(d);
+            } else {
+                self.report(d);
+            }
             return false;
         }
         self.frame_active

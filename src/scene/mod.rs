@@ -13,6 +13,7 @@ mod attributes;
 pub mod builder;
 pub mod cond;
 mod geometry;
+pub mod known;
 mod options;
 pub mod params;
 pub mod table;

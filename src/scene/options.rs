@@ -492,6 +492,7 @@ impl Builder<'_> {
         let cat = call.pos[0].str().to_string();
         let params = self.params(call, ParamUse::Category(&cat));
         for p in params.0 {
+            self.note_if_ignored("Option", &cat, &p);
             if cat == "searchpath" {
                 self.set_search_path(&p);
                 continue;

@@ -187,31 +187,7 @@ const STANDARD: &[(&str, &str)] = &[
     ("jitter", "uniform integer"),
     ("masksize", "uniform integer"),
     ("depthfilter", "uniform string"),
-    // Option "searchpath", "limits", "statistics".
-    ("searchpath:shader", "uniform string"),
-    ("searchpath:texture", "uniform string"),
-    ("searchpath:archive", "uniform string"),
-    ("searchpath:procedural", "uniform string"),
-    ("searchpath:display", "uniform string"),
-    ("searchpath:resource", "uniform string"),
-    ("limits:bucketsize", "uniform integer[2]"),
-    ("limits:gridsize", "uniform integer"),
-    ("limits:texturememory", "uniform integer"),
-    ("limits:eyesplits", "uniform integer"),
-    ("statistics:endofframe", "uniform integer"),
-    ("statistics:filename", "uniform string"),
-    ("render:bucketorder", "uniform string"),
-    // Attribute "displacementbound", "identifier", "trimcurve", "dice", "user" friends.
-    ("displacementbound:sphere", "uniform float"),
-    ("displacementbound:coordinatesystem", "uniform string"),
-    ("identifier:name", "uniform string"),
-    ("trimcurve:sense", "uniform string"),
-    ("dice:binary", "uniform integer"),
-    ("visibility:camera", "uniform integer"),
-    ("visibility:diffuse", "uniform integer"),
-    ("visibility:specular", "uniform integer"),
-    ("visibility:transmission", "uniform string"),
-    ("shadow:bias", "uniform float"),
+    // Option/Attribute "category:name" entries live in `known`.
 ];
 
 /// The declaration dictionary: `Declare`d names over the standard ones.
@@ -223,9 +199,13 @@ pub struct Dictionary {
 impl Default for Dictionary {
     fn default() -> Dictionary {
         let mut map = HashMap::new();
-        for (name, decl) in STANDARD {
+        for (name, decl) in STANDARD
+            .iter()
+            .copied()
+            .chain(super::known::KNOWN.iter().map(|(k, d, _)| (*k, *d)))
+        {
             if let Ok(d) = parse_decl(decl) {
-                map.insert((*name).to_string(), d);
+                map.insert(name.to_string(), d);
             }
         }
         Dictionary { map }

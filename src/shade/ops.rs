@@ -1790,6 +1790,23 @@ pub fn simple_match(pat: &str, s: &str) -> bool {
 /// footprint (4 corners from the grid's derivatives when only a centre is given) and asks
 /// the texture system. Missing maps warn and return the fill value (shadow: 0, unshadowed;
 /// bump: no change of the normal).
+/// The scene's default shadow bias: `Option "shadow" "bias"`, else the middle of PRMan's
+/// `"bias0"`…`"bias1"` range (arbor does not randomise it, to stay deterministic), else 0.
+fn default_shadow_bias(ex: &Exec) -> f32 {
+    let get = |name: &str| match (ex.env.info)("option", name) {
+        Some(InfoValue::Floats(v)) => v.first().copied(),
+        _ => None,
+    };
+    if let Some(b) = get("shadow:bias") {
+        return b;
+    }
+    match (get("shadow:bias0"), get("shadow:bias1")) {
+        (Some(a), Some(b)) => 0.5 * (a + b),
+        (Some(a), None) | (None, Some(a)) => a,
+        (None, None) => 0.0,
+    }
+}
+
 fn texture_call(
     ex: &mut Exec,
     f: Builtin,
@@ -1815,6 +1832,11 @@ fn texture_call(
         samples: 16.0,
         swidth: 1.0,
         twidth: 1.0,
+        bias: if f == Shadow {
+            default_shadow_bias(ex)
+        } else {
+            0.0
+        },
         ..Default::default()
     };
     let mut k = coord0 + ncoord_regs;

@@ -53,7 +53,7 @@ impl IncludeResolver for Resolver<'_> {
         dirs.extend(self.opts.search_paths.iter().cloned());
         for d in dirs {
             let p = d.join(name);
-            if let Ok(text) = std::fs::read_to_string(&p) {
+            if let Ok(text) = crate::encoding::read_text(&p) {
                 return Some((p.display().to_string(), text));
             }
         }
@@ -187,7 +187,7 @@ impl ShaderLibrary {
             .collect();
         candidates.push(PathBuf::from(&file_name));
         for c in candidates {
-            if let Ok(text) = std::fs::read_to_string(&c) {
+            if let Ok(text) = crate::encoding::read_text(&c) {
                 let progs = compile_source(
                     &c.display().to_string(),
                     &text,

@@ -2463,12 +2463,13 @@ impl<'a> Lowerer<'a> {
                 } else {
                     self.coerce(*v, f.ty.base, a.span)
                 };
+                // The body is inlined, so the parameter simply takes the argument's detail.
                 if f.ty.detail == Some(Detail::Uniform) && cv.varying {
                     self.diags.push(
-                        Diag::error(
+                        Diag::warning(
                             "sl::detail",
                             format!(
-                                "parameter `{}` is uniform but the argument is varying",
+                                "parameter `{}` is uniform but the argument is varying; it is treated as varying",
                                 f.name
                             ),
                         )

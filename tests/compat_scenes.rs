@@ -1,0 +1,377 @@
+//! Scenes and shaders written for other renderers: renderer-specific options and attributes,
+//! PRMan requests arbor does not implement, geometry-only archives, 8-bit source files, the
+//! book headers in the standard library, and PRMan-era uniform/varying leniency. Each test is
+//! a small input of our own showing one class of behaviour.
+
+use std::path::PathBuf;
+
+use arbor::diag::{Diagnostics, Severity, SourceMap};
+use arbor::rib::parse_bytes;
+use arbor::scene::{build_scenes, BuildContext, Scene};
+use arbor::sl::{compile_source, CompileOptions};
+
+struct Built {
+    scenes: Vec<Scene>,
+    diags: Diagnostics,
+    sources: SourceMap,
+}
+
+impl Built {
+    fn of(&self, sev: Severity) -> Vec<String> {
+        self.diags
+            .snapshot()
+            .into_iter()
+            .filter(|(d, _)| d.severity == sev)
+            .map(|(d, _)| d.to_line(&self.sources))
+            .collect()
+    }
+}
+
+fn build_bytes(bytes: &[u8]) -> Built {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = parse_bytes("scene.rib", bytes, &sources, &diags);
+    let scenes = {
+        let ctx = BuildContext::new(&sources, &diags);
+        build_scenes(reqs, &ctx)
+    };
+    Built {
+        scenes,
+        diags,
+        sources,
+    }
+}
+
+fn build(text: &str) -> Built {
+    build_bytes(text.as_bytes())
+}
+
+const RENDERER_SETTINGS: &str = r#"
+Option "limits" "zthreshold" [0.5 0.5 0.5]
+Option "radiosity" "steps" [40] "minpatchsamples" [2]
+Option "render" "prmanspecular" [1]
+Option "searchpath" "resource" [".:@"]
+Option "shadow" "bias0" [0.1] "bias1" [0.3]
+Option "statistics" "endofframe" [1]
+Option "shutter" "float offset" [0.03]
+Format 16 16 1
+WorldBegin
+Attribute "light" "shadows" "on" "nsamples" [4]
+LightSource "pointlight" 1
+AttributeBegin
+Attribute "identifier" "name" ["ball"] "shadinggroup" ["ballSG"]
+Attribute "render" "casts_shadows" "opaque" "truedisplacement" [1]
+Attribute "render" "string casts_shadows" ["Os"]
+Attribute "radiosity" "averagecolor" [.5 .5 .5] "patchsize" [4] "zonal" "zonal_receives"
+Attribute "visibility" "camera" [1] "trace" [0] "transmission" "opaque" "photon" [0]
+Attribute "trace" "bias" [0.01] "maxdiffusedepth" [2]
+Attribute "displacementbound" "sphere" [0.5] "coordinatesystem" ["shader"]
+Attribute "dice" "binary" [1] "rasterorient" [0]
+Attribute "sides" "doubleshaded" [0]
+Attribute "cull" "hidden" [0] "backfacing" [0]
+Attribute "stitch" "enable" [1]
+Sphere 1 -1 1 360
+AttributeEnd
+WorldEnd
+"#;
+
+#[test]
+fn known_renderer_settings_are_typed_and_quiet() {
+    let b = build(RENDERER_SETTINGS);
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    assert!(
+        b.of(Severity::Warning).is_empty(),
+        "{:#?}",
+        b.of(Severity::Warning)
+    );
+    // The ignored ones are notes (shown at -v), naming the setting.
+    let notes = b.of(Severity::Note);
+    for key in [
+        "\"render\" \"casts_shadows\"",
+        "\"light\" \"shadows\"",
+        "\"radiosity\" \"steps\"",
+        "\"identifier\" \"shadinggroup\"",
+        "\"visibility\" \"trace\"",
+    ] {
+        assert!(notes.iter().any(|n| n.contains(key)), "{key}: {notes:#?}");
+    }
+    // What arbor uses is not noted, and is applied.
+    assert!(!notes.iter().any(|n| n.contains("\"identifier\" \"name\"")));
+    assert!(!notes.iter().any(|n| n.contains("\"dice\" \"binary\"")));
+    let s = &b.scenes[0];
+    let a = &s.primitives[0].attributes;
+    assert_eq!(a.identifier.as_deref(), Some("ball"));
+    assert_eq!(a.displacement_bound, 0.5);
+    assert_eq!(a.displacement_bound_space, "shader");
+    // Types come from the table: nsamples is an integer, averagecolor a colour.
+    let ns = &s.primitives[0].attributes.user["radiosity:averagecolor"];
+    assert_eq!(ns.data.floats(), &[0.5, 0.5, 0.5]);
+    assert_eq!(
+        s.options.user["limits:zthreshold"].data.floats(),
+        &[0.5, 0.5, 0.5]
+    );
+    assert_eq!(s.options.user["shadow:bias0"].data.floats(), &[0.1]);
+}
+
+#[test]
+fn a_token_nobody_declares_still_warns() {
+    let b = build(
+        "Format 8 8 1\nWorldBegin\nAttribute \"render\" \"frobnicate\" [1]\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    let w = b.of(Severity::Warning);
+    assert_eq!(w.len(), 1, "{w:#?}");
+    assert!(w[0].contains("\"frobnicate\" is not declared"), "{}", w[0]);
+}
+
+#[test]
+fn prman_requests_arbor_lacks_warn_by_name() {
+    let b = build(
+        "Format 8 8 1\nWorldBegin\nGeometricRepresentation \"lines\"\nGeometricApproximation \"flatness\" 0.5\nSystem \"echo hi\"\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let w = b.of(Severity::Warning);
+    for name in [
+        "`GeometricRepresentation`",
+        "`GeometricApproximation \"flatness\"`",
+        "`System`",
+    ] {
+        assert!(w.iter().any(|m| m.contains(name)), "{name}: {w:#?}");
+    }
+    assert_eq!(b.scenes[0].primitives.len(), 1);
+}
+
+#[test]
+fn a_geometry_only_file_is_one_archive_warning() {
+    let b = build(
+        "AttributeBegin\nPatch \"bilinear\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\nPatch \"bilinear\" \"P\" [0 0 1 1 0 1 0 1 1 1 1 1]\nSphere 1 -1 1 360\nAttributeEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let w = b.of(Severity::Warning);
+    assert_eq!(w.len(), 1, "{w:#?}");
+    assert!(
+        w[0].contains("archive-only") && w[0].contains("3 requests"),
+        "{}",
+        w[0]
+    );
+    assert!(b.scenes.is_empty());
+}
+
+#[test]
+fn geometry_before_a_world_in_a_real_scene_is_still_an_error() {
+    let b = build("Sphere 1 -1 1 360\nFormat 8 8 1\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\n");
+    let e = b.of(Severity::Error);
+    assert_eq!(e.len(), 1, "{e:#?}");
+    assert!(e[0].contains("outside `WorldBegin`"), "{}", e[0]);
+    assert_eq!(b.scenes.len(), 1);
+}
+
+#[test]
+fn latin1_rib_names_and_comments_decode() {
+    let b = build_bytes(
+        b"# sc\xe8ne d'\xe9t\xe9\nFormat 8 8 1\nWorldBegin\nAttribute \"identifier\" \"name\" [\"th\xe9i\xe8re\"]\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    assert_eq!(
+        b.scenes[0].primitives[0].attributes.identifier.as_deref(),
+        Some("th\u{e9}i\u{e8}re")
+    );
+}
+
+fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("arbor-compat-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn latin1_shaders_and_headers_compile() {
+    let d = tmpdir("latin1");
+    std::fs::write(
+        d.join("accents.h"),
+        b"/* fonctions utilis\xe9es */\nfloat demi(float x) { return x / 2; }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("ete.sl"),
+        b"/* \xe9t\xe9, \xb0C */\n#include \"accents.h\"\nsurface ete(float Kd = 1;) { Ci = demi(Kd) * Cs; }\n",
+    )
+    .unwrap();
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let lib = arbor::sl::ShaderLibrary::new(CompileOptions {
+        search_paths: vec![d.clone()],
+        ..Default::default()
+    });
+    let p = lib.get("ete", &sources, &diags);
+    assert!(p.is_some(), "{}", diags.render_plain(&sources));
+    assert!(!diags.has_errors());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+fn compile(name: &str, text: &str) -> (usize, String, bool) {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let progs = compile_source(
+        name,
+        text,
+        None,
+        &sources,
+        &diags,
+        &CompileOptions::default(),
+    );
+    (
+        progs.len(),
+        diags.render_plain(&sources),
+        diags.has_errors(),
+    )
+}
+
+#[test]
+fn rmannotes_helpers_are_in_the_standard_library() {
+    let src = r#"
+#include "rmannotes.h"
+surface tiles(float freq = 4, fuzz = 0.02;)
+{
+    float ss = repeat(s, freq), tt = repeat(t, freq);
+    float col = whichtile(s, freq), row = whichtile(t, freq);
+    float inside = intersection(pulse(0.1, 0.9, fuzz, ss), pulse(0.1, 0.9, fuzz, tt));
+    float grout = complement(inside);
+    float lines = union(filteredpulse(0.45, 0.55, ss, 0.01), difference(grout, 0.5));
+    float rs, rt, r, theta;
+    rotate2d(ss, tt, radians(45), 0.5, 0.5, rs, rt);
+    topolar2d(rs - 0.5, rt - 0.5, r, theta);
+    color c = blend(color(1, 0, 0), color(0, 0, 1), inside);
+    if (odd(col + row)) c = blend(c, color 1, 0.5);
+    if (even(col)) c *= boxstep(0.5, r + 0.5);
+    Ci = c * (1 - lines) + theta * 0;
+}
+"#;
+    let (n, log, err) = compile("tiles.sl", src);
+    assert!(!err && n == 1, "{log}");
+    let (n, log, err) = compile(
+        "t2.sl",
+        "#include \"rmannotes.sl\"\nsurface t2() { Ci = blend(0, 1, repeat(s, 2)); }\n",
+    );
+    assert!(!err && n == 1, "{log}");
+}
+
+#[test]
+fn material_functions_are_in_the_standard_library() {
+    let src = r#"
+#include "material.h"
+surface mats(float Ka = 1, Kd = 0.5, Ks = 0.5, Kr = 0.2, roughness = 0.1; string envname = "";)
+{
+    normal Nf = faceforward(normalize(N), I);
+    color c = MaterialPlastic(Nf, Cs, Ka, Kd, Ks, roughness)
+            + MaterialMatte(Nf, Cs, Ka, Kd)
+            + MaterialRoughMetal(Nf, Cs, Ka, Kd, Ks, roughness)
+            + MaterialClay(Nf, Cs, Ka, Kd, 0.3)
+            + MaterialShinyMetal(Nf, Cs, Ka, Ks, Kr, roughness, envname);
+    Oi = Os;
+    Ci = Oi * c;
+}
+"#;
+    let (n, log, err) = compile("mats.sl", src);
+    assert!(!err && n == 1, "{log}");
+}
+
+#[test]
+fn uniform_function_returning_varying_is_demoted() {
+    // A uniform counter advanced by a uniform function called inside illuminance (as
+    // lens-flare shaders do): PRMan accepts it; arbor demotes it with warnings.
+    let src = r#"
+surface flare(float seed = 7;)
+{
+    uniform float n = 0;
+    uniform float next() {
+        extern uniform float n, seed;
+        n += 1;
+        return cellnoise(n, seed);
+    }
+    color c = 0;
+    illuminance (P) {
+        n = 0;
+        uniform float r = next();
+        c += Cl * r;
+    }
+    Ci = c;
+}
+"#;
+    let (n, log, err) = compile("flare.sl", src);
+    assert!(!err && n == 1, "{log}");
+    assert!(log.contains("declared to return uniform"), "{log}");
+}
+
+#[test]
+fn option_shadow_bias_is_the_default_bias_of_shadow() {
+    use arbor::pipeline::{render_paths, Settings};
+    let dir = tmpdir("bias");
+    // A light whose shadow() call names no bias: the scene's Option "shadow" decides.
+    std::fs::write(
+        dir.join("nobiaslight.sl"),
+        "light nobiaslight(string shadowname = \"\";) {\n\
+         solar(vector \"world\" (0, -1, 0), 0) { Cl = 1 - shadow(shadowname, Ps); } }\n",
+    )
+    .unwrap();
+    let (z, tex) = (dir.join("l.z"), dir.join("l.tex"));
+    let cam = "Projection \"orthographic\"\nScreenWindow -2 2 -2 2\n\
+               ConcatTransform [1 0 0 0  0 0 -1 0  0 1 0 0  0 0 0 1]\nTranslate 0 -10 0\n";
+    let floor = "Polygon \"P\" [-2 0 -2  2 0 -2  2 0 2  -2 0 2]";
+    let beauty = |n: u32, opt: &str, png: &PathBuf| {
+        format!(
+            "FrameBegin {n}\nDisplay \"{}\" \"png\" \"rgb\"\nFormat 8 8 1\n{opt}\n{cam}WorldBegin\n\
+             LightSource \"nobiaslight\" 1 \"shadowname\" [\"{}\"]\nSurface \"matte\"\n{floor}\nWorldEnd\nFrameEnd\n",
+            png.display(),
+            tex.display()
+        )
+    };
+    let (far, near) = (dir.join("far.png"), dir.join("near.png"));
+    // The occluder is 1 unit above the floor: a bias of 3 lifts the shadow off the floor,
+    // a bias of 0.05 keeps it.
+    let rib = format!(
+        "FrameBegin 1\nDisplay \"{}\" \"zfile\" \"z\"\nFormat 32 32 1\nPixelSamples 1 1\n{cam}\
+         WorldBegin\nPolygon \"P\" [-1 1 -1  1 1 -1  1 1 1  -1 1 1]\n{floor}\nWorldEnd\nFrameEnd\n\
+         MakeShadow \"{}\" \"{}\"\n{}{}",
+        z.display(),
+        z.display(),
+        tex.display(),
+        beauty(2, "Option \"shadow\" \"bias\" [3]", &far),
+        beauty(
+            3,
+            "Option \"shadow\" \"bias0\" [0.04] \"bias1\" [0.06]",
+            &near
+        ),
+    );
+    let path = dir.join("scene.rib");
+    std::fs::write(&path, rib).unwrap();
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let stdlib = concat!(env!("CARGO_MANIFEST_DIR"), "/stdlib/shaders").to_string();
+    let settings = Settings {
+        threads: 1,
+        shader_paths: vec![dir.display().to_string(), stdlib],
+        ..Default::default()
+    };
+    render_paths(&[path], &settings, &sources, &diags);
+    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    let centre = |p: &PathBuf| image::open(p).unwrap().to_rgb8().get_pixel(4, 4)[0];
+    assert!(centre(&far) > 200, "bias 3: {}", centre(&far));
+    assert!(centre(&near) < 60, "bias 0.05: {}", centre(&near));
+    let _ = std::fs::remove_dir_all(&dir);
+}
