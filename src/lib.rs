@@ -7,6 +7,7 @@
 pub mod diag;
 pub mod film;
 pub mod geom;
+pub mod lsp;
 pub mod num;
 pub mod pattern;
 pub mod pipeline;
