@@ -2,7 +2,7 @@
 //! Every answer is checked, including a diagnostic that appears when a typo is made and goes
 //! when it is fixed, and the server surviving malformed messages and documents.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{channel, Receiver};
