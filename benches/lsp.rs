@@ -21,7 +21,7 @@ fn big_shader() -> String {
     }
     s.push_str("surface big(float Ka = 1, Kd = 0.8, Ks = 0.3, roughness = 0.1;\n           color tint = color(0.8, 0.6, 0.4)) {\n    normal Nf = faceforward(normalize(N), I);\n    vector V = -normalize(I);\n    point PP = transform(\"shader\", P);\n    float acc = 0;\n");
     let mut j = 0;
-    while s.lines().count() < 1_995 {
+    while s.lines().count() < 1_996 {
         s.push_str(&format!(
             "    acc += layer{}(PP, {}.0) * smoothstep(0, 1, s + t);\n",
             (j * 3) % k,
@@ -76,6 +76,32 @@ fn keystroke(server: &mut Server, uri: &str, line: u32, col: u32, version: i32) 
     server.check_dirty();
 }
 
+/// This thread's CPU time (user + system) in seconds, from /proc (Linux; None elsewhere).
+/// Criterion reports wall time, which on a shared machine includes waiting for a core.
+fn thread_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
+    let after = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+fn report_cpu(name: &str, n: i32, mut f: impl FnMut(i32)) {
+    let (Some(a), t) = (thread_cpu_seconds(), std::time::Instant::now()) else {
+        return;
+    };
+    for i in 0..n {
+        f(i);
+    }
+    if let Some(b) = thread_cpu_seconds() {
+        eprintln!(
+            "{name}: {:.1} ms CPU per keystroke (wall {:.1} ms), {n} keystrokes",
+            (b - a) * 1e3 / n as f64,
+            t.elapsed().as_secs_f64() * 1e3 / n as f64
+        );
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let shader = big_shader();
     assert!(shader.lines().count() >= 2_000, "{}", shader.lines().count());
@@ -92,6 +118,9 @@ fn bench(c: &mut Criterion) {
             keystroke(&mut server, uri, last, col, version);
         })
     });
+    report_cpu("lsp/keystroke_recheck_2000_line_shader", 40, |i| {
+        keystroke(&mut server, uri, last, col, version + 1 + i)
+    });
 
     let rib = scene_rib();
     let mut server = Server::new(Settings::default(), Box::new(std::io::sink()));
@@ -104,6 +133,9 @@ fn bench(c: &mut Criterion) {
             // The Ks digit of the first Surface line.
             keystroke(&mut server, uri, 7, 25, version);
         })
+    });
+    report_cpu("lsp/keystroke_recheck_2400_line_rib", 40, |i| {
+        keystroke(&mut server, uri, 7, 25, version + 1 + i)
     });
 }
 

@@ -18,6 +18,7 @@ use lsp_types::{
 };
 
 use super::index::{self, Index};
+use super::reparse::ParseCache;
 use super::text::LineIndex;
 use crate::diag::{Diag, Diagnostics, Severity, SourceMap, Span};
 use crate::pipeline::{library_for, Settings};
@@ -124,6 +125,7 @@ pub fn check_sl(
     lang: Lang,
     settings: &Settings,
     overlay: &Overlay,
+    cache: &mut ParseCache,
 ) -> Checked {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
@@ -132,7 +134,19 @@ pub fn check_sl(
         search: SearchResolver { opts: &opts },
         overlay,
     };
-    let done = compile_with(name, text, path, &sources, &diags, &opts, &resolver);
+    let mut parser = |pre: &crate::sl::preprocess::Preprocessed, d: &Diagnostics| {
+        super::reparse::parse(pre, &sources, d, cache)
+    };
+    let done = compile_with(
+        name,
+        text,
+        path,
+        &sources,
+        &diags,
+        &opts,
+        &resolver,
+        &mut parser,
+    );
     let index = done.ast.as_ref().map(|ast| index::build(ast, &sources));
     let mut list: Vec<Diag> = diags.take().into_iter().map(|(d, _)| d).collect();
     if lang == Lang::SlHeader {

@@ -16,6 +16,7 @@
 
 pub mod check;
 pub mod index;
+pub mod reparse;
 pub mod rib;
 pub mod sl;
 pub mod text;
@@ -57,6 +58,8 @@ pub struct Doc {
     /// The last check whose text parsed (shading language): names while the text does not.
     pub good: Option<Checked>,
     pub dirty: bool,
+    /// The pieces of the last parse, reused where the text did not change.
+    pub cache: reparse::ParseCache,
 }
 
 type Reply = Result<Value, (i64, String)>;
@@ -219,6 +222,7 @@ impl Server {
                         checked: None,
                         good: None,
                         dirty: true,
+                        cache: reparse::ParseCache::default(),
                     },
                 );
             }
@@ -319,6 +323,7 @@ impl Server {
                     doc.lang,
                     &settings,
                     &overlay,
+                    &mut doc.cache,
                 )
             }
             Lang::Rib => check::check_rib(&name, &doc.text, doc.path.as_deref(), &settings),

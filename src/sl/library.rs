@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
-use crate::sl::ast::Item;
+use crate::sl::ast::{Item, SourceFile};
 use crate::sl::ir::Program;
-use crate::sl::preprocess::{preprocess, IncludeResolver};
+use crate::sl::preprocess::{preprocess, IncludeResolver, Preprocessed};
 
 mod embedded {
     include!(concat!(env!("OUT_DIR"), "/stdlib.rs"));
@@ -77,7 +77,18 @@ pub fn compile_source(
     diags: &Diagnostics,
     opts: &CompileOptions,
 ) -> Vec<Program> {
-    compile_with(name, text, path, sources, diags, opts, &SearchResolver { opts }).programs
+    let resolver = SearchResolver { opts };
+    compile_with(name, text, path, sources, diags, opts, &resolver, &mut parse_all).programs
+}
+
+/// How [`compile_with`] parses the preprocessed text: all of it at once (`arbor lsp` reuses
+/// the items of a previous parse that did not change).
+pub type ParseFn<'a> = dyn FnMut(&Preprocessed, &Diagnostics) -> Option<SourceFile> + 'a;
+
+/// The whole preprocessed text through the parser.
+pub fn parse_all(pre: &Preprocessed, diags: &Diagnostics) -> Option<SourceFile> {
+    let span = |a: usize, b: usize| pre.span(a, b);
+    crate::sl::parse::parse(&pre.text, &span, diags)
 }
 
 /// What compiling one source text produced, for tools that also want the syntax tree.
@@ -89,8 +100,9 @@ pub struct Compiled {
     pub programs: Vec<Program>,
 }
 
-/// [`compile_source`] with the include search given (`arbor lsp` overlays unsaved editor
-/// buffers) and the syntax tree kept.
+/// [`compile_source`] with the include search and the parse given (`arbor lsp` overlays
+/// unsaved editor buffers and parses incrementally) and the syntax tree kept.
+#[allow(clippy::too_many_arguments)]
 pub fn compile_with(
     name: &str,
     text: &str,
@@ -99,6 +111,7 @@ pub fn compile_with(
     diags: &Diagnostics,
     opts: &CompileOptions,
     resolver: &dyn IncludeResolver,
+    parser: &mut ParseFn<'_>,
 ) -> Compiled {
     let file = sources.add(name, text);
     let mut done = Compiled {
@@ -116,8 +129,7 @@ pub fn compile_with(
     if missing_include {
         return done;
     }
-    let span = |a: usize, b: usize| pre.span(a, b);
-    let Some(ast) = crate::sl::parse::parse(&pre.text, &span, diags) else {
+    let Some(ast) = parser(&pre, diags) else {
         return done;
     };
     let functions: Vec<_> = ast
