@@ -104,10 +104,20 @@ fn report_cpu(name: &str, n: i32, mut f: impl FnMut(i32)) {
 
 fn bench(c: &mut Criterion) {
     let shader = big_shader();
-    assert!(shader.lines().count() >= 2_000, "{}", shader.lines().count());
+    assert!(
+        shader.lines().count() >= 2_000,
+        "{}",
+        shader.lines().count()
+    );
     // The digit of the last `acc += layerN(PP, D.0)` line's scale.
     let last = shader.lines().count() as u32 - 5;
-    let col = shader.lines().nth(last as usize).unwrap().find(".0)").unwrap() as u32 - 1;
+    let col = shader
+        .lines()
+        .nth(last as usize)
+        .unwrap()
+        .find(".0)")
+        .unwrap() as u32
+        - 1;
     let mut server = Server::new(Settings::default(), Box::new(std::io::sink()));
     let uri = "file:///bench/big.sl";
     open(&mut server, uri, &shader);

@@ -63,7 +63,10 @@ fn check_structure(g: &Value, scope: &str) {
     includes(g, &mut inc);
     for i in inc {
         let key = i.strip_prefix('#').unwrap();
-        assert!(g["repository"].get(key).is_some(), "{scope}: `{i}` is not defined");
+        assert!(
+            g["repository"].get(key).is_some(),
+            "{scope}: `{i}` is not defined"
+        );
     }
     let mut rx = Vec::new();
     regexes(g, &mut rx);
@@ -94,21 +97,39 @@ fn shading_language_grammar_covers_builtins_globals_and_keywords() {
     known.extend(words(&g, "shader-types"));
     known.extend(words(&g, "control"));
     for s in arbor::sl::builtins::SIGS {
-        assert!(known.contains(s.name), "built-in `{}` is not highlighted", s.name);
+        assert!(
+            known.contains(s.name),
+            "built-in `{}` is not highlighted",
+            s.name
+        );
     }
     for s in arbor::sl::builtins::SPECIAL {
         assert!(known.contains(*s), "built-in `{s}` is not highlighted");
     }
     let globals = words(&g, "globals");
     for (name, ..) in arbor::sl::lower::GLOBALS {
-        assert!(globals.contains(*name), "global `{name}` is not highlighted");
+        assert!(
+            globals.contains(*name),
+            "global `{name}` is not highlighted"
+        );
     }
     let types = words(&g, "types");
-    for t in ["float", "string", "color", "point", "vector", "normal", "matrix", "void"] {
+    for t in [
+        "float", "string", "color", "point", "vector", "normal", "matrix", "void",
+    ] {
         assert!(types.contains(t), "{t}");
     }
     let control = words(&g, "control");
-    for k in ["if", "else", "for", "while", "return", "illuminance", "illuminate", "solar"] {
+    for k in [
+        "if",
+        "else",
+        "for",
+        "while",
+        "return",
+        "illuminance",
+        "illuminate",
+        "solar",
+    ] {
         assert!(control.contains(k), "{k}");
     }
     let modifiers = words(&g, "modifiers");

@@ -212,7 +212,10 @@ fn an_editor_session_over_stdio() {
     );
     let caps = &init["result"]["capabilities"];
     assert_eq!(caps["hoverProvider"], true, "{init}");
-    assert_eq!(caps["textDocumentSync"]["change"], 2, "incremental sync: {init}");
+    assert_eq!(
+        caps["textDocumentSync"]["change"], 2,
+        "incremental sync: {init}"
+    );
     assert_eq!(caps["documentFormattingProvider"], true);
     assert_eq!(init["result"]["serverInfo"]["name"], "arbor");
     c.notify("initialized", json!({}));
@@ -253,21 +256,50 @@ fn an_editor_session_over_stdio() {
 
     // --- hover: a built-in, a global, a user function (from the header), a parameter
     let h = c.request("textDocument/hover", at(&sl, 5, col + 2));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
-    assert!(v.contains("float noise(point)") && v.contains("Perlin"), "{v}");
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        v.contains("float noise(point)") && v.contains("Perlin"),
+        "{v}"
+    );
     let cs = STRIPES_SL.lines().nth(6).unwrap().find("Cs").unwrap() as u32;
     let h = c.request("textDocument/hover", at(&sl, 6, cs));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
     assert!(v.contains("varying color Cs"), "{v}");
-    let sd = STRIPES_SL.lines().nth(4).unwrap().find("stripe_distance").unwrap() as u32;
+    let sd = STRIPES_SL
+        .lines()
+        .nth(4)
+        .unwrap()
+        .find("stripe_distance")
+        .unwrap() as u32;
     let h = c.request("textDocument/hover", at(&sl, 4, sd + 3));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
-    assert!(v.contains("float stripe_distance(float x; float freq)"), "{v}");
-    assert!(v.contains("Distance to the nearest stripe centre."), "doc comment: {v}");
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        v.contains("float stripe_distance(float x; float freq)"),
+        "{v}"
+    );
+    assert!(
+        v.contains("Distance to the nearest stripe centre."),
+        "doc comment: {v}"
+    );
     let fq = STRIPES_SL.lines().nth(4).unwrap().rfind("freq").unwrap() as u32;
     let h = c.request("textDocument/hover", at(&sl, 4, fq + 1));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
-    assert!(v.contains("float freq = 4") && v.contains("shader parameter"), "{v}");
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        v.contains("float freq = 4") && v.contains("shader parameter"),
+        "{v}"
+    );
     // Nothing to say about whitespace.
     let h = c.request("textDocument/hover", at(&sl, 1, 0));
     assert!(h["result"].is_null(), "{h}");
@@ -280,7 +312,17 @@ fn an_editor_session_over_stdio() {
         .iter()
         .map(|i| i["label"].as_str().unwrap())
         .collect();
-    for want in ["d", "n", "freq", "stripecolor", "stripe_distance", "noise", "smoothstep", "Cs", "illuminance"] {
+    for want in [
+        "d",
+        "n",
+        "freq",
+        "stripecolor",
+        "stripe_distance",
+        "noise",
+        "smoothstep",
+        "Cs",
+        "illuminance",
+    ] {
         assert!(labels.contains(&want), "completion lacks `{want}`");
     }
     let noise = comp["result"]
@@ -289,7 +331,10 @@ fn an_editor_session_over_stdio() {
         .iter()
         .find(|i| i["label"] == "noise")
         .unwrap();
-    assert!(noise["detail"].as_str().unwrap().contains("noise("), "{noise}");
+    assert!(
+        noise["detail"].as_str().unwrap().contains("noise("),
+        "{noise}"
+    );
 
     // --- go to definition: a function in the included header, the #include itself, a local
     let def = c.request("textDocument/definition", at(&sl, 4, sd + 1));
@@ -297,13 +342,22 @@ fn an_editor_session_over_stdio() {
     assert_eq!(def["result"]["range"]["start"], pos(1, 6), "{def}");
     let def = c.request("textDocument/definition", at(&sl, 0, 12));
     assert_eq!(def["result"]["uri"], util, "{def}");
-    let dcol = STRIPES_SL.lines().nth(6).unwrap().find("step(0.25, d)").unwrap() as u32 + 11;
+    let dcol = STRIPES_SL
+        .lines()
+        .nth(6)
+        .unwrap()
+        .find("step(0.25, d)")
+        .unwrap() as u32
+        + 11;
     let def = c.request("textDocument/definition", at(&sl, 6, dcol));
     assert_eq!(def["result"]["uri"], sl, "{def}");
     assert_eq!(def["result"]["range"]["start"], pos(4, 10), "{def}");
 
     // --- document symbols: the shader with its parameters and locals
-    let syms = c.request("textDocument/documentSymbol", json!({"textDocument": {"uri": sl}}));
+    let syms = c.request(
+        "textDocument/documentSymbol",
+        json!({"textDocument": {"uri": sl}}),
+    );
     let top = syms["result"].as_array().unwrap();
     assert_eq!(top.len(), 1, "only this file's declarations: {syms}");
     assert_eq!(top[0]["name"], "stripes");
@@ -321,7 +375,11 @@ fn an_editor_session_over_stdio() {
         json!({"textDocument": {"uri": util, "languageId": "rsl", "version": 1, "text": UTIL_H}}),
     );
     let d = c.diagnostics(&util);
-    assert!(d.is_empty(), "a header alone defines no shader, fine: {}", messages(&d));
+    assert!(
+        d.is_empty(),
+        "a header alone defines no shader, fine: {}",
+        messages(&d)
+    );
     let broken = UTIL_H.replace("return abs(f - 0.5);", "return abs(f - 0.5)");
     c.forget(&sl);
     c.notify(
@@ -330,8 +388,16 @@ fn an_editor_session_over_stdio() {
     );
     let d = c.diagnostics(&sl);
     assert!(!d.is_empty(), "the includer sees the header's error");
-    assert_eq!(d[0]["range"]["start"]["line"], 0, "at the #include: {}", d[0]);
-    assert!(d[0]["message"].as_str().unwrap().contains("util.h"), "{}", d[0]);
+    assert_eq!(
+        d[0]["range"]["start"]["line"], 0,
+        "at the #include: {}",
+        d[0]
+    );
+    assert!(
+        d[0]["message"].as_str().unwrap().contains("util.h"),
+        "{}",
+        d[0]
+    );
     c.notify(
         "textDocument/didChange",
         json!({"textDocument": {"uri": util, "version": 3}, "contentChanges": [{"text": UTIL_H}]}),
@@ -351,11 +417,20 @@ fn an_editor_session_over_stdio() {
     let d = c.diagnostics(&rib);
     assert!(d.is_empty(), "clean scene: {}", messages(&d));
     let h = c.request("textDocument/hover", at(&rib, 8, 2));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
     assert!(v.contains("Sphere radius zmin zmax thetamax"), "{v}");
     let h = c.request("textDocument/hover", at(&rib, 6, 10));
-    let v = h["result"]["contents"]["value"].as_str().unwrap().to_string();
-    assert!(v.contains("surface stripes(") && v.contains("uniform float freq"), "{v}");
+    let v = h["result"]["contents"]["value"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        v.contains("surface stripes(") && v.contains("uniform float freq"),
+        "{v}"
+    );
     // Completion of request names at the start of a line.
     let comp = c.request("textDocument/completion", at(&rib, 7, 0));
     let labels: Vec<String> = comp["result"]
@@ -399,16 +474,27 @@ fn an_editor_session_over_stdio() {
     let on_disk = std::fs::read_to_string(target.trim_start_matches("file://")).unwrap();
     assert!(on_disk.contains("surface plastic"), "{on_disk}");
     // Outline: the world block holds the attribute block holding the sphere.
-    let syms = c.request("textDocument/documentSymbol", json!({"textDocument": {"uri": rib}}));
+    let syms = c.request(
+        "textDocument/documentSymbol",
+        json!({"textDocument": {"uri": rib}}),
+    );
     let s = syms["result"].to_string();
-    assert!(s.contains("\"World\"") && s.contains("Sphere 1") && s.contains("Surface \\\"plastic\\\""), "{s}");
+    assert!(
+        s.contains("\"World\"") && s.contains("Sphere 1") && s.contains("Surface \\\"plastic\\\""),
+        "{s}"
+    );
     // Formatting: indentation by block, the comment kept.
     let f = c.request(
         "textDocument/formatting",
         json!({"textDocument": {"uri": rib}, "options": {"tabSize": 2, "insertSpaces": true}}),
     );
     let new_text = f["result"][0]["newText"].as_str().unwrap().to_string();
-    assert!(new_text.contains("WorldBegin\n  # the only object\n  AttributeBegin\n    Surface \"plastic\"\n"), "{new_text}");
+    assert!(
+        new_text.contains(
+            "WorldBegin\n  # the only object\n  AttributeBegin\n    Surface \"plastic\"\n"
+        ),
+        "{new_text}"
+    );
 
     // --- a RIB typo: did you mean
     let typo = plastic.replace("Sphere 1", "Sphre 1");
@@ -421,7 +507,12 @@ fn an_editor_session_over_stdio() {
     let m = messages(&d);
     let typo_diag = d
         .iter()
-        .find(|d| d["message"].as_str().unwrap().contains("unknown request `Sphre`"))
+        .find(|d| {
+            d["message"]
+                .as_str()
+                .unwrap()
+                .contains("unknown request `Sphre`")
+        })
         .unwrap_or_else(|| panic!("{m}"));
     assert!(m.contains("did you mean `Sphere`?"), "{m}");
     assert_eq!(typo_diag["range"]["start"], pos(8, 0));
@@ -505,18 +596,31 @@ fn malformed_requests_and_documents_never_crash_the_server() {
                 {"range": {"start": pos(0, 1), "end": pos(0, 2)}, "text": ""}]}),
         );
         for (line, ch) in [(0, 0), (0, 1), (0, 2), (999, 999), (0, u32::MAX)] {
-            for m in ["textDocument/hover", "textDocument/completion", "textDocument/definition"] {
+            for m in [
+                "textDocument/hover",
+                "textDocument/completion",
+                "textDocument/definition",
+            ] {
                 let r = c.request(m, at(&u, line, ch));
-                assert!(r.get("error").is_none(), "{name} {m} {line}:{ch} (#{k}): {r}");
+                assert!(
+                    r.get("error").is_none(),
+                    "{name} {m} {line}:{ch} (#{k}): {r}"
+                );
             }
         }
-        let r = c.request("textDocument/documentSymbol", json!({"textDocument": {"uri": u}}));
+        let r = c.request(
+            "textDocument/documentSymbol",
+            json!({"textDocument": {"uri": u}}),
+        );
         assert!(r.get("error").is_none(), "{r}");
         let r = c.request(
             "textDocument/formatting",
             json!({"textDocument": {"uri": u}, "options": {"tabSize": 2, "insertSpaces": true}}),
         );
-        assert!(r.get("result").is_some() || r["error"]["code"] == -32803, "{r}");
+        assert!(
+            r.get("result").is_some() || r["error"]["code"] == -32803,
+            "{r}"
+        );
         c.notify("textDocument/didClose", json!({"textDocument": {"uri": u}}));
     }
     // Requests on documents never opened.

@@ -139,7 +139,11 @@ impl Walker<'_> {
             text.find(name).unwrap_or(0)
         };
         let start = span.start as usize + at;
-        Span::new(span.file, start, (start + name.len()).min(span.end.max(span.start) as usize))
+        Span::new(
+            span.file,
+            start,
+            (start + name.len()).min(span.end.max(span.start) as usize),
+        )
     }
 
     fn expr_text(&self, e: &Expr) -> String {

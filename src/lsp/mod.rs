@@ -124,8 +124,9 @@ impl Server {
         let params = v.get("params").cloned().unwrap_or(Value::Null);
         match (id, method) {
             (Some(id), Some(m)) => {
-                let r = catch_unwind(AssertUnwindSafe(|| self.request(&m, params)))
-                    .unwrap_or_else(|_| Err((INTERNAL_ERROR, format!("`{m}` failed inside arbor"))));
+                let r = catch_unwind(AssertUnwindSafe(|| self.request(&m, params))).unwrap_or_else(
+                    |_| Err((INTERNAL_ERROR, format!("`{m}` failed inside arbor"))),
+                );
                 self.respond(id, r);
             }
             (None, Some(m)) => {
@@ -143,10 +144,7 @@ impl Server {
     }
 
     fn log(&mut self, message: &str) {
-        self.notify(
-            "window/logMessage",
-            json!({"type": 2, "message": message}),
-        );
+        self.notify("window/logMessage", json!({"type": 2, "message": message}));
     }
 
     fn request(&mut self, method: &str, params: Value) -> Reply {
@@ -176,12 +174,16 @@ impl Server {
             "textDocument/completion" => {
                 let p: CompletionParams = parse(params)?;
                 let pos = p.text_document_position;
-                Ok(to_json(self.completion(&pos.text_document.uri, pos.position)))
+                Ok(to_json(
+                    self.completion(&pos.text_document.uri, pos.position),
+                ))
             }
             "textDocument/definition" => {
                 let p: GotoDefinitionParams = parse(params)?;
                 let pos = p.text_document_position_params;
-                Ok(to_json(self.definition(&pos.text_document.uri, pos.position)))
+                Ok(to_json(
+                    self.definition(&pos.text_document.uri, pos.position),
+                ))
             }
             "textDocument/documentSymbol" => {
                 let p: DocumentSymbolParams = parse(params)?;
@@ -465,7 +467,9 @@ impl Server {
         let syms = match doc.lang {
             Lang::Rib => {
                 let c = doc.checked.as_ref()?;
-                let Detail::Rib(r) = &c.detail else { return None };
+                let Detail::Rib(r) = &c.detail else {
+                    return None;
+                };
                 rib::symbols(&doc.text, r, c.file)
             }
             _ => {

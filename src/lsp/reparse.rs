@@ -281,7 +281,14 @@ mod tests {
 
     fn pre(sources: &SourceMap, text: &str) -> Preprocessed {
         let f = sources.add("t.sl", text);
-        preprocess(f, None, sources, &[], &MapResolver::default(), &Diagnostics::new())
+        preprocess(
+            f,
+            None,
+            sources,
+            &[],
+            &MapResolver::default(),
+            &Diagnostics::new(),
+        )
     }
 
     #[test]

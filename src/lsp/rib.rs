@@ -20,9 +20,9 @@ use lsp_types::{
 
 use super::check::{path_to_uri, uri_of_source, RibChecked, SHADER_REQUESTS};
 use super::text::LineIndex;
+use crate::diag::{Diagnostics, SourceMap};
 use crate::scene::params::STANDARD;
 use crate::scene::table;
-use crate::diag::{Diagnostics, SourceMap};
 use crate::sl::ir::Program;
 use crate::sl::{CompileOptions, ShaderLibrary};
 
@@ -94,7 +94,9 @@ pub fn lex(text: &str) -> Vec<(Tok, usize, usize)> {
 #[derive(Debug, PartialEq)]
 pub enum Context {
     /// On (or typing) a request name.
-    Request { name: String },
+    Request {
+        name: String,
+    },
     /// Inside or on a string argument: its request, its argument index (arrays count once),
     /// the string's text, and the first argument's text (the shader or category name).
     Str {
@@ -136,7 +138,9 @@ pub fn context(text: &str, offset: usize) -> Context {
                 args.clear();
             }
             Tok::Str if here => {
-                let Some(r) = request else { return Context::Other };
+                let Some(r) = request else {
+                    return Context::Other;
+                };
                 return Context::Str {
                     request: r,
                     arg: args.len(),
@@ -220,7 +224,10 @@ fn param_text(par: &crate::sl::ir::ParamInfo) -> String {
 /// The compiled shader a name stands for: the check's, else compiled now from the search
 /// path (the request naming it may not parse yet while it is being typed).
 fn shader_of(checked: Option<&RibChecked>, name: &str) -> Option<Arc<Program>> {
-    if let Some(p) = checked.and_then(|c| c.shaders.get(name)).and_then(|p| p.clone()) {
+    if let Some(p) = checked
+        .and_then(|c| c.shaders.get(name))
+        .and_then(|p| p.clone())
+    {
         return Some(p);
     }
     let search = checked.map(|c| c.shader_paths.clone()).unwrap_or_default();
@@ -282,7 +289,9 @@ pub fn hover(text: &str, offset: usize, checked: Option<&RibChecked>) -> Option<
                     )));
                 }
             }
-            let cat = is_category_request(&request).then_some(first.as_deref()).flatten();
+            let cat = is_category_request(&request)
+                .then_some(first.as_deref())
+                .flatten();
             let decl = standard(cat, bare)?;
             Some(markdown(format!(
                 "```rib\n\"{decl} {bare}\"\n```\n\n*standard declaration*"
@@ -296,7 +305,9 @@ pub fn hover(text: &str, offset: usize, checked: Option<&RibChecked>) -> Option<
 fn shader_files(search: &[PathBuf]) -> Vec<(String, String)> {
     let mut out: Vec<(String, String)> = Vec::new();
     for d in search {
-        let Ok(rd) = std::fs::read_dir(d) else { continue };
+        let Ok(rd) = std::fs::read_dir(d) else {
+            continue;
+        };
         for e in rd.flatten() {
             let p = e.path();
             if p.extension().is_some_and(|x| x == "sl") {
@@ -317,7 +328,12 @@ fn shader_files(search: &[PathBuf]) -> Vec<(String, String)> {
     out
 }
 
-fn item(label: &str, kind: CompletionItemKind, detail: String, doc: Option<String>) -> CompletionItem {
+fn item(
+    label: &str,
+    kind: CompletionItemKind,
+    detail: String,
+    doc: Option<String>,
+) -> CompletionItem {
     CompletionItem {
         label: label.to_string(),
         kind: Some(kind),
@@ -369,7 +385,14 @@ pub fn completion(text: &str, offset: usize, checked: Option<&RibChecked>) -> Ve
                 cats.dedup();
                 return cats
                     .into_iter()
-                    .map(|c| item(c, CompletionItemKind::MODULE, format!("{request} category"), None))
+                    .map(|c| {
+                        item(
+                            c,
+                            CompletionItemKind::MODULE,
+                            format!("{request} category"),
+                            None,
+                        )
+                    })
                     .collect();
             }
             let npos = positional(&request);
@@ -499,7 +522,11 @@ pub fn symbols(text: &str, checked: &RibChecked, file: u32) -> Vec<DocumentSymbo
     for r in checked.requests.iter().filter(|r| r.span.file == file) {
         let n = r.name.as_str();
         if n.len() > 5 && n.ends_with("Begin") {
-            let label = format!("{}{}", n.trim_end_matches("Begin"), first_arg(r).unwrap_or_default());
+            let label = format!(
+                "{}{}",
+                n.trim_end_matches("Begin"),
+                first_arg(r).unwrap_or_default()
+            );
             stack.push((sym(label, SymbolKind::NAMESPACE, r), Vec::new()));
             continue;
         }
@@ -627,10 +654,7 @@ mod tests {
             }
             c => panic!("{c:?}"),
         }
-        assert_eq!(
-            context(t, t.len()),
-            Context::Request { name: "Sph".into() }
-        );
+        assert_eq!(context(t, t.len()), Context::Request { name: "Sph".into() });
     }
 
     #[test]

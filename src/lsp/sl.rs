@@ -24,7 +24,10 @@ use crate::sl::preprocess::IncludeResolver;
 
 /// What each global variable is (RISpec 3.2 §12).
 pub const GLOBAL_DOCS: &[(&str, &str)] = &[
-    ("P", "Surface position (light shaders: the light's position)."),
+    (
+        "P",
+        "Surface position (light shaders: the light's position).",
+    ),
     ("dPdu", "Derivative of surface position along u."),
     ("dPdv", "Derivative of surface position along v."),
     ("N", "Surface shading normal."),
@@ -36,15 +39,24 @@ pub const GLOBAL_DOCS: &[(&str, &str)] = &[
     ("s", "Surface texture coordinate s."),
     ("t", "Surface texture coordinate t."),
     ("Cs", "Surface colour (from `Color` or the primitive's Cs)."),
-    ("Os", "Surface opacity (from `Opacity` or the primitive's Os)."),
+    (
+        "Os",
+        "Surface opacity (from `Opacity` or the primitive's Os).",
+    ),
     ("Ci", "Incident ray colour: the surface shader's result."),
     ("Oi", "Incident ray opacity: the surface shader's result."),
-    ("L", "Incoming light direction (in illuminance: from the surface to the light)."),
+    (
+        "L",
+        "Incoming light direction (in illuminance: from the surface to the light).",
+    ),
     ("Cl", "Light colour arriving from the current light."),
     ("Ol", "Light opacity."),
     ("Ps", "Position being illuminated (light shaders)."),
     ("E", "Position of the eye (camera space origin)."),
-    ("I", "Incident ray direction: from the eye to the surface point."),
+    (
+        "I",
+        "Incident ray direction: from the eye to the surface point.",
+    ),
     ("ncomps", "Number of colour components."),
     ("time", "Current shutter time."),
     ("dtime", "Amount of time covered by this shading sample."),
@@ -53,10 +65,38 @@ pub const GLOBAL_DOCS: &[(&str, &str)] = &[
 ];
 
 const KEYWORDS: &[&str] = &[
-    "surface", "displacement", "light", "volume", "imager", "transformation", "float",
-    "string", "color", "point", "vector", "normal", "matrix", "void", "uniform", "varying",
-    "output", "extern", "if", "else", "while", "for", "break", "continue", "return",
-    "illuminance", "illuminate", "solar", "gather", "texture", "environment", "shadow",
+    "surface",
+    "displacement",
+    "light",
+    "volume",
+    "imager",
+    "transformation",
+    "float",
+    "string",
+    "color",
+    "point",
+    "vector",
+    "normal",
+    "matrix",
+    "void",
+    "uniform",
+    "varying",
+    "output",
+    "extern",
+    "if",
+    "else",
+    "while",
+    "for",
+    "break",
+    "continue",
+    "return",
+    "illuminance",
+    "illuminate",
+    "solar",
+    "gather",
+    "texture",
+    "environment",
+    "shadow",
     "PI",
 ];
 
@@ -282,7 +322,11 @@ pub fn symbols(text: &str, index: &Index, file: u32) -> Vec<DocumentSymbol> {
         },
         tags: None,
         deprecated: None,
-        range: lines.range(text, d.full.start as usize, d.full.end.max(d.span.end) as usize),
+        range: lines.range(
+            text,
+            d.full.start as usize,
+            d.full.end.max(d.span.end) as usize,
+        ),
         selection_range: lines.range(text, d.span.start as usize, d.span.end as usize),
         children,
     };
@@ -389,9 +433,15 @@ mod tests {
     #[test]
     fn builtins_and_globals_have_hover_text() {
         let n = builtin_markdown("noise").unwrap();
-        assert!(n.contains("float noise(point)") && n.contains("Perlin"), "{n}");
+        assert!(
+            n.contains("float noise(point)") && n.contains("Perlin"),
+            "{n}"
+        );
         let p = builtin_markdown("Cs").unwrap();
-        assert!(p.contains("varying color Cs") && p.contains("Surface colour"), "{p}");
+        assert!(
+            p.contains("varying color Cs") && p.contains("Surface colour"),
+            "{p}"
+        );
         assert!(builtin_markdown("notaname").is_none());
         for (g, ..) in GLOBALS {
             assert!(GLOBAL_DOCS.iter().any(|d| d.0 == *g), "{g} has no doc");

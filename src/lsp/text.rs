@@ -78,7 +78,10 @@ impl LineIndex {
     }
 
     pub fn range(&self, text: &str, start: usize, end: usize) -> Range {
-        Range::new(self.position(text, start), self.position(text, end.max(start)))
+        Range::new(
+            self.position(text, start),
+            self.position(text, end.max(start)),
+        )
     }
 }
 

@@ -531,11 +531,17 @@ mod doc_tests {
     fn every_builtin_has_a_doc_line() {
         for name in SIGS.iter().map(|s| s.name).chain(SPECIAL.iter().copied()) {
             let d = doc(name);
-            assert!(d.is_some_and(|(_, l)| !l.is_empty()), "`{name}` has no doc line");
+            assert!(
+                d.is_some_and(|(_, l)| !l.is_empty()),
+                "`{name}` has no doc line"
+            );
             assert!(!signatures(name).is_empty(), "`{name}` has no signature");
         }
         for (name, ..) in DOCS {
-            assert!(is_builtin(name), "doc for `{name}`, which is not a built-in");
+            assert!(
+                is_builtin(name),
+                "doc for `{name}`, which is not a built-in"
+            );
         }
     }
 
@@ -543,9 +549,15 @@ mod doc_tests {
     fn signatures_read_like_rispec() {
         let s = signatures("noise");
         assert!(s.contains(&"float noise(point)".to_string()), "{s:?}");
-        assert!(s.contains(&"color noise(point, float)".to_string()), "{s:?}");
+        assert!(
+            s.contains(&"color noise(point, float)".to_string()),
+            "{s:?}"
+        );
         let f = signatures("fresnel");
-        assert_eq!(f[0], "void fresnel(vector, vector, float, output float, output float)");
+        assert_eq!(
+            f[0],
+            "void fresnel(vector, vector, float, output float, output float)"
+        );
         assert!(signatures("texture")[0].starts_with("float texture("));
     }
 }

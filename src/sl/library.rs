@@ -78,7 +78,17 @@ pub fn compile_source(
     opts: &CompileOptions,
 ) -> Vec<Program> {
     let resolver = SearchResolver { opts };
-    compile_with(name, text, path, sources, diags, opts, &resolver, &mut parse_all).programs
+    compile_with(
+        name,
+        text,
+        path,
+        sources,
+        diags,
+        opts,
+        &resolver,
+        &mut parse_all,
+    )
+    .programs
 }
 
 /// How [`compile_with`] parses the preprocessed text: all of it at once (`arbor lsp` reuses
