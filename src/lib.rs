@@ -8,6 +8,7 @@ pub mod diag;
 pub mod encoding;
 pub mod film;
 pub mod geom;
+pub mod lsp;
 pub mod num;
 pub mod pattern;
 pub mod pipeline;

@@ -50,6 +50,12 @@ enum Cmd {
     },
     /// Make a mip-mapped texture, bump, environment or shadow map (arbor's tiled .tex format).
     Texture(TextureArgs),
+    /// Language server (LSP over stdin/stdout) for .sl and .rib files: diagnostics as you
+    /// type, hover, completion, go-to-definition, outline, RIB formatting.
+    Lsp {
+        #[command(flatten)]
+        paths: PathArgs,
+    },
 }
 
 #[derive(Args)]
@@ -515,9 +521,15 @@ fn main() -> ExitCode {
             }
         }
         Cmd::Texture(a) => texture_cmd(a),
+        Cmd::Lsp { paths } => {
+            let code = arbor::lsp::run_stdio(settings_from(&paths));
+            ExitCode::from(code.clamp(0, 255) as u8)
+        }
         Cmd::Format { file } => match arbor::rib::read_path(&file, &sources, &diags) {
             Ok(reqs) => {
-                print!("{}", arbor::rib::format::format_requests(&reqs));
+                // The text the requests were read from (decoded, for binary RIB): comments kept.
+                let text = sources.get(0).map(|f| f.text.clone()).unwrap_or_default();
+                print!("{}", arbor::rib::format_source(&text, &reqs));
                 if report(&diags, &sources, cli.quiet, cli.verbose) {
                     ExitCode::from(1)
                 } else {

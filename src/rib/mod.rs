@@ -134,7 +134,7 @@ mod binary;
 pub mod format;
 mod lex;
 
-pub use format::format_requests;
+pub use format::{format_requests, format_source};
 
 /// Reads RIB bytes (ASCII, binary or gzip, detected from the content), registering the text
 /// under `name` in `sources`. Syntax errors are reported to `diags`; the requests that could be

@@ -142,7 +142,7 @@ fn has_class_word(token: &str) -> bool {
 
 /// The standard declarations every renderer knows (RISpec 3.2 Table 5.1, the standard
 /// shaders' parameters, Display/Hider/Option/Attribute parameters).
-const STANDARD: &[(&str, &str)] = &[
+pub const STANDARD: &[(&str, &str)] = &[
     ("P", "vertex point"),
     ("Pz", "vertex float"),
     ("Pw", "vertex hpoint"),

@@ -385,3 +385,179 @@ pub fn parse_args(args: &str) -> (Vec<(char, bool)>, bool) {
 pub fn overloads(name: &str) -> impl Iterator<Item = &'static Sig> + '_ {
     SIGS.iter().filter(move |s| s.name == name)
 }
+
+/// One line of what each built-in does (hover and completion in `arbor lsp`), and for the
+/// free-form ones (lowered by hand, not in [`SIGS`]) their signatures as RISpec writes them.
+/// Every name of [`SIGS`] and [`SPECIAL`] has an entry (a test checks).
+pub static DOCS: &[(&str, &[&str], &str)] = &[
+    ("radians", &[], "Degrees to radians."),
+    ("degrees", &[], "Radians to degrees."),
+    ("sin", &[], "Sine of an angle in radians."),
+    ("cos", &[], "Cosine of an angle in radians."),
+    ("tan", &[], "Tangent of an angle in radians."),
+    ("asin", &[], "Arc sine, in [-PI/2, PI/2]."),
+    ("acos", &[], "Arc cosine, in [0, PI]."),
+    ("atan", &[], "Arc tangent: atan(y/x) in [-PI/2, PI/2], or atan(y, x) in [-PI, PI]."),
+    ("pow", &[], "x raised to the power y."),
+    ("exp", &[], "e raised to the power x."),
+    ("sqrt", &[], "Square root."),
+    ("inversesqrt", &[], "1 / sqrt(x)."),
+    ("log", &[], "Natural logarithm, or log(x, base) to a given base."),
+    ("mod", &[], "a modulo b, always in [0, b) (unlike C's fmod for negative a)."),
+    ("abs", &[], "Absolute value."),
+    ("sign", &[], "-1, 0 or 1 by the sign of x."),
+    ("floor", &[], "Largest integer not greater than x."),
+    ("ceil", &[], "Smallest integer not less than x."),
+    ("round", &[], "Nearest integer (halves away from zero)."),
+    ("min", &[], "Smallest of the arguments (per component for triples)."),
+    ("max", &[], "Largest of the arguments (per component for triples)."),
+    ("clamp", &[], "a limited to [min, max] (per component for triples)."),
+    ("mix", &[], "Linear blend (1-t)*a + t*b."),
+    ("step", &[], "0 if value < min, else 1."),
+    ("smoothstep", &[], "0 below min, 1 above max, a smooth Hermite ramp between."),
+    ("filterstep", &["float filterstep(float edge, float s1 [, float s2] [, ...params])"], "step(edge, s) box-filtered over the width s covers on the micropolygon (anti-aliased)."),
+    ("spline", &["float spline([string basis,] float value, float f0, float f1, ..., float fn)", "color spline([string basis,] float value, color c0, ..., color cn)", "float spline([string basis,] float value, float fa[])"], "Catmull-Rom (or the named basis) spline through the control values at value in [0,1]."),
+    ("Du", &[], "Derivative of an expression along u (per du)."),
+    ("Dv", &[], "Derivative of an expression along v (per dv)."),
+    ("Deriv", &[], "Derivative of num with respect to den: Du(num)/Du(den) + Dv(num)/Dv(den)."),
+    ("random", &[], "A random number (or triple) in [0,1), different at every point."),
+    ("noise", &[], "Perlin noise of 1 to 4 dimensions, in [0,1], averaging 0.5."),
+    ("pnoise", &[], "Periodic noise: noise with the given period in every dimension."),
+    ("cellnoise", &[], "A value in [0,1) constant over each integer cell of the domain."),
+    ("xcomp", &[], "x component of a point, vector or normal."),
+    ("ycomp", &[], "y component of a point, vector or normal."),
+    ("zcomp", &[], "z component of a point, vector or normal."),
+    ("setxcomp", &[], "Sets the x component of a point, vector or normal."),
+    ("setycomp", &[], "Sets the y component of a point, vector or normal."),
+    ("setzcomp", &[], "Sets the z component of a point, vector or normal."),
+    ("length", &[], "Euclidean length of a vector."),
+    ("normalize", &[], "The vector scaled to unit length."),
+    ("distance", &[], "Distance between two points."),
+    ("ptlined", &[], "Distance from point Q to the segment from P0 to P1."),
+    ("rotate", &[], "A point rotated by angle (radians) about the axis through P0 and P1; or a matrix rotated about an axis."),
+    ("area", &[], "Area of the micropolygon around P (length of dPdu*du ^ dPdv*dv)."),
+    ("faceforward", &[], "N flipped, if needed, to face against I (against Nref's side)."),
+    ("reflect", &[], "I reflected about N: I - 2*(I.N)*N."),
+    ("refract", &[], "I refracted through a surface with normal N and relative index eta (0 vector on total internal reflection)."),
+    ("fresnel", &[], "Fresnel reflection and transmission coefficients Kr, Kt (and directions R, T) for index ratio eta."),
+    ("depth", &[], "Normalized camera depth of a point: 0 at the near, 1 at the far clipping plane."),
+    ("calculatenormal", &[], "Surface normal at P from its derivatives: Du(P) ^ Dv(P), oriented like N."),
+    ("comp", &[], "A component of a colour or triple, or element (row, col) of a matrix."),
+    ("setcomp", &[], "Sets a component of a colour, or element (row, col) of a matrix."),
+    ("ctransform", &[], "A colour converted from one colour space (\"rgb\", \"hsv\", \"hsl\", \"xyz\", \"XYZ\", \"xyY\", \"YIQ\") to another."),
+    ("determinant", &[], "Determinant of a matrix."),
+    ("translate", &[], "The matrix followed by a translation."),
+    ("scale", &[], "The matrix followed by a scale."),
+    ("concat", &[], "The strings joined end to end."),
+    ("format", &["string format(string pattern, ...)"], "printf-style formatting to a string (%f %d %s %c %p %m %%)."),
+    ("printf", &["void printf(string pattern, ...)"], "printf-style formatting to standard error (%f %d %s %c %p %m %%)."),
+    ("match", &[], "1 if the regular expression pattern matches the subject string, else 0."),
+    ("ambient", &[], "Sum of the ambient light sources' Cl."),
+    ("diffuse", &[], "Lambertian diffuse light on a surface with normal N: sum of Cl*(L.N)."),
+    ("specular", &[], "Specular highlight (RISpec's model) for normal N, view V and roughness."),
+    ("specularbrdf", &[], "The specular() term of one light direction L."),
+    ("phong", &[], "Phong highlight for normal N, view V and exponent size."),
+    ("trace", &[], "Colour seen along a ray from P in direction R (arbor: black, no ray tracing)."),
+    ("texture", &["float texture(string name[channel] [, float s, t [, ...4 corners]] [, ...params])", "color texture(string name[channel] [, float s, t] [, ...params])"], "Filtered texture-map lookup at (s,t) or a quadrilateral; params: blur, width, swidth, twidth, filter, fill."),
+    ("environment", &["float environment(string name[channel], vector R [, ...params])", "color environment(string name[channel], vector R [, ...params])"], "Filtered environment-map lookup in direction R (lat-long or cube)."),
+    ("shadow", &["float shadow(string name[channel], point P [, ...params])"], "Fraction of P in shadow in a shadow map (percentage-closer filtered): 0 lit, 1 shadowed."),
+    ("textureinfo", &["float textureinfo(string name, string dataname, output type value)"], "Information about a texture file (\"resolution\", \"type\", \"channels\", \"viewingmatrix\", \"projectionmatrix\"); 1 if known."),
+    ("bump", &["point bump(string name[channel], normal N, vector dPds, vector dPdt [, float s, t] [, ...params])"], "Bump-map displacement read from a bump map made with `arbor texture --bump`."),
+    ("atmosphere", &["float atmosphere(string paramname, output type value)"], "Reads a parameter of the atmosphere shader; 1 if found."),
+    ("displacement", &["float displacement(string paramname, output type value)"], "Reads a parameter of the displacement shader; 1 if found."),
+    ("lightsource", &["float lightsource(string paramname, output type value)"], "Inside illuminance: reads a parameter of the current light; 1 if found."),
+    ("surface", &["float surface(string paramname, output type value)"], "Reads a parameter of the surface shader (from a light or atmosphere); 1 if found."),
+    ("incident", &["float incident(string paramname, output type value)"], "Reads a parameter of the incident volume shader; 1 if found."),
+    ("opposite", &["float opposite(string paramname, output type value)"], "Reads a parameter of the opposite volume shader; 1 if found."),
+    ("attribute", &["float attribute(string name, output type value)"], "Reads a graphics-state attribute (\"ShadingRate\", \"Sides\", \"identifier:name\", \"user:…\"); 1 if known."),
+    ("option", &["float option(string name, output type value)"], "Reads a rendering option (\"Format\", \"FrameAspectRatio\", \"Clipping\", \"user:…\"); 1 if known."),
+    ("rendererinfo", &["float rendererinfo(string name, output type value)"], "Information about the renderer (\"renderer\", \"version\", \"versionstring\"); 1 if known."),
+    ("shadername", &["string shadername()", "string shadername(string shadertype)"], "Name of the current shader, or of the shader of the given type."),
+    ("arraylength", &["float arraylength(type array[])"], "Number of elements of an array."),
+    ("isnan", &[], "1 if x is not a number, else 0."),
+    ("raylevel", &[], "Ray depth of the current shading (arbor shades camera rays only: 0)."),
+    ("isshadowray", &[], "1 when shading for a shadow ray (arbor: always 0)."),
+    ("horizon", &[], "Self-shadowing of a bump map from a horizon table (Max) for light direction L at (s,t): 1 lit, 0 shadowed."),
+    ("horizonheight", &[], "Height read from a horizon table at (s,t)."),
+    ("transform", &["point transform([string fromspace,] string tospace, point p)", "point transform([string fromspace,] matrix m, point p)", "matrix transform([string fromspace,] string tospace, matrix m)"], "A point transformed between coordinate systems (or by a matrix)."),
+    ("vtransform", &["vector vtransform([string fromspace,] string tospace, vector v)", "vector vtransform([string fromspace,] matrix m, vector v)"], "A vector transformed between coordinate systems (no translation)."),
+    ("ntransform", &["normal ntransform([string fromspace,] string tospace, normal n)", "normal ntransform([string fromspace,] matrix m, normal n)"], "A normal transformed between coordinate systems (by the inverse transpose)."),
+];
+
+/// The doc entry of a built-in name: (hand-written signatures, one-line description).
+pub fn doc(name: &str) -> Option<(&'static [&'static str], &'static str)> {
+    DOCS.iter()
+        .find(|d| d.0 == name)
+        .map(|&(_, sigs, line)| (sigs, line))
+}
+
+/// Every overload of a name written as RISpec does: `float noise(point)`. Hand-written
+/// signatures for the free-form built-ins come first.
+pub fn signatures(name: &str) -> Vec<String> {
+    let mut out: Vec<String> = doc(name)
+        .map(|(s, _)| s.iter().map(|s| s.to_string()).collect())
+        .unwrap_or_default();
+    if !out.is_empty() {
+        return out;
+    }
+    let ty = |c: char| match c {
+        't' => "type",
+        'q' => "vector",
+        'x' => "any",
+        c => code_type(c).map(BaseType::name).unwrap_or("?"),
+    };
+    for s in overloads(name) {
+        let (args, repeat) = parse_args(s.args);
+        let mut list: Vec<String> = args
+            .iter()
+            .map(|&(c, o)| format!("{}{}", if o { "output " } else { "" }, ty(c)))
+            .collect();
+        if repeat {
+            list.push("...".into());
+        }
+        let line = format!("{} {}({})", ty(s.ret), s.name, list.join(", "));
+        if !out.contains(&line) {
+            out.push(line);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod doc_tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_has_a_doc_line() {
+        for name in SIGS.iter().map(|s| s.name).chain(SPECIAL.iter().copied()) {
+            let d = doc(name);
+            assert!(
+                d.is_some_and(|(_, l)| !l.is_empty()),
+                "`{name}` has no doc line"
+            );
+            assert!(!signatures(name).is_empty(), "`{name}` has no signature");
+        }
+        for (name, ..) in DOCS {
+            assert!(
+                is_builtin(name),
+                "doc for `{name}`, which is not a built-in"
+            );
+        }
+    }
+
+    #[test]
+    fn signatures_read_like_rispec() {
+        let s = signatures("noise");
+        assert!(s.contains(&"float noise(point)".to_string()), "{s:?}");
+        assert!(
+            s.contains(&"color noise(point, float)".to_string()),
+            "{s:?}"
+        );
+        let f = signatures("fresnel");
+        assert_eq!(
+            f[0],
+            "void fresnel(vector, vector, float, output float, output float)"
+        );
+        assert!(signatures("texture")[0].starts_with("float texture("));
+    }
+}

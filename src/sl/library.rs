@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
-use crate::sl::ast::Item;
+use crate::sl::ast::{Item, SourceFile};
 use crate::sl::ir::Program;
-use crate::sl::preprocess::{preprocess, IncludeResolver};
+use crate::sl::preprocess::{preprocess, IncludeResolver, Preprocessed};
 
 mod embedded {
     include!(concat!(env!("OUT_DIR"), "/stdlib.rs"));
@@ -37,11 +37,13 @@ pub struct CompileOptions {
     pub search_paths: Vec<PathBuf>,
 }
 
-struct Resolver<'a> {
-    opts: &'a CompileOptions,
+/// The include search of a compile: the including file's folder (for `"file"`), `-I` folders,
+/// the shader search path, then the embedded `stdlib/include`.
+pub struct SearchResolver<'a> {
+    pub opts: &'a CompileOptions,
 }
 
-impl IncludeResolver for Resolver<'_> {
+impl IncludeResolver for SearchResolver<'_> {
     fn resolve(&self, name: &str, system: bool, from: Option<&Path>) -> Option<(String, String)> {
         let mut dirs: Vec<PathBuf> = Vec::new();
         if !system {
@@ -75,21 +77,70 @@ pub fn compile_source(
     diags: &Diagnostics,
     opts: &CompileOptions,
 ) -> Vec<Program> {
+    let resolver = SearchResolver { opts };
+    compile_with(
+        name,
+        text,
+        path,
+        sources,
+        diags,
+        opts,
+        &resolver,
+        &mut parse_all,
+    )
+    .programs
+}
+
+/// How [`compile_with`] parses the preprocessed text: all of it at once (`arbor lsp` reuses
+/// the items of a previous parse that did not change).
+pub type ParseFn<'a> = dyn FnMut(&Preprocessed, &Diagnostics) -> Option<SourceFile> + 'a;
+
+/// The whole preprocessed text through the parser.
+pub fn parse_all(pre: &Preprocessed, diags: &Diagnostics) -> Option<SourceFile> {
+    let span = |a: usize, b: usize| pre.span(a, b);
+    crate::sl::parse::parse(&pre.text, &span, diags)
+}
+
+/// What compiling one source text produced, for tools that also want the syntax tree.
+pub struct Compiled {
+    /// The registered file id of the text.
+    pub file: u32,
+    /// The syntax tree (None after syntax errors or a missing include).
+    pub ast: Option<crate::sl::ast::SourceFile>,
+    pub programs: Vec<Program>,
+}
+
+/// [`compile_source`] with the include search and the parse given (`arbor lsp` overlays
+/// unsaved editor buffers and parses incrementally) and the syntax tree kept.
+#[allow(clippy::too_many_arguments)]
+pub fn compile_with(
+    name: &str,
+    text: &str,
+    path: Option<&Path>,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+    opts: &CompileOptions,
+    resolver: &dyn IncludeResolver,
+    parser: &mut ParseFn<'_>,
+) -> Compiled {
     let file = sources.add(name, text);
-    let resolver = Resolver { opts };
+    let mut done = Compiled {
+        file,
+        ast: None,
+        programs: Vec::new(),
+    };
     let before = diags.snapshot().len();
-    let pre = preprocess(file, path, sources, &opts.defines, &resolver, diags);
+    let pre = preprocess(file, path, sources, &opts.defines, resolver, diags);
     // A missing header leaves names undefined everywhere; its one diagnostic says it all, so
     // the cascade of unknown names it would cause is not compiled and reported.
     let missing_include = diags.snapshot()[before..]
         .iter()
         .any(|(d, _)| d.is_error() && d.code == "sl::include");
     if missing_include {
-        return Vec::new();
+        return done;
     }
-    let span = |a: usize, b: usize| pre.span(a, b);
-    let Some(ast) = crate::sl::parse::parse(&pre.text, &span, diags) else {
-        return Vec::new();
+    let Some(ast) = parser(&pre, diags) else {
+        return done;
     };
     let functions: Vec<_> = ast
         .items
@@ -125,7 +176,9 @@ pub fn compile_source(
             format!("`{name}` defines no shader"),
         ));
     }
-    out
+    done.ast = Some(ast);
+    done.programs = out;
+    done
 }
 
 /// Compiled shaders by name, shared by every thread of a render.

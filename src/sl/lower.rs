@@ -48,7 +48,7 @@ struct Var {
 }
 
 /// The globals of the language: name, type, varying.
-const GLOBALS: &[(&str, BaseType, bool)] = &[
+pub const GLOBALS: &[(&str, BaseType, bool)] = &[
     ("P", BaseType::Point, true),
     ("dPdu", BaseType::Vector, true),
     ("dPdv", BaseType::Vector, true),
