@@ -364,6 +364,8 @@ pub fn lsp_diagnostics(
         let severity = Some(match d.severity {
             Severity::Error => DiagnosticSeverity::ERROR,
             Severity::Warning => DiagnosticSeverity::WARNING,
+            // Notes (known settings arbor ignores) are shown at -v on the command line.
+            Severity::Note => DiagnosticSeverity::HINT,
         });
         let mut message = d.message.clone();
         if let Some((_, label)) = d.labels.first() {
