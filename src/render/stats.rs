@@ -33,6 +33,8 @@ pub struct Stats {
     pub shaded_points: AtomicU64,
     pub samples_tested: AtomicU64,
     pub samples_hit: AtomicU64,
+    /// Grids a bucket skipped whole: behind every sample's opaque front.
+    pub grids_occluded: AtomicU64,
     pub buckets: AtomicU64,
     /// Nanoseconds per [`Stage`].
     pub stage_ns: [AtomicU64; 5],
@@ -81,6 +83,7 @@ impl fmt::Display for Stats {
         writeln!(f, "  shaded points    {:>12}", g(&self.shaded_points))?;
         writeln!(f, "  samples tested   {:>12}", g(&self.samples_tested))?;
         writeln!(f, "  samples hit      {:>12}", g(&self.samples_hit))?;
+        writeln!(f, "  grids occluded   {:>12}", g(&self.grids_occluded))?;
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,
