@@ -612,6 +612,8 @@ fn render_inner(
         yres as usize,
         Film::standard_channels(&channel_names),
     );
+    let film_bytes = film.data.len() * std::mem::size_of::<f32>();
+    stats.alloc(film_bytes);
 
     // Place every surface in the first bucket row it reaches.
     Stats::add(&stats.primitives, scene.primitives.len() as u64);
@@ -753,6 +755,7 @@ fn render_inner(
         filter_row(&mut film, r, &bufs);
     }
     frame.hider.finish(diags);
+    stats.free(film_bytes);
     stats
         .wall_ns
         .fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);

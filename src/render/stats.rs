@@ -33,12 +33,14 @@ pub struct Stats {
     pub shaded_points: AtomicU64,
     pub samples_tested: AtomicU64,
     pub samples_hit: AtomicU64,
+    /// Grids a bucket skipped whole: behind every sample's opaque front.
+    pub grids_occluded: AtomicU64,
     pub buckets: AtomicU64,
     /// Nanoseconds per [`Stage`].
     pub stage_ns: [AtomicU64; 5],
     /// Wall-clock time of the whole frame.
     pub wall_ns: AtomicU64,
-    /// Bytes held now / at most by shaded grids and sample buffers.
+    /// Bytes held now / at most by the film, shaded grids and sample buffers.
     pub live_bytes: AtomicU64,
     pub peak_bytes: AtomicU64,
 }
@@ -81,12 +83,20 @@ impl fmt::Display for Stats {
         writeln!(f, "  shaded points    {:>12}", g(&self.shaded_points))?;
         writeln!(f, "  samples tested   {:>12}", g(&self.samples_tested))?;
         writeln!(f, "  samples hit      {:>12}", g(&self.samples_hit))?;
+        writeln!(f, "  grids occluded   {:>12}", g(&self.grids_occluded))?;
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,
-            "  peak memory      {:>9.1} MiB (shaded grids and sample buffers)",
+            "  peak memory      {:>9.1} MiB (film, shaded grids and sample buffers)",
             g(&self.peak_bytes) as f64 / (1024.0 * 1024.0)
         )?;
+        if let Some(rss) = peak_rss() {
+            writeln!(
+                f,
+                "  peak resident    {:>9.1} MiB (whole process)",
+                rss as f64 / (1024.0 * 1024.0)
+            )?;
+        }
         writeln!(f, "  time (summed over threads)")?;
         for (i, name) in STAGE_NAMES.iter().enumerate() {
             let s = self.stage_ns[i].load(Relaxed) as f64 * 1e-9;
@@ -98,6 +108,14 @@ impl fmt::Display for Stats {
             g(&self.wall_ns) as f64 * 1e-9
         )
     }
+}
+
+/// The process's peak resident set size in bytes (`VmHWM`), where the system reports it.
+pub fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
 }
 
 #[cfg(test)]

@@ -91,6 +91,9 @@ pub struct ShadedGrid {
     /// a grid overlaps skips whole rows and rejects micropolygons with four compares.
     pub mp_bounds: Vec<[f32; 4]>,
     pub row_bounds: Vec<[f32; 4]>,
+    /// A lower bound of the camera depth of every point of the grid (0 when unknown): a
+    /// bucket whose samples all see an opaque surface nearer than this skips the grid.
+    pub zmin: f32,
 }
 
 /// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
@@ -215,6 +218,31 @@ impl ShadedGrid {
             }
             row_bounds.push(rb);
         }
+        // Nearest depth over the points in front of the eye (perspective depth is 1/z).
+        let zmin = if view.perspective {
+            let q = depth
+                .iter()
+                .zip(&ok)
+                .filter(|(_, &o)| o)
+                .fold(0f32, |m, (&d, _)| m.max(d));
+            if q > 0.0 {
+                1.0 / q
+            } else {
+                0.0
+            }
+        } else {
+            depth
+                .iter()
+                .zip(&ok)
+                .filter(|(_, &o)| o)
+                .fold(f32::INFINITY, |m, (&d, _)| m.min(d))
+        };
+        // Interpolation may round a hair outside the corners' range: keep a margin.
+        let zmin = if zmin.is_finite() {
+            zmin - zmin.abs() * 1e-5
+        } else {
+            0.0
+        };
         let bound = [
             b[0].max(info.clip[0]),
             b[1].max(info.clip[1]),
@@ -237,6 +265,7 @@ impl ShadedGrid {
             bound,
             mp_bounds,
             row_bounds,
+            zmin,
         }
     }
 

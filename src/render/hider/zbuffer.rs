@@ -99,6 +99,10 @@ struct Bucket<'c> {
     aovs: Vec<f32>,
     tested: u64,
     hits: u64,
+    /// Whether points behind the opaque front still matter (the midpoint depth filter).
+    keep_second: bool,
+    /// Samples without an opaque front yet.
+    uncovered: usize,
 }
 
 impl<'c> Bucket<'c> {
@@ -125,6 +129,9 @@ impl<'c> Bucket<'c> {
             return;
         }
         if opaque {
+            if fz == f32::INFINITY && z < f32::INFINITY {
+                self.uncovered -= 1;
+            }
             self.second[s] = fz;
             self.front[s] = (z, key, sub);
             // Drop the points the new opaque one hides.
@@ -199,8 +206,30 @@ impl Hider for ZBuffer {
             aovs: Vec::new(),
             tested: 0,
             hits: 0,
+            keep_second: cfg.depth_filter == DepthFilter::Midpoint,
+            uncovered: n,
         };
-        for g in grids {
+        // Front to back (ties by key), so opaque surfaces cull the grids behind them. The
+        // order never changes the picture: visible points composite in a total order.
+        let mut order: Vec<&ShadedGrid> = grids.to_vec();
+        order.sort_by(|a, c| a.zmin.total_cmp(&c.zmin).then(a.key.cmp(&c.key)));
+        // The farthest opaque front over the bucket (∞ while a sample sees none): a grid
+        // entirely behind it hides nowhere. Refreshed as samples are hit; stale is safe
+        // (fronts only come nearer).
+        let mut far = f32::INFINITY;
+        let mut hits_at_refresh = 0u64;
+        for g in order {
+            if !b.keep_second
+                && b.uncovered == 0
+                && (far == f32::INFINITY || b.hits - hits_at_refresh >= (n as u64 / 8).max(1))
+            {
+                far = b.front.iter().fold(0f32, |m, f| m.max(f.0));
+                hits_at_refresh = b.hits;
+            }
+            if g.zmin > far {
+                Stats::add(&stats.grids_occluded, 1);
+                continue;
+            }
             sample_grid(&mut b, &buf, rect, g);
         }
         resolve(&b, &mut buf);
@@ -212,11 +241,37 @@ impl Hider for ZBuffer {
     }
 }
 
-/// Tests every live micropolygon of `g` against the samples its raster bound covers.
+/// Per micropolygon constants shared by its sample tests.
+struct Micro<'a> {
+    m: usize,
+    /// The two triangles sharing the diagonal corner 0 – corner 2, as the old two-triangle
+    /// test saw them: vertices (counter-clockwise), grid point indices, 1 / area; None when
+    /// degenerate.
+    tris: [Option<([[f32; 2]; 3], [usize; 3], f32)>; 2],
+    cc: [f32; 3],
+    co: [f32; 3],
+    mean_aov: &'a [f32],
+}
+
+/// Candidate strata (0-based, clamped to `0..n`) of a pixel at integer coordinate
+/// `p` whose samples may lie in `[t0, t1]`. Sample positions are `p + (s + j) / n` rounded, so
+/// the range is widened by the rounding error; the exact test happens per sample.
+#[inline]
+fn strata(t0: f32, t1: f32, p: i32, n: usize) -> std::ops::Range<usize> {
+    let nf = n as f32;
+    let eps = (p.unsigned_abs() as f32 + 2.0) * nf * 2.5e-7 + 1e-4;
+    let lo = floor_i32((t0 - p as f32) * nf - eps).max(0);
+    let hi = floor_i32((t1 - p as f32) * nf + eps).min(n as i32 - 1);
+    lo as usize..(hi + 1).max(lo) as usize
+}
+
+/// Tests every live micropolygon of `g` against the samples its raster bound covers: the
+/// pixels under the bound and, in each, only the strata the bound reaches. A convex
+/// micropolygon is one quad test (its four edges, then the diagonal picks the triangle whose
+/// interpolation applies, so the result is that of the two-triangle test); others fall back to
+/// two triangles.
 fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGrid) {
     let cfg = b.cfg;
-    let [xs, ys] = cfg.spp;
-    let spp = xs * ys;
     let nu = g.nu;
     let aw = g.aov_width;
     // Sampling window: the bucket region clipped by the grid's own bound.
@@ -230,13 +285,13 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
     g.micropolygons_in(win, &mut visible);
     for &(m, k, mb) in &visible {
         let corner = [k, k + 1, k + nu + 1, k + nu];
-        let (x0, y0, x1, y1) = (
+        let bx = [
             mb[0].max(wx0),
             mb[1].max(wy0),
             mb[2].min(wx1),
             mb[3].min(wy1),
-        );
-        if !(x0 <= x1 && y0 <= y1) {
+        ];
+        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
             continue;
         }
         // Constant shading: one colour per micropolygon, the mean of its corners.
@@ -256,16 +311,11 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 }
             }
         }
-        // Two triangles sharing the diagonal corner[0]–corner[2].
-        for (t, tri) in [
-            [corner[0], corner[1], corner[2]],
-            [corner[0], corner[2], corner[3]],
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            let mut v = [g.xy[tri[0]], g.xy[tri[1]], g.xy[tri[2]]];
-            let mut idx = tri;
+        let p = corner.map(|c| g.xy[c]);
+        let mut tris = [None, None];
+        for (t, tri) in [[0, 1, 2], [0, 2, 3]].into_iter().enumerate() {
+            let mut v = tri.map(|i| p[i]);
+            let mut idx = tri.map(|i| corner[i]);
             let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
                 - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
             if area == 0.0 || !area.is_finite() {
@@ -275,85 +325,175 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 v.swap(1, 2);
                 idx.swap(1, 2);
             }
-            let area = area.abs();
-            let tx0 = v[0][0].min(v[1][0]).min(v[2][0]).max(x0);
-            let tx1 = v[0][0].max(v[1][0]).max(v[2][0]).min(x1);
-            let ty0 = v[0][1].min(v[1][1]).min(v[2][1]).max(y0);
-            let ty1 = v[0][1].max(v[1][1]).max(v[2][1]).min(y1);
-            if !(tx0 <= tx1 && ty0 <= ty1) {
-                continue;
-            }
-            let px0 = floor_i32(tx0).max(rect.x0);
-            let px1 = floor_i32(tx1).min(rect.x1 - 1);
-            let py0 = floor_i32(ty0).max(rect.y0);
-            let py1 = floor_i32(ty1).min(rect.y1 - 1);
-            let sub = (m as u32) << 1 | t as u32;
-            let inv_area = 1.0 / area;
-            let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
-            for py in py0..=py1 {
-                for px in px0..=px1 {
-                    let base =
-                        ((py - rect.y0) as usize * rect.width() + (px - rect.x0) as usize) * spp;
-                    for s in base..base + spp {
-                        let pos = buf.positions[s];
-                        if pos[0] < tx0 || pos[0] > tx1 || pos[1] < ty0 || pos[1] > ty1 {
-                            continue;
-                        }
-                        b.tested += 1;
-                        let e0 = edge(v[1], v[2], pos);
-                        if !inside(e0) {
-                            continue;
-                        }
-                        let e1 = edge(v[2], v[0], pos);
-                        if !inside(e1) {
-                            continue;
-                        }
-                        let e2 = edge(v[0], v[1], pos);
-                        if !inside(e2) {
-                            continue;
-                        }
-                        let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
-                        let w0 = 1.0 - w1 - w2;
-                        // Relative to vertex 0, so a constant depth stays exact.
-                        let q = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
-                        let z = if cfg.perspective { 1.0 / q } else { q };
-                        if !(z >= cfg.near && z <= cfg.far) {
-                            continue;
-                        }
-                        if !cfg.clip_planes.is_empty() {
-                            let p = cfg.camera_point(pos[0], pos[1], z);
-                            if cfg
-                                .clip_planes
-                                .iter()
-                                .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
-                            {
-                                continue;
-                            }
-                        }
-                        let (c, o, aov): ([f32; 3], [f32; 3], &[f32]) = if g.smooth {
-                            let w = [w0, w1, w2];
-                            let mut c = [0f32; 3];
-                            let mut o = [0f32; 3];
-                            for (vi, &gi) in idx.iter().enumerate() {
-                                for q in 0..3 {
-                                    c[q] += w[vi] * g.ci[gi][q];
-                                    o[q] += w[vi] * g.oi[gi][q];
-                                }
-                            }
-                            for q in 0..aw {
-                                interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
-                                    + w1 * g.aov[idx[1] * aw + q]
-                                    + w2 * g.aov[idx[2] * aw + q];
-                            }
-                            (c, o, &interp_aov)
-                        } else {
-                            (cc, co, &mean_aov)
-                        };
-                        b.insert(s, z, g.key, sub, c, o, g.matte, aov);
+            tris[t] = Some((v, idx, 1.0 / area.abs()));
+        }
+        let mp = Micro {
+            m,
+            tris,
+            cc,
+            co,
+            mean_aov: &mean_aov,
+        };
+        // Convex: every corner turns the same way (strictly).
+        let turn = |a: [f32; 2], o: [f32; 2], c: [f32; 2]| {
+            (a[0] - o[0]) * (c[1] - o[1]) - (a[1] - o[1]) * (c[0] - o[0])
+        };
+        let turns = [
+            turn(p[1], p[0], p[3]),
+            turn(p[2], p[1], p[0]),
+            turn(p[3], p[2], p[1]),
+            turn(p[0], p[3], p[2]),
+        ];
+        let ccw = turns.iter().all(|&t| t > 0.0);
+        let cw = turns.iter().all(|&t| t < 0.0);
+        if (ccw || cw) && mp.tris[0].is_some() && mp.tris[1].is_some() {
+            // Outer edges counter-clockwise; the diagonal as triangle 0 sees it.
+            let o = if ccw { [0, 1, 2, 3] } else { [0, 3, 2, 1] };
+            let edges = [
+                (p[o[0]], p[o[1]]),
+                (p[o[1]], p[o[2]]),
+                (p[o[2]], p[o[3]]),
+                (p[o[3]], p[o[0]]),
+            ];
+            let diag0 = if ccw { (p[2], p[0]) } else { (p[0], p[2]) };
+            for_samples(b, buf, rect, bx, |b, s, pos| {
+                for &(a, c) in &edges {
+                    if !inside(edge(a, c, pos)) {
+                        return;
                     }
+                }
+                let t = if inside(edge(diag0.0, diag0.1, pos)) { 0 } else { 1 };
+                hit(b, g, cfg, &mp, t, s, pos, &mut interp_aov);
+            });
+        } else {
+            for t in 0..2 {
+                let Some((v, _, _)) = mp.tris[t] else {
+                    continue;
+                };
+                let tb = [
+                    v[0][0].min(v[1][0]).min(v[2][0]).max(bx[0]),
+                    v[0][1].min(v[1][1]).min(v[2][1]).max(bx[1]),
+                    v[0][0].max(v[1][0]).max(v[2][0]).min(bx[2]),
+                    v[0][1].max(v[1][1]).max(v[2][1]).min(bx[3]),
+                ];
+                if !(tb[0] <= tb[2] && tb[1] <= tb[3]) {
+                    continue;
+                }
+                for_samples(b, buf, rect, tb, |b, s, pos| {
+                    if inside(edge(v[1], v[2], pos))
+                        && inside(edge(v[2], v[0], pos))
+                        && inside(edge(v[0], v[1], pos))
+                    {
+                        hit(b, g, cfg, &mp, t, s, pos, &mut interp_aov);
+                    }
+                });
+            }
+        }
+    }
+}
+
+/// Calls `f(bucket, sample index, position)` for every sample of `rect` inside the closed
+/// box `bx` (x0, y0, x1, y1), visiting only the pixels and strata the box reaches.
+#[inline]
+fn for_samples(
+    b: &mut Bucket,
+    buf: &SampleBuffer,
+    rect: PixelRect,
+    bx: [f32; 4],
+    mut f: impl FnMut(&mut Bucket, usize, [f32; 2]),
+) {
+    let [xs, ys] = b.cfg.spp;
+    let spp = xs * ys;
+    let px0 = floor_i32(bx[0]).max(rect.x0);
+    let px1 = floor_i32(bx[2]).min(rect.x1 - 1);
+    let py0 = floor_i32(bx[1]).max(rect.y0);
+    let py1 = floor_i32(bx[3]).min(rect.y1 - 1);
+    let w = rect.width();
+    let mut tested = 0u64;
+    for py in py0..=py1 {
+        let sy = strata(bx[1], bx[3], py, ys);
+        for px in px0..=px1 {
+            let sx = strata(bx[0], bx[2], px, xs);
+            let base = ((py - rect.y0) as usize * w + (px - rect.x0) as usize) * spp;
+            for j in sy.clone() {
+                let row = base + j * xs;
+                for s in row + sx.start..row + sx.end {
+                    let pos = buf.positions[s];
+                    if pos[0] < bx[0] || pos[0] > bx[2] || pos[1] < bx[1] || pos[1] > bx[3] {
+                        continue;
+                    }
+                    tested += 1;
+                    f(b, s, pos);
                 }
             }
         }
+    }
+    b.tested += tested;
+}
+
+/// Sample `s` at `pos` lies in triangle `t` of micropolygon `mp`: interpolate its depth
+/// (and colour when smooth) and insert it.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn hit(
+    b: &mut Bucket,
+    g: &ShadedGrid,
+    cfg: &HiderConfig,
+    mp: &Micro,
+    t: usize,
+    s: usize,
+    pos: [f32; 2],
+    interp_aov: &mut [f32],
+) {
+    let Some((v, idx, inv_area)) = mp.tris[t] else {
+        return;
+    };
+    let aw = g.aov_width;
+    let e1 = edge(v[2], v[0], pos);
+    let e2 = edge(v[0], v[1], pos);
+    let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
+    let w0 = 1.0 - w1 - w2;
+    // Relative to vertex 0, so a constant depth stays exact.
+    let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
+    let q = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
+    let z = if cfg.perspective { 1.0 / q } else { q };
+    if !(z >= cfg.near && z <= cfg.far) {
+        return;
+    }
+    // Behind this sample's opaque front: nothing to do unless the second depth is kept.
+    if z > b.front[s].0 && !b.keep_second {
+        b.hits += 1;
+        return;
+    }
+    if !cfg.clip_planes.is_empty() {
+        let p = cfg.camera_point(pos[0], pos[1], z);
+        if cfg
+            .clip_planes
+            .iter()
+            .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
+        {
+            return;
+        }
+    }
+    let sub = (mp.m as u32) << 1 | t as u32;
+    if g.smooth {
+        let w = [w0, w1, w2];
+        let mut c = [0f32; 3];
+        let mut o = [0f32; 3];
+        for (vi, &gi) in idx.iter().enumerate() {
+            for q in 0..3 {
+                c[q] += w[vi] * g.ci[gi][q];
+                o[q] += w[vi] * g.oi[gi][q];
+            }
+        }
+        for q in 0..aw {
+            interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
+                + w1 * g.aov[idx[1] * aw + q]
+                + w2 * g.aov[idx[2] * aw + q];
+        }
+        b.insert(s, z, g.key, sub, c, o, g.matte, interp_aov);
+    } else {
+        b.insert(s, z, g.key, sub, mp.cc, mp.co, g.matte, mp.mean_aov);
     }
 }
 
