@@ -315,7 +315,7 @@ surface flare(float seed = 7;)
 "#;
     let (n, log, err) = compile("flare.sl", src);
     assert!(!err && n == 1, "{log}");
-    assert!(log.contains("declared to return uniform"), "{log}");
+    assert!(log.contains("declared to return a uniform value"), "{log}");
 }
 
 #[test]
