@@ -68,7 +68,8 @@ pub fn render_frame(
     opts: &RenderOptions,
     diags: &Diagnostics,
 ) -> Film {
-    let options = effective_options(&scene.options, opts);
+    let mut options = effective_options(&scene.options, opts);
+    super::limits::apply_frame_limits(&mut options, diags);
     check_options(&options, diags);
     let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
     let mut surfaces = Vec::new();
@@ -115,7 +116,13 @@ struct PrimInfo {
     binary: bool,
 }
 
-fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnostics) -> PrimInfo {
+fn prim_info(
+    scene: &Scene,
+    camera: &Camera,
+    prim: &Primitive,
+    min_rate: f32,
+    diags: &Diagnostics,
+) -> PrimInfo {
     let a = &prim.attributes;
     let mut disp = 0.0;
     if a.displacement_bound > 0.0 {
@@ -152,7 +159,7 @@ fn prim_info(scene: &Scene, camera: &Camera, prim: &Primitive, diags: &Diagnosti
     }
     let _ = scene;
     let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
-        a.shading_rate
+        super::limits::shading_rate(a.shading_rate, min_rate, prim.span, diags)
     } else {
         1.0
     };
@@ -553,7 +560,7 @@ fn render_inner(
             Some([x]) => [*x as i32, *x as i32],
             _ => [DEFAULT_BUCKET as i32; 2],
         });
-    let size = [size[0].clamp(1, 4096), size[1].clamp(1, 4096)];
+    let size = super::limits::bucket_size(size, diags);
     let buckets = Buckets {
         crop,
         image,
@@ -566,7 +573,7 @@ fn render_inner(
     let max_grid = options
         .user_floats("limits:gridsize")
         .and_then(|f| f.first())
-        .map_or(DEFAULT_GRID, |&g| (g.max(1.0)) as usize);
+        .map_or(DEFAULT_GRID, |&g| super::limits::grid_size(g, diags));
     let eye_split_limit = options
         .user_floats("limits:eyesplits")
         .and_then(|f| f.first())
@@ -585,10 +592,11 @@ fn render_inner(
         DepthFilter::Min | DepthFilter::Midpoint => FilmDepthFilter::Min,
     };
     let hider = make_hider(options, config, diags);
+    let min_rate = super::limits::min_shading_rate(options);
     let prims: Vec<PrimInfo> = scene
         .primitives
         .iter()
-        .map(|p| prim_info(scene, camera, p, diags))
+        .map(|p| prim_info(scene, camera, p, min_rate, diags))
         .collect();
     let frame = Frame {
         scene,

@@ -5,7 +5,7 @@
 //! depend on the bucket size or the thread count.
 //!
 //! Modules: [`camera`] (projection, crop, named spaces), [`dice`] (cull / split / dice
-//! decisions), [`driver`] (buckets, forwarding, shading, parallelism), [`hider`] (the shared
+//! decisions), [`limits`] (clamps on absurd requests), [`driver`] (buckets, forwarding, shading, parallelism), [`hider`] (the shared
 //! `ShadedGrid` form and the hiders: [`hider::zbuffer`]; an A-buffer plugs in as another
 //! [`hider::Hider`]), [`sampler`] (hashed jittered sample positions), [`stats`] (`--stats`).
 
@@ -13,6 +13,7 @@ pub mod camera;
 pub mod dice;
 pub mod driver;
 pub mod hider;
+pub mod limits;
 pub mod sampler;
 pub mod stats;
 

@@ -55,6 +55,12 @@ impl Mask {
     pub fn recount(&mut self) {
         self.count = self.bits.iter().filter(|&&b| b).count();
     }
+    /// Becomes a copy of `other`, reusing this mask's buffer.
+    pub fn copy_from(&mut self, other: &Mask) {
+        self.bits.clear();
+        self.bits.extend_from_slice(&other.bits);
+        self.count = other.count;
+    }
 }
 
 /// The transforms, lights and information a program may ask for.
@@ -219,9 +225,20 @@ pub struct Exec<'a> {
     /// The light whose illuminance body is running (for lightsource()).
     pub current_light: Option<usize>,
     iterations: u64,
+    /// Most iterations one execution of a loop statement may run (`Option "limits"
+    /// "loopiterations"`); the whole run may loop 64 times that.
+    pub loop_limit: u64,
+    /// Spare mask buffers, so control flow allocates nothing per instruction.
+    bits_pool: Vec<Vec<bool>>,
 }
 
-const MAX_ITERATIONS: u64 = 1 << 26;
+/// Default for [`Exec::loop_limit`]: far beyond any real shader's loop (a ray march at the
+/// smallest step real shaders use runs some ten thousand steps).
+pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
+
+/// From this iteration on, a loop is checked for a fixed point at every power of two: when a
+/// whole iteration leaves every register and the running mask unchanged, it can never end.
+const FIRST_PROGRESS_CHECK: u64 = 1024;
 
 impl<'a> Exec<'a> {
     /// Loop iterations run so far in this execution (deterministic for a program and grid):
@@ -259,7 +276,52 @@ impl<'a> Exec<'a> {
             light: None,
             current_light: None,
             iterations: 0,
+            loop_limit: DEFAULT_LOOP_LIMIT,
+            bits_pool: Vec::new(),
         }
+    }
+
+    /// A copy of `m` in a pooled buffer (give it back with [`Exec::release`]).
+    fn mask_like(&mut self, m: &Mask) -> Mask {
+        let mut bits = self.bits_pool.pop().unwrap_or_default();
+        bits.clear();
+        bits.extend_from_slice(&m.bits);
+        Mask {
+            bits,
+            count: m.count,
+        }
+    }
+
+    /// `n` flags set to `v`, in a pooled buffer.
+    fn bits_filled(&mut self, v: bool) -> Vec<bool> {
+        let mut bits = self.bits_pool.pop().unwrap_or_default();
+        bits.clear();
+        bits.resize(self.n, v);
+        bits
+    }
+
+    fn release(&mut self, bits: Vec<bool>) {
+        self.bits_pool.push(bits);
+    }
+
+    fn push_frame(&mut self, kind: FrameKind) {
+        let broken = self.bits_filled(false);
+        let outward = self.bits_filled(false);
+        self.frames.push(Frame {
+            kind,
+            broken,
+            outward,
+        });
+    }
+
+    fn pop_frame(&mut self) -> Option<Frame> {
+        self.frames.pop()
+    }
+
+    /// Gives a popped frame's buffers back to the pool.
+    fn recycle_frame(&mut self, f: Frame) {
+        self.release(f.broken);
+        self.release(f.outward);
     }
 
     pub fn warn(&self, span: Span, msg: impl Into<String>) {
@@ -282,14 +344,12 @@ impl<'a> Exec<'a> {
     /// Runs the body over every point.
     pub fn run_body(&mut self) {
         let mut mask = Mask::all(self.n);
-        self.frames.push(Frame {
-            kind: FrameKind::Function,
-            broken: vec![false; self.n],
-            outward: vec![false; self.n],
-        });
+        self.push_frame(FrameKind::Function);
         let body = &self.prog.body;
         self.block(body, &mut mask);
-        self.frames.pop();
+        if let Some(f) = self.pop_frame() {
+            self.recycle_frame(f);
+        }
     }
 
     /// Sets a register to a value (used to bind globals and parameters).
@@ -306,10 +366,11 @@ impl<'a> Exec<'a> {
         }
     }
 
-    fn cond_bits(&self, reg: Reg) -> Result<bool, Vec<bool>> {
+    /// A uniform condition's value, or None when it is varying.
+    fn uniform_cond(&self, reg: Reg) -> Option<bool> {
         match &self.regs[reg as usize] {
-            Slot::VF(v) => Err(v.iter().map(|&x| x != 0.0).collect()),
-            s => Ok(s.f().first() != 0.0),
+            Slot::VF(_) => None,
+            s => Some(s.f().first() != 0.0),
         }
     }
 
@@ -354,30 +415,32 @@ impl<'a> Exec<'a> {
                 cond,
                 then,
                 otherwise,
-            } => match self.cond_bits(*cond) {
-                Ok(true) => self.block(then, mask),
-                Ok(false) => self.block(otherwise, mask),
-                Err(bits) => {
-                    let mut tm: Vec<bool> =
-                        mask.bits.iter().zip(&bits).map(|(&m, &c)| m && c).collect();
-                    let mut em: Vec<bool> = mask
-                        .bits
-                        .iter()
-                        .zip(&bits)
-                        .map(|(&m, &c)| m && !c)
-                        .collect();
-                    let mut t = Mask::from_bits(std::mem::take(&mut tm));
-                    let mut e = Mask::from_bits(std::mem::take(&mut em));
+            } => match self.uniform_cond(*cond) {
+                Some(true) => self.block(then, mask),
+                Some(false) => self.block(otherwise, mask),
+                None => {
+                    let mut t = self.mask_like(mask);
+                    let mut e = self.mask_like(mask);
+                    if let Slot::VF(c) = &self.regs[*cond as usize] {
+                        for ((tb, eb), &c) in t.bits.iter_mut().zip(e.bits.iter_mut()).zip(c) {
+                            *tb &= c != 0.0;
+                            *eb &= c == 0.0;
+                        }
+                    }
+                    t.recount();
+                    e.recount();
                     if !t.is_none() {
                         self.block(then, &mut t);
                     }
                     if !e.is_none() && !otherwise.is_empty() {
                         self.block(otherwise, &mut e);
                     }
-                    for i in 0..n {
-                        mask.bits[i] = t.bits[i] || e.bits[i];
+                    for ((m, &tb), &eb) in mask.bits.iter_mut().zip(&t.bits).zip(&e.bits) {
+                        *m = tb || eb;
                     }
                     mask.recount();
+                    self.release(t.bits);
+                    self.release(e.bits);
                 }
             },
             Instr::Loop {
@@ -385,59 +448,16 @@ impl<'a> Exec<'a> {
                 cond,
                 body,
                 step,
-            } => {
-                self.frames.push(Frame {
-                    kind: FrameKind::Loop,
-                    broken: vec![false; n],
-                    outward: vec![false; n],
-                });
-                let mut loop_mask = mask.clone();
-                loop {
-                    self.iterations += 1;
-                    if self.iterations > MAX_ITERATIONS {
-                        self.warn(self.prog.span, "a loop ran too long and was stopped");
-                        break;
-                    }
-                    let mut cm = loop_mask.clone();
-                    self.block(cond_code, &mut cm);
-                    match self.cond_bits(*cond) {
-                        Ok(true) => {}
-                        Ok(false) => break,
-                        Err(bits) => {
-                            for (m, c) in loop_mask.bits.iter_mut().zip(bits) {
-                                *m &= c;
-                            }
-                            loop_mask.recount();
-                        }
-                    }
-                    if loop_mask.is_none() {
-                        break;
-                    }
-                    let mut bm = loop_mask.clone();
-                    self.block(body, &mut bm);
-                    let broken = self
-                        .frames
-                        .last()
-                        .map(|f| f.broken.clone())
-                        .unwrap_or_default();
-                    loop_mask.and_not(&broken);
-                    if loop_mask.is_none() {
-                        break;
-                    }
-                    let mut sm = loop_mask.clone();
-                    self.block(step, &mut sm);
-                }
-                if let Some(f) = self.frames.pop() {
-                    mask.and_not(&f.outward);
-                }
-            }
+                span,
+            } => self.run_loop(cond_code, *cond, body, step, *span, mask),
             Instr::Break(k) => self.exit_to(*k as usize, None, mask),
             Instr::Continue(k) => {
                 let k = *k as usize;
                 // Inner loops are left; loop k skips to its step.
                 if k > 1 {
-                    let mut m = mask.clone();
+                    let mut m = self.mask_like(mask);
                     self.exit_to(k - 1, None, &mut m);
+                    self.release(m.bits);
                 }
                 mask.bits.iter_mut().for_each(|b| *b = false);
                 mask.count = 0;
@@ -456,14 +476,13 @@ impl<'a> Exec<'a> {
                 );
             }
             Instr::Function { body } => {
-                self.frames.push(Frame {
-                    kind: FrameKind::Function,
-                    broken: vec![false; n],
-                    outward: vec![false; n],
-                });
-                let mut m = mask.clone();
+                self.push_frame(FrameKind::Function);
+                let mut m = self.mask_like(mask);
                 self.block(body, &mut m);
-                self.frames.pop();
+                self.release(m.bits);
+                if let Some(f) = self.pop_frame() {
+                    self.recycle_frame(f);
+                }
             }
             Instr::Illuminance {
                 category,
@@ -517,6 +536,111 @@ impl<'a> Exec<'a> {
             }
             other => ops::compute(self, other, mask),
         }
+    }
+
+    /// One loop statement: condition, body, step until no point is left, under the guard
+    /// against loops that never end (see [`DEFAULT_LOOP_LIMIT`], [`FIRST_PROGRESS_CHECK`]).
+    fn run_loop(
+        &mut self,
+        cond_code: &'a [Instr],
+        cond: Reg,
+        body: &'a [Instr],
+        step: &'a [Instr],
+        span: Span,
+        mask: &mut Mask,
+    ) {
+        self.push_frame(FrameKind::Loop);
+        let mut live = self.mask_like(mask);
+        let mut scratch = self.mask_like(mask);
+        let total_limit = self.loop_limit.saturating_mul(64);
+        let mut count: u64 = 0;
+        let mut snapshot: Option<(Vec<Slot>, Vec<bool>)> = None;
+        loop {
+            self.iterations += 1;
+            count += 1;
+            if count > self.loop_limit || self.iterations > total_limit {
+                self.runaway_loop(span, count - 1, false);
+                break;
+            }
+            scratch.copy_from(&live);
+            self.block(cond_code, &mut scratch);
+            match &self.regs[cond as usize] {
+                Slot::VF(c) => {
+                    for (m, &c) in live.bits.iter_mut().zip(c) {
+                        *m &= c != 0.0;
+                    }
+                    live.recount();
+                }
+                s => {
+                    if s.f().first() == 0.0 {
+                        break;
+                    }
+                }
+            }
+            if live.is_none() {
+                break;
+            }
+            scratch.copy_from(&live);
+            self.block(body, &mut scratch);
+            if let Some(f) = self.frames.last() {
+                live.and_not(&f.broken);
+            }
+            if live.is_none() {
+                break;
+            }
+            scratch.copy_from(&live);
+            self.block(step, &mut scratch);
+            if count >= FIRST_PROGRESS_CHECK {
+                if count.is_power_of_two() {
+                    if let Some((regs, _)) = snapshot.take() {
+                        crate::shade::value::recycle(regs);
+                    }
+                    snapshot = Some((self.regs.clone(), live.bits.clone()));
+                } else if let Some((regs, bits)) = snapshot.take() {
+                    // One whole iteration since the snapshot: did anything change?
+                    let stuck = bits == live.bits
+                        && regs.iter().zip(&self.regs).all(|(a, b)| same_slot(a, b));
+                    crate::shade::value::recycle(regs);
+                    if stuck {
+                        self.runaway_loop(span, count, true);
+                        break;
+                    }
+                }
+            }
+        }
+        if let Some((regs, _)) = snapshot.take() {
+            crate::shade::value::recycle(regs);
+        }
+        self.release(live.bits);
+        self.release(scratch.bits);
+        if let Some(f) = self.pop_frame() {
+            mask.and_not(&f.outward);
+            self.recycle_frame(f);
+        }
+    }
+
+    /// The warning of a loop stopped by the guard; the points still in it keep their values.
+    fn runaway_loop(&self, span: Span, count: u64, stuck: bool) {
+        let what = if stuck {
+            format!("this loop stopped making progress (an iteration changed nothing) after {count} iterations")
+        } else {
+            format!("this loop ran {count} iterations without ending")
+        };
+        self.env.diags.report(
+            Diag::warning(
+                "shade::runaway_loop",
+                format!(
+                    "shader `{}`: {what}; it was stopped and the grid is shaded with the values it had",
+                    self.env.shader_name
+                ),
+            )
+            .label(span, "this loop")
+            .help(format!(
+                "a loop may run {} iterations per grid; a shader that needs more can raise it with `Option \"limits\" \"loopiterations\" [{}]`",
+                self.loop_limit,
+                self.loop_limit.saturating_mul(10)
+            )),
+        );
     }
 
     /// Masked store, broadcasting uniform sources into varying destinations.
@@ -761,6 +885,32 @@ impl<'a> Exec<'a> {
         if !m.is_none() {
             self.block(body, &mut m);
         }
+    }
+}
+
+/// Whether two register values are the same bit for bit (NaN equals NaN).
+fn same_slot(a: &Slot, b: &Slot) -> bool {
+    fn bits3(v: Vec3) -> [u32; 3] {
+        [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()]
+    }
+    fn bits16(m: &Mat4) -> [u32; 16] {
+        m.to_cols_array().map(f32::to_bits)
+    }
+    match (a, b) {
+        (Slot::F(x), Slot::F(y)) => x.to_bits() == y.to_bits(),
+        (Slot::T(x), Slot::T(y)) => bits3(*x) == bits3(*y),
+        (Slot::M(x), Slot::M(y)) => bits16(x) == bits16(y),
+        (Slot::S(x), Slot::S(y)) => x == y,
+        (Slot::VF(x), Slot::VF(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
+        }
+        (Slot::VT(x), Slot::VT(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| bits3(*p) == bits3(*q))
+        }
+        (Slot::VM(x), Slot::VM(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| bits16(p) == bits16(q))
+        }
+        _ => false,
     }
 }
 

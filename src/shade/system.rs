@@ -559,6 +559,7 @@ impl<'a> ShadeSystem<'a> {
             seed: ctx.seed,
         };
         let mut ex = Exec::new(prog, n, &env);
+        ex.loop_limit = loop_limit(scene);
         // Globals.
         for g in &prog.globals {
             let v = match g.name {
@@ -628,6 +629,14 @@ impl<'a> ShadeSystem<'a> {
             ex.run_body();
         }
         Some(ex.regs)
+    }
+}
+
+/// `Option "limits" "loopiterations"`: most iterations of one loop statement per grid.
+fn loop_limit(scene: &Scene) -> u64 {
+    match scene.options.user_floats("limits:loopiterations") {
+        Some([x, ..]) if *x >= 1.0 => *x as u64,
+        _ => crate::shade::exec::DEFAULT_LOOP_LIMIT,
     }
 }
 

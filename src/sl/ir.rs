@@ -219,12 +219,14 @@ pub enum Instr {
         then: Vec<Instr>,
         otherwise: Vec<Instr>,
     },
-    /// `cond_code` computes `cond`; body; step.
+    /// `cond_code` computes `cond`; body; step. `span` is the loop statement (named by the
+    /// runaway-loop guard).
     Loop {
         cond_code: Vec<Instr>,
         cond: Reg,
         body: Vec<Instr>,
         step: Vec<Instr>,
+        span: Span,
     },
     Break(u32),
     Continue(u32),
@@ -359,6 +361,7 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 cond,
                 body,
                 step,
+                ..
             } => {
                 writeln!(f, "{pad}loop")?;
                 list(f, cond_code, depth + 1)?;

@@ -1082,6 +1082,7 @@ impl<'a> Lowerer<'a> {
             cond: c.reg,
             body: b,
             step: st,
+            span,
         });
     }
 
