@@ -53,7 +53,11 @@ fn a_missing_texture_map_reads_as_white() {
     let (log, px, _) = render(&dir, &rib, Some(("showmap", shader)));
     assert!(log.contains("no-such-map.tx"), "{log}");
     // 0.5 * 1 + 0.25 * 1 = 0.75 everywhere: 191 in 8 bits.
-    assert!(px.iter().all(|&v| (190..=192).contains(&v)), "{:?}", &px[..8]);
+    assert!(
+        px.iter().all(|&v| (190..=192).contains(&v)),
+        "{:?}",
+        &px[..8]
+    );
 }
 
 #[test]
@@ -97,10 +101,17 @@ fn displacement_past_its_bound_is_reported() {
         )
     };
     let (log, _, _) = render(&dir, &scene(""), Some(("bumpy", shader)));
-    assert!(log.contains("render::displacementbound") && log.contains("`bumpy`"), "{log}");
+    assert!(
+        log.contains("render::displacementbound") && log.contains("`bumpy`"),
+        "{log}"
+    );
     let declared = "Attribute \"displacementbound\" \"sphere\" [0.2]\n";
     let (log, px, _) = render(&dir, &scene(declared), None);
     assert!(!log.contains("render::displacementbound"), "{log}");
     // Every pixel is covered by the (white, constant) plane: no cracks.
-    assert!(px.iter().all(|&v| v == 255), "a crack: {}", px.iter().filter(|&&v| v < 255).count());
+    assert!(
+        px.iter().all(|&v| v == 255),
+        "a crack: {}",
+        px.iter().filter(|&&v| v < 255).count()
+    );
 }

@@ -16,7 +16,11 @@ use arbor::sl::ShaderLibrary;
 
 /// Renders the first frame of `rib` with shaders from `dir`; returns the film, the
 /// diagnostics (with their counts) and the source map to place them.
-fn render(rib: &str, dir: &[PathBuf], opts: &RenderOptions) -> (Film, Vec<(Diag, usize)>, SourceMap) {
+fn render(
+    rib: &str,
+    dir: &[PathBuf],
+    opts: &RenderOptions,
+) -> (Film, Vec<(Diag, usize)>, SourceMap) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
@@ -52,7 +56,11 @@ fn shader_dir(name: &str, files: &[(&str, &str)]) -> PathBuf {
 }
 
 fn find<'a>(diags: &'a [(Diag, usize)], code: &str) -> Vec<&'a Diag> {
-    diags.iter().filter(|(d, _)| d.code == code).map(|(d, _)| d).collect()
+    diags
+        .iter()
+        .filter(|(d, _)| d.code == code)
+        .map(|(d, _)| d)
+        .collect()
 }
 
 /// A square facing the camera that fills a small frame, with `surface` on it.
@@ -91,13 +99,21 @@ fn a_loop_that_stops_changing_is_stopped_and_the_grid_keeps_its_values() {
     assert_eq!(warns.len(), 1, "{diags:#?}");
     let w = warns[0];
     assert!(w.message.contains("stuck"), "{}", w.message);
-    assert!(w.message.contains("stopped making progress"), "{}", w.message);
+    assert!(
+        w.message.contains("stopped making progress"),
+        "{}",
+        w.message
+    );
     // The label is the loop statement: stuck.sl line 4.
     let span = w.primary_span().expect("a span");
     let file = sources.get(span.file).expect("file");
     assert!(file.name.ends_with("stuck.sl"), "{}", file.name);
     assert_eq!(sources.line_col(span).0, 4);
-    assert!(w.help.as_deref().unwrap_or("").contains("\"loopiterations\""));
+    assert!(w
+        .help
+        .as_deref()
+        .unwrap_or("")
+        .contains("\"loopiterations\""));
     // Shaded with what it had: d kept its value, green is 1, blue 0.
     let rgb = common::film_rgb(&film);
     for px in rgb.chunks_exact(3) {
@@ -126,7 +142,11 @@ fn a_loop_past_the_iteration_limit_is_stopped() {
     let (film, diags, _) = render(&rib, &[dir], &Default::default());
     let warns = find(&diags, "shade::runaway_loop");
     assert_eq!(warns.len(), 1, "{diags:#?}");
-    assert!(warns[0].message.contains("ran 3000 iterations"), "{}", warns[0].message);
+    assert!(
+        warns[0].message.contains("ran 3000 iterations"),
+        "{}",
+        warns[0].message
+    );
     // 3000 passes of x = 1 - x leave x at 0.
     for px in common::film_rgb(&film).chunks_exact(3) {
         assert!(px[0].abs() < 1e-4 && (px[2] - 1.0).abs() < 1e-4, "{px:?}");
@@ -204,9 +224,14 @@ WorldEnd
     assert!(w.iter().any(|m| m.contains("PixelSamples 1000 1000")
         && m.contains("using 16 16")
         && m.contains("\"limits\" \"pixelsamples\"")));
-    assert!(w.iter().any(|m| m.contains("PixelFilter") && m.contains("\"filterwidth\"")));
+    assert!(w
+        .iter()
+        .any(|m| m.contains("PixelFilter") && m.contains("\"filterwidth\"")));
     let m = common::film_mean(&film);
-    assert!((m[0] - 0.5).abs() < 1e-3 && (m[2] - 1.0).abs() < 1e-3, "{m:?}");
+    assert!(
+        (m[0] - 0.5).abs() < 1e-3 && (m[2] - 1.0).abs() < 1e-3,
+        "{m:?}"
+    );
 }
 
 #[test]
@@ -223,7 +248,10 @@ WorldEnd
     let (film, diags, _) = render(rib, &[], &Default::default());
     assert_eq!((film.width, film.height), (40, 20));
     let w = limit_warnings(&diags);
-    assert!(w.len() == 1 && w[0].contains("Format 100000 50000") && w[0].contains("40×20"), "{w:#?}");
+    assert!(
+        w.len() == 1 && w[0].contains("Format 100000 50000") && w[0].contains("40×20"),
+        "{w:#?}"
+    );
 }
 
 #[test]
@@ -243,9 +271,16 @@ WorldEnd
     };
     let (_, diags, _) = render(&scene(""), &[], &Default::default());
     let w = limit_warnings(&diags);
-    assert!(w.len() == 1 && w[0].contains("ShadingRate 1e-9") && w[0].contains("using 0.05"), "{w:#?}");
+    assert!(
+        w.len() == 1 && w[0].contains("ShadingRate 1e-9") && w[0].contains("using 0.05"),
+        "{w:#?}"
+    );
     assert!(w[0].contains("\"limits\" \"shadingrate\""), "{w:#?}");
-    let (_, diags, _) = render(&scene(r#"Option "limits" "shadingrate" [0.02]"#), &[], &Default::default());
+    let (_, diags, _) = render(
+        &scene(r#"Option "limits" "shadingrate" [0.02]"#),
+        &[],
+        &Default::default(),
+    );
     let w = limit_warnings(&diags);
     assert!(w.len() == 1 && w[0].contains("using 0.02"), "{w:#?}");
 }
@@ -276,7 +311,10 @@ WorldEnd
     );
     let w = limit_warnings(&diags);
     assert_eq!(w.len(), 2, "{w:#?}");
-    assert!(w.iter().all(|m| m.contains("memory use and speed")), "{w:#?}");
+    assert!(
+        w.iter().all(|m| m.contains("memory use and speed")),
+        "{w:#?}"
+    );
     // Bucket size never changes the picture; grid size only moves grid seams.
     let (a, b) = (common::film_mean(&plain), common::film_mean(&big));
     assert!((0..3).all(|c| (a[c] - b[c]).abs() < 2e-3), "{a:?} {b:?}");

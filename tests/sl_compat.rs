@@ -437,7 +437,10 @@ fn clamp_with_crossed_bounds_keeps_marching_loops_moving() {
     assert_eq!(value("clamp(0.001, 0.005, 0.0)"), 0.005);
     assert_eq!(value("clamp(0.25, 0.005, 0.001)"), 0.001);
     assert_eq!(value("clamp(0.5, 0, 1)"), 0.5);
-    assert_eq!(value("comp(clamp(color(0.001), color(0.005), color(0)), 1)"), 0.005);
+    assert_eq!(
+        value("comp(clamp(color(0.001), color(0.005), color(0)), 1)"),
+        0.005
+    );
     let (prog, _) = compile_ok(
         "volume march(float stepsize = 0.25; float end = 3.7;) {
              float d = 0.1, ss = min(stepsize, end - d), steps = 0;
@@ -461,7 +464,10 @@ fn uniform_function_updating_a_demoted_uniform_compiles() {
                  if (s > 0.3) { uniform float y = next(); x = y + next(); }
                  Ci = x; }";
     let (prog, rendered) = compile_ok(src);
-    assert!(rendered.contains("declared to return a uniform value"), "{rendered}");
+    assert!(
+        rendered.contains("declared to return a uniform value"),
+        "{rendered}"
+    );
     let (ci, _) = run(&prog, 5);
     let want = [0.0, 0.0, 30.0, 30.0, 30.0];
     for (c, w) in ci.iter().zip(want) {

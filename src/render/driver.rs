@@ -300,12 +300,25 @@ impl Frame<'_> {
         let Some(d) = self.scene.primitives[prim].attributes.displacement.as_ref() else {
             return;
         };
-        let mut b = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+        let mut b = [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ];
         for rb in &sg.row_bounds {
-            b = [b[0].min(rb[0]), b[1].min(rb[1]), b[2].max(rb[2]), b[3].max(rb[3])];
+            b = [
+                b[0].min(rb[0]),
+                b[1].min(rb[1]),
+                b[2].max(rb[2]),
+                b[3].max(rb[3]),
+            ];
         }
         // Half a pixel of slack: filters and jitter hide less than that.
-        let out = (clip[0] - b[0]).max(clip[1] - b[1]).max(b[2] - clip[2]).max(b[3] - clip[3]);
+        let out = (clip[0] - b[0])
+            .max(clip[1] - b[1])
+            .max(b[2] - clip[2])
+            .max(b[3] - clip[3]);
         if out > 0.5 {
             self.diags.report(
                 Diag::warning(

@@ -91,7 +91,10 @@ pub fn apply_frame_limits(options: &mut Options, diags: &Diagnostics) {
     let max_fw = option_limit(options, "filterwidth").unwrap_or(MAX_FILTER_WIDTH);
     let f = &mut options.pixel_filter;
     if !(f.xwidth <= max_fw && f.ywidth <= max_fw) {
-        let (nx, ny) = (clamp_num(f.xwidth, 1.0, max_fw), clamp_num(f.ywidth, 1.0, max_fw));
+        let (nx, ny) = (
+            clamp_num(f.xwidth, 1.0, max_fw),
+            clamp_num(f.ywidth, 1.0, max_fw),
+        );
         warn(
             diags,
             format!(
@@ -226,7 +229,10 @@ mod tests {
         let d = Diagnostics::new();
         let r = shading_rate(1e-9, MIN_SHADING_RATE, Span::default(), &d);
         assert_eq!(r, MIN_SHADING_RATE);
-        assert_eq!(shading_rate(0.25, MIN_SHADING_RATE, Span::default(), &d), 0.25);
+        assert_eq!(
+            shading_rate(0.25, MIN_SHADING_RATE, Span::default(), &d),
+            0.25
+        );
         assert_eq!(d.snapshot().len(), 1);
     }
 

@@ -1994,7 +1994,11 @@ fn texture_call(
     // A missing map reads as white (1 in every channel), as in Aqsis and Pixie: a surface
     // that multiplies its colour by the map keeps its colour instead of turning black.
     // Environments and shadows keep 0 / unshadowed.
-    let missing = if matches!(f, TextureF | TextureC) { 1.0 } else { fill };
+    let missing = if matches!(f, TextureF | TextureC) {
+        1.0
+    } else {
+        fill
+    };
     ex.warn(
         span,
         format!("texture \"{name}\" is not available; using {missing} for every lookup"),

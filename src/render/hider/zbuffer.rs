@@ -362,7 +362,11 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                         return;
                     }
                 }
-                let t = if inside(edge(diag0.0, diag0.1, pos)) { 0 } else { 1 };
+                let t = if inside(edge(diag0.0, diag0.1, pos)) {
+                    0
+                } else {
+                    1
+                };
                 hit(b, g, cfg, &mp, t, s, pos, &mut interp_aov);
             });
         } else {
