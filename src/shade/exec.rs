@@ -733,8 +733,18 @@ impl<'a> Exec<'a> {
                 let a = s.f();
                 let mut v = match out {
                     Slot::VF(v) if v.len() == n => v,
-                    Slot::F(x) => vec![x; n],
-                    _ => vec![0.0; n],
+                    Slot::F(x) => {
+                        let mut v = crate::shade::value::grid_vf(n);
+                        v.fill(x);
+                        v
+                    }
+                    // Zeros where the mask leaves it unset (never a pooled buffer's old
+                    // contents, which depend on what ran before on this thread).
+                    _ => {
+                        let mut v = crate::shade::value::grid_vf(n);
+                        v.fill(0.0);
+                        v
+                    }
                 };
                 if all {
                     match a {
@@ -754,8 +764,8 @@ impl<'a> Exec<'a> {
                 let a = s.t();
                 let mut v = match out {
                     Slot::VT(v) if v.len() == n => v,
-                    Slot::T(x) => vec![x; n],
-                    _ => vec![Vec3::ZERO; n],
+                    Slot::T(x) => crate::shade::value::grid_vt_filled(n, x),
+                    _ => crate::shade::value::grid_vt_filled(n, Vec3::ZERO),
                 };
                 if all {
                     match a {
