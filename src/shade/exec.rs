@@ -190,8 +190,8 @@ pub struct LightResult {
     pub nondiffuse: bool,
     pub nonspecular: bool,
     /// The light's program and its parameters' values after the run, one per
-    /// `program.params` entry (for lightsource()).
-    pub program: Arc<Program>,
+    /// `program.params` entry (for lightsource()); None: no parameters to read.
+    pub program: Option<Arc<Program>>,
     pub outputs: Vec<Slot>,
 }
 

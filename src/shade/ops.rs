@@ -2007,7 +2007,10 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             let Some(light) = ex.current_light_result() else {
                 return false;
             };
-            let found = light.program.params.iter().position(|p| p.name == name);
+            let found = light
+                .program
+                .as_ref()
+                .and_then(|p| p.params.iter().position(|p| p.name == name));
             match found.and_then(|k| light.outputs.get(k)) {
                 Some(s) => {
                     let s = s.clone();

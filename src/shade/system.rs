@@ -543,7 +543,7 @@ impl<'a> ShadeSystem<'a> {
                 category,
                 nondiffuse,
                 nonspecular,
-                program: prog.clone(),
+                program: Some(prog.clone()),
                 outputs,
             }));
         }
