@@ -90,9 +90,10 @@ fn three_lights(n: usize) -> Vec<LightResult> {
         l_uniform: Some(dir),
         cl: vec![Vec3::splat(c); n],
         ol: vec![Vec3::ZERO; n],
-        category: String::new(),
+        category: std::sync::Arc::from(""),
         nondiffuse: false,
         nonspecular: false,
+        program: None,
         outputs: Vec::new(),
     };
     vec![

@@ -156,8 +156,11 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
         return Decision::Split { eye: false };
     }
     let edge = shading_rate.max(1e-4).sqrt();
-    // A bound far bigger than any grid can cover: split without trial dicing.
-    let (bw, bh) = ((rb[2] - rb[0]) / edge, (rb[3] - rb[1]) / edge);
+    // A surface far bigger than any grid can cover: split without trial dicing. Its own
+    // bound, not the displacement-widened one: splitting never shrinks the widening, so a
+    // displacement bound larger than a grid would split forever.
+    let own = view.raster_bound(&surface.bound()).unwrap_or(rb);
+    let (bw, bh) = ((own[2] - own[0]) / edge, (own[3] - own[1]) / edge);
     if bw * bh > 64.0 * view.max_grid as f32 && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt() {
         return Decision::Split { eye: false };
     }
@@ -366,6 +369,16 @@ pub(crate) mod tests {
         assert_eq!(decide(&q, &b, 4.0, &v), Decision::Dice { nu: 16, nv: 8 });
         // Rate 0.25 needs 64×32 = 2048 micropolygons > 1024: split.
         assert_eq!(decide(&q, &b, 0.25, &v), Decision::Split { eye: false });
+    }
+
+    #[test]
+    fn a_displacement_bound_wider_than_a_grid_does_not_force_splits() {
+        // A 4-pixel square whose displacement bound reaches far over the frame: it dices at
+        // its own size (the widened bound only decides culling).
+        let v = ortho_view(64);
+        let q = Quad::rect(-0.0625, -0.0625, 0.0625, 0.0625, 1.0, 0);
+        let widened = q.bound().grow(20.0);
+        assert_eq!(decide(&q, &widened, 1.0, &v), Decision::Dice { nu: 4, nv: 4 });
     }
 
     #[test]

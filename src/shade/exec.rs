@@ -7,6 +7,7 @@
 //! `return` and rejoins where the language says it does. Faults never panic: they write a
 //! defined value and warn once per shader.
 
+use std::rc::Rc;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
@@ -185,11 +186,13 @@ pub struct LightResult {
     pub l_uniform: Option<Vec3>,
     pub cl: Vec<Vec3>,
     pub ol: Vec<Vec3>,
-    pub category: String,
+    pub category: Arc<str>,
     pub nondiffuse: bool,
     pub nonspecular: bool,
-    /// The light's parameters after the run (for lightsource()).
-    pub outputs: Vec<(String, Slot)>,
+    /// The light's program and its parameters' values after the run, one per
+    /// `program.params` entry (for lightsource()); None: no parameters to read.
+    pub program: Option<Arc<Program>>,
+    pub outputs: Vec<Slot>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -230,6 +233,43 @@ pub struct Exec<'a> {
     pub loop_limit: u64,
     /// Spare mask buffers, so control flow allocates nothing per instruction.
     bits_pool: Vec<Vec<bool>>,
+    /// Where `env.lights` were evaluated (the grid's P), and how to evaluate them elsewhere:
+    /// `illuminance(pos)` at other positions (a volume shader marching a ray) runs the lights
+    /// again, once over the whole grid. None: `env.lights` serve every position.
+    pub lights_at: Option<&'a [Vec3]>,
+    pub relight: Option<&'a Relight<'a>>,
+    /// The last lights evaluated away from the grid's P.
+    relit: Option<Rc<RelitLights>>,
+    /// The light set of the running illuminance body (None: `env.lights`).
+    lights_in_use: Option<Rc<RelitLights>>,
+}
+
+/// Runs the grid's lights with the lit points at `ps`, for the lights flagged in `want` (by
+/// index into `env.lights`; None where not wanted or not runnable).
+pub type Relight<'a> = dyn Fn(&[Vec3], &[bool]) -> Vec<Option<LightResult>> + 'a;
+
+/// Lights evaluated at positions other than the grid's.
+pub struct RelitLights {
+    ps: Vec<Vec3>,
+    want: Vec<bool>,
+    lights: Vec<Option<LightResult>>,
+}
+
+impl RelitLights {
+    fn recycle(self) {
+        crate::shade::value::recycle([Slot::VT(self.ps)]);
+        for l in self.lights.into_iter().flatten() {
+            l.recycle();
+        }
+    }
+}
+
+impl LightResult {
+    /// Gives the grid buffers back to this thread's pool.
+    pub fn recycle(self) {
+        crate::shade::value::recycle([Slot::VT(self.l), Slot::VT(self.cl), Slot::VT(self.ol)]);
+        crate::shade::value::recycle(self.outputs);
+    }
 }
 
 /// Default for [`Exec::loop_limit`]: far beyond any real shader's loop (a ray march at the
@@ -255,15 +295,15 @@ impl<'a> Exec<'a> {
             .map(|r| match r.kind {
                 Kind::Float => Slot::F(0.0),
                 Kind::Triple => Slot::T(Vec3::ZERO),
-                Kind::Matrix => Slot::M(Mat4::IDENTITY),
-                Kind::Str => Slot::S(Arc::from("")),
+                Kind::Matrix => Slot::M(Box::new(Mat4::IDENTITY)),
+                Kind::Str => Slot::S(crate::shade::value::empty_str()),
             })
             .collect();
         for (r, c) in &prog.consts {
             regs[*r as usize] = match c {
                 Const::F(x) => Slot::F(*x),
                 Const::T(x) => Slot::T(*x),
-                Const::M(x) => Slot::M(*x),
+                Const::M(x) => Slot::M(Box::new(*x)),
                 Const::S(x) => Slot::S(x.clone()),
             };
         }
@@ -278,6 +318,10 @@ impl<'a> Exec<'a> {
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
             bits_pool: Vec::new(),
+            lights_at: None,
+            relight: None,
+            relit: None,
+            lights_in_use: None,
         }
     }
 
@@ -486,10 +530,10 @@ impl<'a> Exec<'a> {
             }
             Instr::Illuminance {
                 category,
-                pos: _,
+                pos,
                 axis,
                 body,
-            } => self.illuminance(*category, *axis, body, mask),
+            } => self.illuminance(*category, *pos, *axis, body, mask),
             Instr::Illuminate { pos, axis, body } => self.illuminate(Some(*pos), *axis, body, mask),
             Instr::Solar { axis, body } => self.illuminate(None, *axis, body, mask),
             Instr::Gather { otherwise } => self.block(otherwise, mask),
@@ -656,7 +700,7 @@ impl<'a> Exec<'a> {
             self.regs[dst as usize] = match v {
                 Slot::VF(x) => Slot::F(first_active(&x, mask)),
                 Slot::VT(x) => Slot::T(first_active(&x, mask)),
-                Slot::VM(x) => Slot::M(first_active(&x, mask)),
+                Slot::VM(x) => Slot::M(Box::new(first_active(&x, mask))),
                 s => s,
             };
             return;
@@ -689,8 +733,18 @@ impl<'a> Exec<'a> {
                 let a = s.f();
                 let mut v = match out {
                     Slot::VF(v) if v.len() == n => v,
-                    Slot::F(x) => vec![x; n],
-                    _ => vec![0.0; n],
+                    Slot::F(x) => {
+                        let mut v = crate::shade::value::grid_vf(n);
+                        v.fill(x);
+                        v
+                    }
+                    // Zeros where the mask leaves it unset (never a pooled buffer's old
+                    // contents, which depend on what ran before on this thread).
+                    _ => {
+                        let mut v = crate::shade::value::grid_vf(n);
+                        v.fill(0.0);
+                        v
+                    }
                 };
                 if all {
                     match a {
@@ -710,8 +764,8 @@ impl<'a> Exec<'a> {
                 let a = s.t();
                 let mut v = match out {
                     Slot::VT(v) if v.len() == n => v,
-                    Slot::T(x) => vec![x; n],
-                    _ => vec![Vec3::ZERO; n],
+                    Slot::T(x) => crate::shade::value::grid_vt_filled(n, x),
+                    _ => crate::shade::value::grid_vt_filled(n, Vec3::ZERO),
                 };
                 if all {
                     match a {
@@ -731,7 +785,7 @@ impl<'a> Exec<'a> {
                 let a = s.m();
                 let mut v = match out {
                     Slot::VM(v) if v.len() == n => v,
-                    Slot::M(x) => vec![x; n],
+                    Slot::M(x) => vec![*x; n],
                     _ => vec![Mat4::IDENTITY; n],
                 };
                 for i in 0..n {
@@ -750,9 +804,61 @@ impl<'a> Exec<'a> {
         self.prog.global(name).map(|g| g.reg)
     }
 
+    /// The lights `illuminance(pos)` sees: those of the grid when `pos` is the grid's P,
+    /// otherwise every wanted light run once over the whole grid at `pos` (cached while the
+    /// positions repeat). None: the grid's lights.
+    fn lights_at(&mut self, pos: Reg, cat: Option<&str>) -> Option<Rc<RelitLights>> {
+        let relight = self.relight?;
+        let at = self.lights_at?;
+        let n = self.n;
+        let p = self.regs[pos as usize].t();
+        let same = match p {
+            T::V(v) => v.len() == at.len() && v.iter().zip(at).all(|(a, b)| a == b),
+            T::U(x) => at.iter().all(|a| *a == x),
+        };
+        if same {
+            return None;
+        }
+        let want: Vec<bool> = self
+            .env
+            .lights
+            .iter()
+            .map(|l| !l.ambient && cat.is_none_or(|c| category_matches(c, &l.category)))
+            .collect();
+        if let Some(c) = &self.relit {
+            if c.want == want && (0..n).all(|i| c.ps[i] == p.at(i)) {
+                return Some(c.clone());
+            }
+        }
+        let ps: Vec<Vec3> = (0..n).map(|i| p.at(i)).collect();
+        let lights = relight(&ps, &want);
+        if let Some(old) = self.relit.take() {
+            if let Ok(old) = Rc::try_unwrap(old) {
+                old.recycle();
+            }
+        }
+        let r = Rc::new(RelitLights { ps, want, lights });
+        self.relit = Some(r.clone());
+        Some(r)
+    }
+
+    /// The light `lightsource()` reads inside an illuminance body.
+    pub fn current_light_result(&self) -> Option<&LightResult> {
+        self.current_light_ref()
+    }
+
+    fn current_light_ref(&self) -> Option<&LightResult> {
+        let li = self.current_light?;
+        match &self.lights_in_use {
+            Some(r) => r.lights.get(li)?.as_ref(),
+            None => self.env.lights.get(li),
+        }
+    }
+
     fn illuminance(
         &mut self,
         category: Option<Reg>,
+        pos: Reg,
         axis: Option<(Reg, Reg)>,
         body: &'a [Instr],
         mask: &mut Mask,
@@ -768,8 +874,17 @@ impl<'a> Exec<'a> {
                 (0..n).map(|i| ang.at(i)).collect(),
             )
         });
-        let lights = self.env.lights;
-        for (li, light) in lights.iter().enumerate() {
+        let relit = self.lights_at(pos, cat.as_deref());
+        let outer = std::mem::replace(&mut self.lights_in_use, relit.clone());
+        let grid_lights = self.env.lights;
+        for li in 0..grid_lights.len() {
+            let light = match &relit {
+                Some(r) => match &r.lights[li] {
+                    Some(l) => l,
+                    None => continue,
+                },
+                None => &grid_lights[li],
+            };
             if light.ambient {
                 continue;
             }
@@ -778,10 +893,11 @@ impl<'a> Exec<'a> {
                     continue;
                 }
             }
-            let mut bits = vec![false; n];
+            let mut m = self.mask_like(mask);
             let mut any = false;
-            for i in 0..n {
-                if !(mask.bits[i] && light.lit[i]) {
+            for (i, b) in m.bits.iter_mut().enumerate() {
+                if !(*b && light.lit[i]) {
+                    *b = false;
                     continue;
                 }
                 let ok = match &axis_vals {
@@ -797,28 +913,27 @@ impl<'a> Exec<'a> {
                     }
                     None => true,
                 };
-                if ok {
-                    bits[i] = true;
-                    any = true;
-                }
+                *b = ok;
+                any |= ok;
             }
             if !any {
+                self.release(m.bits);
                 continue;
             }
-            if let Some(r) = lr {
-                self.regs[r as usize] = Slot::VT(light.l.clone());
-            }
-            if let Some(r) = clr {
-                self.regs[r as usize] = Slot::VT(light.cl.clone());
-            }
-            if let Some(r) = olr {
-                self.regs[r as usize] = Slot::VT(light.ol.clone());
+            m.recount();
+            for (reg, values) in [(lr, &light.l), (clr, &light.cl), (olr, &light.ol)] {
+                if let Some(r) = reg {
+                    let mut v = take_vt(&mut self.regs[r as usize], n);
+                    v.copy_from_slice(values);
+                    self.regs[r as usize] = Slot::VT(v);
+                }
             }
             self.current_light = Some(li);
-            let mut m = Mask::from_bits(bits);
             self.block(body, &mut m);
             self.current_light = None;
+            self.release(m.bits);
         }
+        self.lights_in_use = outer;
     }
 
     fn illuminate(
@@ -833,15 +948,24 @@ impl<'a> Exec<'a> {
             return;
         };
         let lreg = self.reg_of("L");
-        let mut l = vec![Vec3::ZERO; n];
-        let mut bits = vec![false; n];
+        // L reuses the register's buffer; the lit mask a pooled one.
+        let mut l = match lreg {
+            Some(r) => take_vt(&mut self.regs[r as usize], n),
+            None => crate::shade::value::grid_vt(n),
+        };
         match pos {
-            Some(p) => {
-                let from = self.regs[p as usize].t();
-                for i in 0..n {
-                    l[i] = state.ps[i] - from.at(i);
+            Some(p) => match self.regs[p as usize].t() {
+                T::U(from) => {
+                    for (li, &p) in l.iter_mut().zip(state.ps.iter()) {
+                        *li = p - from;
+                    }
                 }
-            }
+                from => {
+                    for (i, li) in l.iter_mut().enumerate() {
+                        *li = state.ps[i] - from.at(i);
+                    }
+                }
+            },
             None => match axis {
                 Some((a, _)) => {
                     let ax = self.regs[a as usize].t();
@@ -856,35 +980,53 @@ impl<'a> Exec<'a> {
                 }
             },
         }
-        match (pos, axis) {
-            (Some(_), Some((a, ang))) => {
-                let ax = self.regs[a as usize].t();
-                let an = self.regs[ang as usize].f();
-                for i in 0..n {
-                    let (axl, ll) = (ax.at(i).length(), l[i].length());
-                    let c = if axl == 0.0 || ll == 0.0 {
-                        1.0
-                    } else {
-                        ax.at(i).dot(l[i]) / (axl * ll)
-                    };
-                    bits[i] = mask.bits[i] && c >= an.at(i).min(std::f32::consts::PI).cos() - 1e-6;
+        let mut m = self.mask_like(mask);
+        if let (Some(_), Some((a, ang))) = (pos, axis) {
+            let ax = self.regs[a as usize].t();
+            let an = self.regs[ang as usize].f();
+            let cos_of = |x: f32| x.min(std::f32::consts::PI).cos() - 1e-6;
+            // The cone's axis and angle are almost always uniform: their length and cosine
+            // once per grid.
+            let ax_u = match ax {
+                T::U(x) => Some((x, x.length())),
+                T::V(_) => None,
+            };
+            let cos_u = match an {
+                F::U(x) => Some(cos_of(x)),
+                F::V(_) => None,
+            };
+            for (i, b) in m.bits.iter_mut().enumerate() {
+                if !*b {
+                    continue;
                 }
+                let (a, axl) = match ax_u {
+                    Some(u) => u,
+                    None => (ax.at(i), ax.at(i).length()),
+                };
+                let ll = l[i].length();
+                let c = if axl == 0.0 || ll == 0.0 {
+                    1.0
+                } else {
+                    a.dot(l[i]) / (axl * ll)
+                };
+                *b = c >= cos_u.unwrap_or_else(|| cos_of(an.at(i)));
             }
-            _ => bits.copy_from_slice(&mask.bits),
+            m.recount();
         }
-        if let Some(r) = lreg {
-            self.regs[r as usize] = Slot::VT(l);
+        match lreg {
+            Some(r) => self.regs[r as usize] = Slot::VT(l),
+            None => crate::shade::value::recycle([Slot::VT(l)]),
         }
-        let mut m = Mask::from_bits(bits.clone());
         let mut state = state;
         state.ran = true;
-        for (a, b) in state.lit.iter_mut().zip(&bits) {
+        for (a, b) in state.lit.iter_mut().zip(&m.bits) {
             *a |= *b;
         }
         self.light = Some(state);
         if !m.is_none() {
             self.block(body, &mut m);
         }
+        self.release(m.bits);
     }
 }
 
@@ -928,7 +1070,7 @@ pub fn broadcast(v: &Slot, n: usize) -> Slot {
     match v {
         Slot::F(x) => Slot::VF(vec![*x; n]),
         Slot::T(x) => Slot::VT(vec![*x; n]),
-        Slot::M(x) => Slot::VM(vec![*x; n]),
+        Slot::M(x) => Slot::VM(vec![**x; n]),
         s => s.clone(),
     }
 }

@@ -115,7 +115,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                         Arith::Div => write_m(&mut out, n, v, |i| inverse(y.at(i)) * x.at(i)),
                     }
                 }
-                Kind::Str => out = Slot::S(Arc::from("")),
+                Kind::Str => out = Slot::S(crate::shade::value::empty_str()),
             }
             put(ex, *dst, out);
         }
@@ -308,7 +308,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
         Instr::SpaceMatrix { dst, space } => {
             let sp = ex.regs[*space as usize].s();
             let m = space_matrix(ex, &sp);
-            put(ex, *dst, Slot::M(m));
+            put(ex, *dst, Slot::M(Box::new(m)));
         }
         Instr::Transform {
             kind,
@@ -2037,12 +2037,15 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
     let outs: Vec<Reg> = args[ty_idx + 1..].to_vec();
     let value: Option<InfoValue> = match &*which {
         "lightsource" => {
-            let Some(li) = ex.current_light else {
+            let Some(light) = ex.current_light_result() else {
                 return false;
             };
-            let light = &ex.env.lights[li];
-            match light.outputs.iter().find(|(n, _)| *n == name) {
-                Some((_, s)) => {
+            let found = light
+                .program
+                .as_ref()
+                .and_then(|p| p.params.iter().position(|p| p.name == name));
+            match found.and_then(|k| light.outputs.get(k)) {
+                Some(s) => {
                     let s = s.clone();
                     if let Some(&r) = outs.first() {
                         set_out(ex, r, s);
@@ -2109,7 +2112,7 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
                     let mut a = [0f32; 16];
                     a.copy_from_slice(&v[..16]);
                     if let Some(&r) = outs.first() {
-                        set_out(ex, r, Slot::M(Mat4::from_cols_array(&a)));
+                        set_out(ex, r, Slot::M(Box::new(Mat4::from_cols_array(&a))));
                     }
                 }
                 _ => return false,

@@ -15,7 +15,7 @@ use glam::{Mat4, Vec3};
 use crate::diag::{Diag, Diagnostics, SourceMap};
 use crate::render::Camera;
 use crate::scene::{Attributes, ParamData, ParamType, Scene, ShaderRef};
-use crate::shade::exec::{Env, Exec, InfoValue, LightResult, LightState, TextureLookup};
+use crate::shade::exec::{Env, Exec, InfoValue, LightResult, LightState, Relight, TextureLookup};
 use crate::shade::value::Slot;
 use crate::shade::{Grid, GridVar};
 use crate::sl::ast::{BaseType, ShaderKind};
@@ -74,6 +74,13 @@ fn uses_bare_solar(instrs: &[Instr]) -> bool {
         Instr::Gather { otherwise } => uses_bare_solar(otherwise),
         _ => false,
     })
+}
+
+/// A light of the primitive, ready to run over its grids.
+struct GridLight<'s> {
+    shader: &'s ShaderRef,
+    prog: Arc<Program>,
+    bare_solar: bool,
 }
 
 /// Per-run facts shared by the programs of one grid.
@@ -165,7 +172,7 @@ impl<'a> ShadeSystem<'a> {
         };
         let ctx = self.ctx(scene, camera, prim);
         let n0 = grid.n.clone();
-        let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None);
+        let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None, None);
         if let Some(mut regs) = regs {
             if let Some(g) = prog.global("P") {
                 grid.p = own_vt(&mut regs[g.reg as usize], grid.len());
@@ -258,7 +265,8 @@ impl<'a> ShadeSystem<'a> {
                 seed: 0x1a6e,
                 alpha: Some(&alpha),
             };
-            if let Some(mut regs) = self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None)
+            if let Some(mut regs) =
+                self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None, None)
             {
                 let n = grid.len();
                 let ci = prog
@@ -324,12 +332,26 @@ impl<'a> ShadeSystem<'a> {
         let atmosphere_lights = atmosphere
             .as_ref()
             .is_some_and(|(a, _)| uses_lights(&a.body));
-        let lights = if uses_lights(&prog.body) || atmosphere_lights {
-            self.eval_lights(grid, &ctx)
+        let wants_lights = uses_lights(&prog.body) || atmosphere_lights;
+        let grid_lights = if wants_lights {
+            self.grid_lights(&ctx)
         } else {
             Vec::new()
         };
-        if let Some(mut regs) = self.run(&prog, &sref, grid, &ctx, &lights, None, None) {
+        let lights: Vec<LightResult> = self
+            .eval_lights(grid, &ctx, &grid_lights, None, None)
+            .into_iter()
+            .flatten()
+            .collect();
+        // illuminance() away from the grid's P runs the same lights again there.
+        let surface_regs = {
+            let g: &Grid = grid;
+            let relight = |ps: &[Vec3], want: &[bool]| {
+                self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+            };
+            self.run(&prog, &sref, g, &ctx, &lights, None, None, Some(&relight))
+        };
+        if let Some(mut regs) = surface_regs {
             let n = grid.len();
             if let Some(g) = prog.global("Ci") {
                 grid.ci = own_vt(&mut regs[g.reg as usize], n);
@@ -388,9 +410,20 @@ impl<'a> ShadeSystem<'a> {
             {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
-                if let Some(mut regs) =
-                    self.run(&aprog, &aref, grid, &ctx, &lights, Some((&ci, &oi)), None)
-                {
+                let g: &Grid = grid;
+                let relight = |ps: &[Vec3], want: &[bool]| {
+                    self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+                };
+                if let Some(mut regs) = self.run(
+                    &aprog,
+                    &aref,
+                    grid,
+                    &ctx,
+                    &lights,
+                    Some((&ci, &oi)),
+                    None,
+                    Some(&relight),
+                ) {
                     let n = grid.len();
                     if let Some(g) = aprog.global("Ci") {
                         grid.ci = own_vt(&mut regs[g.reg as usize], n);
@@ -403,7 +436,7 @@ impl<'a> ShadeSystem<'a> {
             }
         }
         for l in lights {
-            crate::shade::value::recycle([Slot::VT(l.l), Slot::VT(l.cl), Slot::VT(l.ol)]);
+            l.recycle();
         }
         // Guard the hider against NaN and infinities from shaders.
         let mut bad = false;
@@ -424,20 +457,48 @@ impl<'a> ShadeSystem<'a> {
         }
     }
 
-    fn eval_lights(&self, grid: &Grid, ctx: &RunCtx) -> Vec<LightResult> {
+    /// The primitive's lights that have a runnable program, in `lights_on` order, each with
+    /// whether it calls `solar()` without an axis (it then needs the unit normals).
+    fn grid_lights<'s>(&self, ctx: &RunCtx<'s>) -> Vec<GridLight<'s>> {
+        ctx.attrs
+            .lights_on
+            .iter()
+            .filter_map(|&li| {
+                let light = ctx.scene.lights.get(li)?;
+                let prog = self.program(&light.shader, ShaderKind::Light)?;
+                let bare_solar = uses_bare_solar(&prog.body);
+                Some(GridLight {
+                    shader: &light.shader,
+                    prog,
+                    bare_solar,
+                })
+            })
+            .collect()
+    }
+
+    /// Runs `lights` over the grid: with the lit points at the grid's P, or at `ps`
+    /// (illuminance at other positions). With `want`, only the lights flagged there run; the
+    /// others are None.
+    fn eval_lights(
+        &self,
+        grid: &Grid,
+        ctx: &RunCtx,
+        lights: &[GridLight],
+        ps: Option<&[Vec3]>,
+        want: Option<&[bool]>,
+    ) -> Vec<Option<LightResult>> {
         let n = grid.len();
-        let mut out = Vec::new();
+        let mut out = Vec::with_capacity(lights.len());
         // The unit surface normal is needed only by solar() without an axis.
         let mut ns: Option<Arc<[Vec3]>> = None;
-        let ps: Arc<[Vec3]> = grid.p.as_slice().into();
-        for &li in &ctx.attrs.lights_on {
-            let Some(light) = ctx.scene.lights.get(li) else {
+        let ps: Arc<[Vec3]> = ps.unwrap_or(&grid.p).into();
+        for (k, gl) in lights.iter().enumerate() {
+            if want.is_some_and(|w| !w.get(k).copied().unwrap_or(false)) {
+                out.push(None);
                 continue;
-            };
-            let Some(prog) = self.program(&light.shader, ShaderKind::Light) else {
-                continue;
-            };
-            let ns = if uses_bare_solar(&prog.body) {
+            }
+            let prog = &gl.prog;
+            let ns = if gl.bare_solar {
                 ns.get_or_insert_with(|| grid.n.iter().map(|v| v.normalize_or_zero()).collect())
                     .clone()
             } else {
@@ -451,8 +512,9 @@ impl<'a> ShadeSystem<'a> {
             };
             let mut st = Some(state);
             let Some(mut regs) =
-                self.run(&prog, &light.shader, grid, ctx, &[], None, Some(&mut st))
+                self.run(prog, gl.shader, grid, ctx, &[], None, Some(&mut st), None)
             else {
+                out.push(None);
                 continue;
             };
             let state = st.unwrap_or_default();
@@ -481,22 +543,23 @@ impl<'a> ShadeSystem<'a> {
                     }
                 }
             }
-            let mut category = String::new();
+            let mut category: Arc<str> = crate::shade::value::empty_str();
             let mut nondiffuse = false;
             let mut nonspecular = false;
-            let mut outputs = Vec::new();
+            let mut outputs = Vec::with_capacity(prog.params.len());
             for par in &prog.params {
-                let slot = regs[par.reg as usize].clone();
+                // The register file is discarded after the run: move the values out.
+                let slot = std::mem::take(&mut regs[par.reg as usize]);
                 match par.name.as_str() {
-                    "__category" => category = slot.s().to_string(),
+                    "__category" => category = slot.s(),
                     "__nondiffuse" => nondiffuse = slot.f().first() != 0.0,
                     "__nonspecular" => nonspecular = slot.f().first() != 0.0,
                     _ => {}
                 }
-                outputs.push((par.name.clone(), slot));
+                outputs.push(slot);
             }
             crate::shade::value::recycle(regs);
-            out.push(LightResult {
+            out.push(Some(LightResult {
                 l_uniform,
                 ambient,
                 lit,
@@ -506,8 +569,9 @@ impl<'a> ShadeSystem<'a> {
                 category,
                 nondiffuse,
                 nonspecular,
+                program: Some(prog.clone()),
                 outputs,
-            });
+            }));
         }
         out
     }
@@ -523,6 +587,7 @@ impl<'a> ShadeSystem<'a> {
         lights: &[LightResult],
         ci_oi: Option<(&[Vec3], &[Vec3])>,
         light_state: Option<&mut Option<LightState>>,
+        relight: Option<&Relight>,
     ) -> Option<Vec<Slot>> {
         let n = grid.len();
         let camera_from_shader = ctx.camera.camera_from_world * sref.world_from_shader;
@@ -560,6 +625,15 @@ impl<'a> ShadeSystem<'a> {
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);
+        if relight.is_some() {
+            ex.relight = relight;
+            ex.lights_at = Some(&grid.p);
+        }
+        // A light run for illuminance at other positions sees them as Ps.
+        let lit_ps = light_state
+            .as_ref()
+            .and_then(|st| st.as_ref())
+            .map(|st| st.ps.clone());
         // Globals.
         for g in &prog.globals {
             let v = match g.name {
@@ -570,7 +644,10 @@ impl<'a> ShadeSystem<'a> {
                         Slot::VT(grid.p.clone())
                     }
                 }
-                "Ps" => Slot::VT(grid.p.clone()),
+                "Ps" => match &lit_ps {
+                    Some(ps) => Slot::VT(ps.to_vec()),
+                    None => Slot::VT(grid.p.clone()),
+                },
                 "N" => Slot::VT(grid.n.clone()),
                 "Ng" => Slot::VT(grid.ng.clone()),
                 "dPdu" => Slot::VT(grid.dpdu.clone()),
@@ -648,7 +725,7 @@ fn fit(v: Slot, varying: bool, n: usize) -> Slot {
         match v {
             Slot::VF(x) => Slot::F(x.first().copied().unwrap_or(0.0)),
             Slot::VT(x) => Slot::T(x.first().copied().unwrap_or(Vec3::ZERO)),
-            Slot::VM(x) => Slot::M(x.first().copied().unwrap_or(Mat4::IDENTITY)),
+            Slot::VM(x) => Slot::M(Box::new(x.first().copied().unwrap_or(Mat4::IDENTITY))),
             s => s,
         }
     } else {
@@ -690,7 +767,7 @@ fn bind_params(
                             BaseType::Matrix => {
                                 let mut a = [0f32; 16];
                                 a.copy_from_slice(x);
-                                Slot::M(Mat4::from_cols_array(&a))
+                                Slot::M(Box::new(Mat4::from_cols_array(&a)))
                             }
                             BaseType::Point => Slot::T(
                                 camera_from_shader.transform_point3(Vec3::new(x[0], x[1], x[2])),
@@ -766,7 +843,7 @@ fn bind_gridvar(
                 _ => {
                     let mut a = [0f32; 16];
                     a.copy_from_slice(&f[off..off + 16]);
-                    Slot::M(Mat4::from_cols_array(&a))
+                    Slot::M(Box::new(Mat4::from_cols_array(&a)))
                 }
             }
         } else {

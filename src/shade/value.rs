@@ -12,7 +12,8 @@ use glam::{Mat4, Vec3};
 pub enum Slot {
     F(f32),
     T(Vec3),
-    M(Mat4),
+    /// Boxed: a matrix inline would make every register 72 bytes instead of 32.
+    M(Box<Mat4>),
     S(Arc<str>),
     VF(Vec<f32>),
     VT(Vec<Vec3>),
@@ -117,7 +118,7 @@ impl Slot {
     }
     pub fn m(&self) -> M<'_> {
         match self {
-            Slot::M(x) => M::U(*x),
+            Slot::M(x) => M::U(**x),
             Slot::VM(v) => M::V(v),
             Slot::F(x) => M::U(Mat4::IDENTITY * *x),
             _ => M::U(Mat4::IDENTITY),
@@ -126,12 +127,20 @@ impl Slot {
     pub fn s(&self) -> Arc<str> {
         match self {
             Slot::S(s) => s.clone(),
-            _ => Arc::from(""),
+            _ => empty_str(),
         }
     }
     pub fn is_varying(&self) -> bool {
         matches!(self, Slot::VF(_) | Slot::VT(_) | Slot::VM(_))
     }
+}
+
+/// The empty string, shared (string registers start empty: no allocation per register).
+pub fn empty_str() -> Arc<str> {
+    thread_local! {
+        static EMPTY: Arc<str> = Arc::from("");
+    }
+    EMPTY.with(Arc::clone)
 }
 
 /// Per-thread free lists of grid buffers, so the temporaries of one grid's run reuse the
@@ -141,7 +150,7 @@ mod pool {
     use glam::Vec3;
     use std::cell::RefCell;
 
-    pub const POOL_MAX: usize = 96;
+    pub const POOL_MAX: usize = 512;
 
     thread_local! {
         pub static FLOATS: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
@@ -176,23 +185,18 @@ pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
 
 /// Gives the grid buffers of finished registers back to this thread's pool.
 pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
-    for s in slots {
-        match s {
-            Slot::VF(v) => pool::FLOATS.with(|p| {
-                let mut p = p.borrow_mut();
-                if p.len() < pool::POOL_MAX {
-                    p.push(v);
+    pool::FLOATS.with(|fp| {
+        pool::TRIPLES.with(|tp| {
+            let (mut fp, mut tp) = (fp.borrow_mut(), tp.borrow_mut());
+            for s in slots {
+                match s {
+                    Slot::VF(v) if fp.len() < pool::POOL_MAX => fp.push(v),
+                    Slot::VT(v) if tp.len() < pool::POOL_MAX => tp.push(v),
+                    _ => {}
                 }
-            }),
-            Slot::VT(v) => pool::TRIPLES.with(|p| {
-                let mut p = p.borrow_mut();
-                if p.len() < pool::POOL_MAX {
-                    p.push(v);
-                }
-            }),
-            _ => {}
-        }
-    }
+            }
+        })
+    })
 }
 
 /// Takes a float vector of length `n` out of a slot to reuse its allocation (contents are
@@ -263,7 +267,7 @@ pub fn write_m(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> Mat
         }
         *out = Slot::VM(v);
     } else {
-        *out = Slot::M(f(0));
+        *out = Slot::M(Box::new(f(0)));
     }
 }
 

@@ -1,0 +1,121 @@
+//! `illuminance(pos)` at positions other than the surface point (volume shaders that march a
+//! ray) runs the lights there: every light once over the whole grid at the new positions,
+//! with `lightsource()` reading that light's values. Scenes and shaders are our own.
+
+mod common;
+
+use arbor::diag::{Diagnostics, SourceMap};
+use arbor::render::driver::{render_frame, RenderOptions};
+use arbor::scene::{build_scenes, BuildContext};
+use arbor::shade::system::ShadeSystem;
+use arbor::sl::ShaderLibrary;
+
+/// Renders `rib` with the shaders in `files`; returns the centre pixel's rgb.
+fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
+    let dir = common::scratch_dir(name);
+    for (f, text) in files {
+        std::fs::write(dir.join(f), text).unwrap();
+    }
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
+    let ctx = BuildContext {
+        sources: &sources,
+        diags: &diags,
+        shader_paths: Vec::new(),
+        texture_paths: Vec::new(),
+        archive_paths: Vec::new(),
+        base_dir: None,
+        frames: None,
+    };
+    let scenes = build_scenes(reqs, &ctx);
+    let library = ShaderLibrary::new(common::stdlib_options(&[dir]));
+    let system = ShadeSystem {
+        library: &library,
+        sources: &sources,
+        diags: &diags,
+        textures: None,
+        aovs: Vec::new(),
+    };
+    let opts = RenderOptions {
+        threads,
+        ..Default::default()
+    };
+    let film = render_frame(&scenes[0], &system, &opts, &diags);
+    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    let rgb = common::film_rgb(&film);
+    let k = (film.height / 2 * film.width + film.width / 2) * 3;
+    [rgb[k], rgb[k + 1], rgb[k + 2]]
+}
+
+// Light arriving halfway between the eye and the surface point (the eye is at the origin of
+// camera space, so that point is P / 2), from every light whose __foglight is not 0.
+const MIDWAY: &str = "volume midway()
+{
+    color c = 0;
+    point mid = P - 0.5 * I;
+    illuminance(mid) {
+        float fog = 1;
+        lightsource(\"__foglight\", fog);
+        if (fog > 0)
+            c += Cl;
+    }
+    Ci = c;
+    Oi = 1;
+}
+";
+
+const FOGLAMP: &str = "light foglamp(float intensity = 1; point from = point \"shader\" (0, 0, 0);
+                     output float __foglight = 1;)
+{
+    illuminate(from)
+        Cl = intensity / (L . L);
+}
+";
+
+/// A wall at z = 4 seen through the centre pixel (21×21, no jitter, box filter: the centre
+/// sample is the ray through (0, 0, 4), shaded at a grid point up to a pixel away); world
+/// space is camera space.
+fn scene(lights: &str) -> String {
+    format!(
+        r#"Format 21 21 1
+PixelSamples 1 1
+PixelFilter "box" 1 1
+Hider "hidden" "jitter" [0]
+Projection "perspective" "fov" [30]
+WorldBegin
+{lights}
+Atmosphere "midway"
+Surface "constant"
+Polygon "P" [-5 -5 4  5 -5 4  5 5 4  -5 5 4]
+WorldEnd
+"#
+    )
+}
+
+#[test]
+fn illuminance_at_a_marched_point_sees_the_light_there() {
+    // A point light on the axis 1 unit before the midpoint (0, 0, 2): Cl = 1 there, but 1/9
+    // at the wall. (On the axis, the half-pixel offset of the shading point hardly matters.)
+    let rib = scene(r#"LightSource "pointlight" 1 "from" [0 0 1]"#);
+    let c = centre("vol_midway", &rib, &[("midway.sl", MIDWAY)], 1);
+    for v in c {
+        assert!((v - 1.0).abs() < 5e-3, "{c:?}");
+    }
+}
+
+#[test]
+fn lightsource_reads_the_light_being_run_at_the_marched_point() {
+    // The second lamp (5 times brighter, as far on the other side) is not a fog light.
+    let rib = scene(
+        r#"LightSource "foglamp" 1 "from" [0 0 1]
+LightSource "foglamp" 2 "from" [0 0 3] "intensity" [5] "__foglight" [0]"#,
+    );
+    let files = [("midway.sl", MIDWAY), ("foglamp.sl", FOGLAMP)];
+    let c = centre("vol_foglight", &rib, &files, 1);
+    for v in c {
+        assert!((v - 1.0).abs() < 5e-3, "{c:?}");
+    }
+    // The same picture with every core.
+    assert_eq!(centre("vol_foglight", &rib, &files, 0), c);
+}
