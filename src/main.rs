@@ -347,25 +347,7 @@ fn main() -> ExitCode {
                     // Compile every shader the scenes name, as a render would.
                     for scene in &scenes {
                         let lib = pipeline::library_for(scene, &s);
-                        let mut names: Vec<String> = Vec::new();
-                        for p in &scene.primitives {
-                            for sh in [
-                                &p.attributes.surface,
-                                &p.attributes.displacement,
-                                &p.attributes.atmosphere,
-                            ]
-                            .into_iter()
-                            .flatten()
-                            {
-                                names.push(sh.name.clone());
-                            }
-                        }
-                        for l in &scene.lights {
-                            names.push(l.shader.name.clone());
-                        }
-                        names.sort();
-                        names.dedup();
-                        for n in names {
+                        for n in pipeline::shader_names(scene) {
                             lib.get(&n, &sources, &diags);
                         }
                     }

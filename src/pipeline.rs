@@ -97,6 +97,25 @@ pub fn library_for(scene: &Scene, settings: &Settings) -> ShaderLibrary {
     })
 }
 
+/// Every shader a scene names (surfaces, displacements, atmospheres, lights), sorted and
+/// without repeats: what `arbor check` and the editor compile to report a scene's errors.
+pub fn shader_names(scene: &Scene) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for p in &scene.primitives {
+        let a = &p.attributes;
+        for sh in [&a.surface, &a.displacement, &a.atmosphere]
+            .into_iter()
+            .flatten()
+        {
+            names.push(sh.name.clone());
+        }
+    }
+    names.extend(scene.lights.iter().map(|l| l.shader.name.clone()));
+    names.sort();
+    names.dedup();
+    names
+}
+
 /// Arbitrary output variables the displays ask for (modes other than r g b a z).
 pub fn aovs_for(scene: &Scene) -> Vec<Aov> {
     let mut out: Vec<Aov> = Vec::new();

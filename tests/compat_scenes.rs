@@ -3,6 +3,8 @@
 //! book headers in the standard library, and PRMan-era uniform/varying leniency. Each test is
 //! a small input of our own showing one class of behaviour.
 
+mod common;
+
 use std::path::PathBuf;
 
 use arbor::diag::{Diagnostics, Severity, SourceMap};
@@ -193,15 +195,9 @@ fn latin1_rib_names_and_comments_decode() {
     );
 }
 
-fn tmpdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-compat-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 #[test]
 fn latin1_shaders_and_headers_compile() {
-    let d = tmpdir("latin1");
+    let d = common::scratch_dir("compat_latin1");
     std::fs::write(
         d.join("accents.h"),
         b"/* fonctions utilis\xe9es */\nfloat demi(float x) { return x / 2; }\n",
@@ -320,8 +316,7 @@ surface flare(float seed = 7;)
 
 #[test]
 fn option_shadow_bias_is_the_default_bias_of_shadow() {
-    use arbor::pipeline::{render_paths, Settings};
-    let dir = tmpdir("bias");
+    let dir = common::scratch_dir("compat_bias");
     // A light whose shadow() call names no bias: the scene's Option "shadow" decides.
     std::fs::write(
         dir.join("nobiaslight.sl"),
@@ -358,18 +353,8 @@ fn option_shadow_bias_is_the_default_bias_of_shadow() {
             &near
         ),
     );
-    let path = dir.join("scene.rib");
-    std::fs::write(&path, rib).unwrap();
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let stdlib = concat!(env!("CARGO_MANIFEST_DIR"), "/stdlib/shaders").to_string();
-    let settings = Settings {
-        threads: 1,
-        shader_paths: vec![dir.display().to_string(), stdlib],
-        ..Default::default()
-    };
-    render_paths(&[path], &settings, &sources, &diags);
-    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
     let centre = |p: &PathBuf| image::open(p).unwrap().to_rgb8().get_pixel(4, 4)[0];
     assert!(centre(&far) > 200, "bias 3: {}", centre(&far));
     assert!(centre(&near) < 60, "bias 0.05: {}", centre(&near));

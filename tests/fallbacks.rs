@@ -2,16 +2,9 @@
 //! need: a missing texture map reads as white (Aqsis and Pixie do the same), and a missing
 //! surface shader is stood in for by `matte` (or `plastic`), so the scene keeps its lights.
 
-use std::path::{Path, PathBuf};
+mod common;
 
-use arbor::diag::{Diagnostics, SourceMap};
-use arbor::pipeline::{render_paths, Settings};
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-fallbacks-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use std::path::Path;
 
 /// Renders `rib` (which writes `out.png` in `dir`) and returns the diagnostics and the
 /// picture's grey levels (0–255, red channel), row-major.
@@ -19,21 +12,11 @@ fn render(dir: &Path, rib: &str, shader: Option<(&str, &str)>) -> (String, Vec<u
     if let Some((name, text)) = shader {
         std::fs::write(dir.join(format!("{name}.sl")), text).unwrap();
     }
-    let path = dir.join("scene.rib");
-    std::fs::write(&path, rib).unwrap();
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let stdlib = concat!(env!("CARGO_MANIFEST_DIR"), "/stdlib/shaders").to_string();
-    let settings = Settings {
-        threads: 1,
-        shader_paths: vec![dir.display().to_string(), stdlib],
-        ..Default::default()
-    };
-    render_paths(&[path], &settings, &sources, &diags);
+    let (log, _) = common::render_scene_file(dir, rib);
     let img = image::open(dir.join("out.png")).expect("picture").to_rgb8();
     let w = img.width() as usize;
     let px = img.pixels().map(|p| p.0[0]).collect();
-    (diags.render_plain(&sources), px, w)
+    (log, px, w)
 }
 
 const CAMERA: &str = "Format 32 32 1\nPixelSamples 1 1\nProjection \"orthographic\"\n\
@@ -41,7 +24,7 @@ const CAMERA: &str = "Format 32 32 1\nPixelSamples 1 1\nProjection \"orthographi
 
 #[test]
 fn a_missing_texture_map_reads_as_white() {
-    let dir = tmp("texture");
+    let dir = common::scratch_dir("fallbacks_texture");
     let out = dir.join("out.png").display().to_string();
     let rib = format!(
         "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
@@ -62,7 +45,7 @@ fn a_missing_texture_map_reads_as_white() {
 
 #[test]
 fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
-    let dir = tmp("surface");
+    let dir = common::scratch_dir("fallbacks_surface");
     let out = dir.join("out.png").display().to_string();
     // A narrow spotlight straight down the view axis: only the middle of the plane is lit.
     let rib = format!(
@@ -82,12 +65,36 @@ fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
     assert_eq!(px[w * w - 1], 0);
 }
 
-/// A displacement that leaves the surface's displacement bound is cut off at the bound (so
-/// that every bucket size gives the same picture): arbor says so once, naming the shader and
-/// the attribute that fixes it; with the bound declared there is no warning and no crack.
+/// A sphere around the camera with a missing shader is a sky dome (star fields, skies emit
+/// light): `defaultsurface` stands in, showing its colour, not `matte` lit from inside by the
+/// scene's distant light.
+#[test]
+fn a_missing_sky_dome_shader_shows_the_dome_colour() {
+    let dir = common::scratch_dir("fallbacks_dome");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\nFormat 16 16 1\nPixelSamples 1 1\n\
+         Projection \"perspective\" \"fov\" 30\nWorldBegin\n\
+         LightSource \"distantlight\" 1 \"intensity\" 3 \"from\" [0 0 0] \"to\" [0 0 1]\n\
+         Color [0.5 0.5 0.5]\nSurface \"nosuchstarfield\"\nSphere 1000 -1000 1000 360\nWorldEnd\n"
+    );
+    let (log, px, _) = render(&dir, &rib, None);
+    assert!(log.contains("`defaultsurface` stands in"), "{log}");
+    // Ka + Kd·(facing ratio ≈ 1) = 1 times Cs = 0.5: 128, not matte's 3·0.5 (clipped to 255).
+    assert!(
+        px.iter().all(|&v| (124..=130).contains(&v)),
+        "{:?}",
+        &px[..4]
+    );
+}
+
+/// A displacement that leaves the surface's declared displacement bound is cut off at the
+/// bound (so that every bucket size gives the same picture): arbor says so once, naming the
+/// shader and the attribute that fixes it. With no bound declared (as BMRT-era scenes do),
+/// arbor estimates one by displacing test grids: no warning and no crack.
 #[test]
 fn displacement_past_its_bound_is_reported() {
-    let dir = tmp("dispbound");
+    let dir = common::scratch_dir("fallbacks_dispbound");
     let out = dir.join("out.png").display().to_string();
     let shader = "displacement bumpy(float amp = 0.3) { \
                   P += amp * (noise(s * 40, t * 40) - 0.5) * normalize(N); \
@@ -100,18 +107,47 @@ fn displacement_past_its_bound_is_reported() {
              Patch \"bilinear\" \"P\" [-3 -3 0  3 -3 0  -3 3 0  3 3 0]\nWorldEnd\n"
         )
     };
-    let (log, _, _) = render(&dir, &scene(""), Some(("bumpy", shader)));
+    let too_small = "Attribute \"displacementbound\" \"sphere\" [0.001]\n";
+    let (log, _, _) = render(&dir, &scene(too_small), Some(("bumpy", shader)));
     assert!(
         log.contains("render::displacementbound") && log.contains("`bumpy`"),
         "{log}"
     );
-    let declared = "Attribute \"displacementbound\" \"sphere\" [0.2]\n";
-    let (log, px, _) = render(&dir, &scene(declared), None);
-    assert!(!log.contains("render::displacementbound"), "{log}");
-    // Every pixel is covered by the (white, constant) plane: no cracks.
+    for bound in ["Attribute \"displacementbound\" \"sphere\" [0.2]\n", ""] {
+        let (log, px, _) = render(&dir, &scene(bound), None);
+        assert!(!log.contains("render::displacementbound"), "{bound}: {log}");
+        // Every pixel is covered by the (white, constant) plane: no cracks.
+        assert!(
+            px.iter().all(|&v| v == 255),
+            "{bound}: a crack: {}",
+            px.iter().filter(|&&v| v < 255).count()
+        );
+    }
+}
+
+/// A value for a parameter the named shader does not have (the scene was written for another
+/// shader of the same name) is ignored with a warning naming both; the parameters the shader
+/// has still apply.
+#[test]
+fn a_parameter_the_shader_lacks_is_named_in_a_warning() {
+    let dir = common::scratch_dir("fallbacks_unknown_param");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         Surface \"tint\" \"float Kd\" [0.5] \"float density\" [3]\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let shader = "surface tint(float Kd = 1) { Oi = 1; Ci = Kd; }";
+    let (log, px, _) = render(&dir, &rib, Some(("tint", shader)));
     assert!(
-        px.iter().all(|&v| v == 255),
-        "a crack: {}",
-        px.iter().filter(|&&v| v < 255).count()
+        log.contains("shader `tint` has no parameter `density`"),
+        "{log}"
+    );
+    assert!(!log.contains("parameter `Kd`"), "{log}");
+    // Kd = 0.5 still applies: 128 in 8 bits.
+    assert!(
+        px.iter().all(|&v| (127..=129).contains(&v)),
+        "{:?}",
+        &px[..4]
     );
 }

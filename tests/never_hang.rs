@@ -7,45 +7,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use arbor::diag::{Diag, Diagnostics, SourceMap};
-use arbor::film::resolve::Film;
-use arbor::render::driver::{render_frame, RenderOptions};
-use arbor::scene::{build_scenes, BuildContext};
-use arbor::shade::system::ShadeSystem;
-use arbor::sl::ShaderLibrary;
-
-/// Renders the first frame of `rib` with shaders from `dir`; returns the film, the
-/// diagnostics (with their counts) and the source map to place them.
-fn render(
-    rib: &str,
-    dir: &[PathBuf],
-    opts: &RenderOptions,
-) -> (Film, Vec<(Diag, usize)>, SourceMap) {
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: Vec::new(),
-        texture_paths: Vec::new(),
-        archive_paths: Vec::new(),
-        base_dir: None,
-        frames: None,
-    };
-    let scenes = build_scenes(reqs, &ctx);
-    let library = ShaderLibrary::new(common::stdlib_options(dir));
-    let system = ShadeSystem {
-        library: &library,
-        sources: &sources,
-        diags: &diags,
-        textures: None,
-        aovs: Vec::new(),
-    };
-    let film = render_frame(&scenes[0], &system, opts, &diags);
-    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
-    (film, diags.snapshot(), sources)
-}
+use arbor::diag::Diag;
 
 fn shader_dir(name: &str, files: &[(&str, &str)]) -> PathBuf {
     let d = common::scratch_dir(name);
@@ -94,7 +56,8 @@ const STUCK: &str = "surface stuck(float speed = 0)
 #[test]
 fn a_loop_that_stops_changing_is_stopped_and_the_grid_keeps_its_values() {
     let dir = shader_dir("hang_stuck", &[("stuck.sl", STUCK)]);
-    let (film, diags, sources) = render(&square_scene("", "stuck"), &[dir], &Default::default());
+    let (film, diags, sources) =
+        common::render_rib_with(&square_scene("", "stuck"), &[dir], &Default::default());
     let warns = find(&diags, "shade::runaway_loop");
     assert_eq!(warns.len(), 1, "{diags:#?}");
     let w = warns[0];
@@ -139,7 +102,7 @@ const CYCLE: &str = "surface cycle()
 fn a_loop_past_the_iteration_limit_is_stopped() {
     let dir = shader_dir("hang_cycle", &[("cycle.sl", CYCLE)]);
     let rib = square_scene(r#"Option "limits" "loopiterations" [3000]"#, "cycle");
-    let (film, diags, _) = render(&rib, &[dir], &Default::default());
+    let (film, diags, _) = common::render_rib_with(&rib, &[dir], &Default::default());
     let warns = find(&diags, "shade::runaway_loop");
     assert_eq!(warns.len(), 1, "{diags:#?}");
     assert!(
@@ -166,7 +129,8 @@ const LONG: &str = "surface long()
 #[test]
 fn long_loops_that_progress_run_to_the_end() {
     let dir = shader_dir("hang_long", &[("long.sl", LONG)]);
-    let (film, diags, _) = render(&square_scene("", "long"), &[dir], &Default::default());
+    let (film, diags, _) =
+        common::render_rib_with(&square_scene("", "long"), &[dir], &Default::default());
     assert!(find(&diags, "shade::runaway_loop").is_empty(), "{diags:#?}");
     let m = common::film_mean(&film);
     assert!((m[0] - 1.0).abs() < 1e-3, "{m:?}");
@@ -189,7 +153,8 @@ const MARCH: &str = "surface march(float end = 1)
 #[test]
 fn a_clamped_march_step_ends_the_loop() {
     let dir = shader_dir("hang_march", &[("march.sl", MARCH)]);
-    let (film, diags, _) = render(&square_scene("", "march"), &[dir], &Default::default());
+    let (film, diags, _) =
+        common::render_rib_with(&square_scene("", "march"), &[dir], &Default::default());
     assert!(find(&diags, "shade::runaway_loop").is_empty(), "{diags:#?}");
     let m = common::film_mean(&film);
     // 0.3, 0.6, 0.9, then end (clamped to end - d), then at most a zero step and one of
@@ -218,7 +183,7 @@ Surface "constant"
 Polygon "P" [-2 -2 1  2 -2 1  2 2 1  -2 2 1]
 WorldEnd
 "#;
-    let (film, diags, _) = render(rib, &[], &Default::default());
+    let (film, diags, _) = common::render_rib_with(rib, &[], &Default::default());
     let w = limit_warnings(&diags);
     assert_eq!(w.len(), 2, "{w:#?}");
     assert!(w.iter().any(|m| m.contains("PixelSamples 1000 1000")
@@ -245,7 +210,7 @@ Surface "constant"
 Polygon "P" [-2 -2 1  2 -2 1  2 2 1  -2 2 1]
 WorldEnd
 "#;
-    let (film, diags, _) = render(rib, &[], &Default::default());
+    let (film, diags, _) = common::render_rib_with(rib, &[], &Default::default());
     assert_eq!((film.width, film.height), (40, 20));
     let w = limit_warnings(&diags);
     assert!(
@@ -269,14 +234,14 @@ WorldEnd
 "#
         )
     };
-    let (_, diags, _) = render(&scene(""), &[], &Default::default());
+    let (_, diags, _) = common::render_rib_with(&scene(""), &[], &Default::default());
     let w = limit_warnings(&diags);
     assert!(
         w.len() == 1 && w[0].contains("ShadingRate 1e-9") && w[0].contains("using 0.05"),
         "{w:#?}"
     );
     assert!(w[0].contains("\"limits\" \"shadingrate\""), "{w:#?}");
-    let (_, diags, _) = render(
+    let (_, diags, _) = common::render_rib_with(
         &scene(r#"Option "limits" "shadingrate" [0.02]"#),
         &[],
         &Default::default(),
@@ -302,9 +267,9 @@ WorldEnd
 "#
         )
     };
-    let (plain, diags, _) = render(&scene(""), &[], &Default::default());
+    let (plain, diags, _) = common::render_rib_with(&scene(""), &[], &Default::default());
     assert!(limit_warnings(&diags).is_empty());
-    let (big, diags, _) = render(
+    let (big, diags, _) = common::render_rib_with(
         &scene(r#"Option "limits" "bucketsize" [100000 100000] "gridsize" [1e12]"#),
         &[],
         &Default::default(),
@@ -318,7 +283,7 @@ WorldEnd
     // Bucket size never changes the picture; grid size only moves grid seams.
     let (a, b) = (common::film_mean(&plain), common::film_mean(&big));
     assert!((0..3).all(|c| (a[c] - b[c]).abs() < 2e-3), "{a:?} {b:?}");
-    let (bucket, _, _) = render(
+    let (bucket, _, _) = common::render_rib_with(
         &scene(r#"Option "limits" "bucketsize" [100000 100000]"#),
         &[],
         &Default::default(),

@@ -207,25 +207,7 @@ pub fn check_rib(name: &str, text: &str, path: Option<&Path>, settings: &Setting
         if k == 0 {
             shader_paths = lib.opts.search_paths.clone();
         }
-        let mut names: Vec<String> = Vec::new();
-        for p in &scene.primitives {
-            for sh in [
-                &p.attributes.surface,
-                &p.attributes.displacement,
-                &p.attributes.atmosphere,
-            ]
-            .into_iter()
-            .flatten()
-            {
-                names.push(sh.name.clone());
-            }
-        }
-        for l in &scene.lights {
-            names.push(l.shader.name.clone());
-        }
-        names.sort();
-        names.dedup();
-        for n in names {
+        for n in crate::pipeline::shader_names(scene) {
             let p = lib.get(&n, &sources, &diags);
             shaders.entry(n).or_insert(p);
         }

@@ -107,6 +107,8 @@ pub fn effective_options(options: &Options, opts: &RenderOptions) -> Options {
 struct PrimInfo {
     /// Displacement bound in camera space.
     disp: f32,
+    /// The bound was estimated by displacing test grids (the scene declares none).
+    disp_estimated: bool,
     rate: f32,
     matte: bool,
     smooth: bool,
@@ -165,6 +167,7 @@ fn prim_info(
     };
     PrimInfo {
         disp,
+        disp_estimated: false,
         rate,
         matte: a.matte,
         smooth: a.smooth_shading,
@@ -174,6 +177,42 @@ fn prim_info(
             .get("dice:binary")
             .and_then(|p| p.data.floats().first().copied())
             .is_some_and(|v| v != 0.0),
+    }
+}
+
+/// Displaced primitives that declare no displacement bound get an estimated one (see
+/// [`super::dispbound`]), so their grids are not cut off at their surfaces' bounds.
+fn estimate_displacement_bounds(
+    scene: &Scene,
+    camera: &Camera,
+    view: &View,
+    surfaces: &[Vec<Box<dyn Surface>>],
+    prims: &mut [PrimInfo],
+    shader: &dyn GridShader,
+) {
+    let wanted: Vec<usize> = (0..prims.len().min(surfaces.len()))
+        .filter(|&i| prims[i].disp == 0.0 && scene.primitives[i].attributes.displacement.is_some())
+        .collect();
+    let found: Vec<(usize, f32)> = wanted
+        .into_par_iter()
+        .map(|i| {
+            let d = super::dispbound::estimate(
+                scene,
+                camera,
+                &view.raster_from_camera,
+                prims[i].rate,
+                i,
+                &surfaces[i],
+                shader,
+            );
+            (i, d)
+        })
+        .collect();
+    for (i, d) in found {
+        if d > 0.0 && d.is_finite() {
+            prims[i].disp = d;
+            prims[i].disp_estimated = true;
+        }
     }
 }
 
@@ -323,11 +362,21 @@ impl Frame<'_> {
             self.diags.report(
                 Diag::warning(
                     "render::displacementbound",
-                    format!(
-                        "displacement shader `{}` moves points outside the surface's \
-                         displacement bound; what lies outside is cut off (cracks along grid edges)",
-                        d.name
-                    ),
+                    if self.prims[prim].disp_estimated {
+                        format!(
+                            "displacement shader `{}` moves points further than arbor's \
+                             estimate of its displacement bound; what lies outside is cut off \
+                             (cracks along grid edges)",
+                            d.name
+                        )
+                    } else {
+                        format!(
+                            "displacement shader `{}` moves points outside the surface's \
+                             displacement bound; what lies outside is cut off (cracks along \
+                             grid edges)",
+                            d.name
+                        )
+                    },
                 )
                 .label(d.span, "displacement shader named here")
                 .help("declare the largest displacement: Attribute \"displacementbound\" \"sphere\" [d] (in object space)"),
@@ -492,7 +541,7 @@ impl Frame<'_> {
 }
 
 /// I = P − E: the eye at the origin for perspective views, straight along +z for orthographic.
-fn set_incident(grid: &mut crate::shade::Grid, perspective: bool) {
+pub(super) fn set_incident(grid: &mut crate::shade::Grid, perspective: bool) {
     let n = grid.p.len();
     grid.i.resize(n, Vec3::ZERO);
     for (i, p) in grid.i.iter_mut().zip(&grid.p) {
@@ -606,11 +655,12 @@ fn render_inner(
     };
     let hider = make_hider(options, config, diags);
     let min_rate = super::limits::min_shading_rate(options);
-    let prims: Vec<PrimInfo> = scene
+    let mut prims: Vec<PrimInfo> = scene
         .primitives
         .iter()
         .map(|p| prim_info(scene, camera, p, min_rate, diags))
         .collect();
+    estimate_displacement_bounds(scene, camera, &view, &surfaces, &mut prims, shader);
     let frame = Frame {
         scene,
         camera,

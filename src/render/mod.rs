@@ -11,6 +11,7 @@
 
 pub mod camera;
 pub mod dice;
+pub mod dispbound;
 pub mod driver;
 pub mod hider;
 pub mod limits;

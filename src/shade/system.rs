@@ -14,7 +14,7 @@ use glam::{Mat4, Vec3};
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
 use crate::render::Camera;
-use crate::scene::{Attributes, ParamData, ParamType, Scene, ShaderRef};
+use crate::scene::{Attributes, ParamData, ParamType, Primitive, Scene, ShaderRef};
 use crate::shade::exec::{Env, Exec, InfoValue, LightResult, LightState, Relight, TextureLookup};
 use crate::shade::value::Slot;
 use crate::shade::{Grid, GridVar};
@@ -127,6 +127,27 @@ impl<'a> ShadeSystem<'a> {
             );
             return None;
         }
+        // A value for a parameter the shader lacks is dropped: say so, since it usually means
+        // the scene was written for another shader of the same name (its look will differ).
+        for given in &sref.params.0 {
+            if !p.params.iter().any(|par| par.name == given.name) {
+                self.diags.report(
+                    Diag::warning(
+                        "shade::param",
+                        format!(
+                            "shader `{}` has no parameter `{}`: the value is ignored",
+                            sref.name, given.name
+                        ),
+                    )
+                    .label(given.span, "not a parameter of this shader")
+                    .help(format!(
+                        "check that `{}` found on the shader path is the version this scene \
+                         was written for",
+                        sref.name
+                    )),
+                );
+            }
+        }
         Some(p)
     }
 
@@ -134,12 +155,25 @@ impl<'a> ShadeSystem<'a> {
     /// standard `plastic` when its instance gives plastic's specular parameters, else `matte`,
     /// with the parameters the two share (`Ka`, `Kd`, …): the scene keeps its lighting design
     /// (a missing `RCMatte` under a spotlight still shows the spot) where `defaultsurface`
-    /// would light everything from the eye.
-    fn stand_in_surface(&self, s: &Arc<ShaderRef>) -> Option<(Arc<Program>, Arc<ShaderRef>)> {
+    /// would light everything from the eye. A sphere around the camera is a sky dome, whose
+    /// shaders (star fields, skies) emit rather than reflect: `defaultsurface` (its colour,
+    /// seen face-on) stands in for those, as Aqsis and Pixie render every missing shader.
+    fn stand_in_surface(
+        &self,
+        s: &Arc<ShaderRef>,
+        prim: &Primitive,
+        camera: &Camera,
+    ) -> Option<(Arc<Program>, Arc<ShaderRef>)> {
         let specular = ["Ks", "roughness", "specularcolor"]
             .iter()
             .any(|n| s.params.get(n).is_some());
-        let name = if specular { "plastic" } else { "matte" };
+        let name = if encloses_eye(prim, camera) {
+            "defaultsurface"
+        } else if specular {
+            "plastic"
+        } else {
+            "matte"
+        };
         let prog = self.library.get(name, self.sources, self.diags)?;
         self.diags.report(
             Diag::warning(
@@ -305,7 +339,7 @@ impl<'a> ShadeSystem<'a> {
             Some(s) => self
                 .program(s, ShaderKind::Surface)
                 .map(|prog| (prog, s.clone()))
-                .or_else(|| self.stand_in_surface(s)),
+                .or_else(|| self.stand_in_surface(s, p, camera)),
             None => None,
         };
         let (prog, sref) = match surface {
@@ -707,6 +741,16 @@ impl<'a> ShadeSystem<'a> {
         }
         Some(ex.regs)
     }
+}
+
+/// True when the eye is inside a sphere primitive (a sky dome around the camera).
+fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
+    let crate::scene::Geometry::Sphere { radius, .. } = *prim.geometry else {
+        return false;
+    };
+    let object_from_camera = (camera.camera_from_world * prim.world_from_object).inverse();
+    let eye = object_from_camera.transform_point3(Vec3::ZERO);
+    eye.is_finite() && eye.length() < radius.abs()
 }
 
 /// `Option "limits" "loopiterations"`: most iterations of one loop statement per grid.

@@ -2728,13 +2728,11 @@ impl<'a> Lowerer<'a> {
         // Positional coordinates until the first string argument.
         let mut coords = Vec::new();
         let mut k = 1;
-        let mut varying = false;
         while k < args.len() {
             let v = self.expr(&args[k], None);
             if v.ty == BaseType::String {
                 break;
             }
-            varying |= v.varying;
             coords.push((v, args[k].span));
             k += 1;
         }
@@ -2759,7 +2757,6 @@ impl<'a> Lowerer<'a> {
                 break;
             };
             let pv = self.expr(val, None);
-            varying |= pv.varying;
             params.push(pn.reg);
             params.push(pv.reg);
             k += 2;
@@ -2815,7 +2812,6 @@ impl<'a> Lowerer<'a> {
                     Some(v) => {
                         self.mark_used(v.reg);
                         regs.push(v.reg);
-                        varying |= v.varying;
                     }
                     None => {
                         return self.error(
@@ -2852,7 +2848,9 @@ impl<'a> Lowerer<'a> {
             "bump" => (Builtin::Bump, BaseType::Point),
             _ => (Builtin::Shadow, BaseType::Float),
         };
-        let t = self.temp(ty, varying || true);
+        // Always varying: the filter footprint comes from the coordinates' derivatives, which
+        // differ per point even when the coordinates are uniform expressions of s and t.
+        let t = self.temp(ty, true);
         self.emit(Instr::Call {
             f,
             dst: t.reg,

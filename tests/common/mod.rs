@@ -10,8 +10,9 @@
 
 use std::path::{Path, PathBuf};
 
-use arbor::diag::{Diagnostics, SourceMap};
+use arbor::diag::{Diag, Diagnostics, SourceMap};
 use arbor::film::resolve::Film;
+use arbor::pipeline::{render_paths, Settings};
 use arbor::render::driver::{render_frame, RenderOptions};
 use arbor::scene::{build_scenes, BuildContext};
 use arbor::shade::system::ShadeSystem;
@@ -46,11 +47,16 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     d
 }
 
-/// Renders the first frame of RIB text; panics with the diagnostics if anything is an error.
-pub fn render_rib(rib: &str, extra_shader_dirs: &[PathBuf]) -> Film {
+/// Renders the first frame of RIB text with `opts`; returns the film, the diagnostics (with
+/// their counts) and the source map that places them. Panics if anything is an error.
+pub fn render_rib_with(
+    rib: &str,
+    extra_shader_dirs: &[PathBuf],
+    opts: &RenderOptions,
+) -> (Film, Vec<(Diag, usize)>, SourceMap) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
-    let reqs = arbor::rib::parse_bytes("<test>", rib.as_bytes(), &sources, &diags);
+    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
     let ctx = BuildContext {
         sources: &sources,
         diags: &diags,
@@ -61,7 +67,11 @@ pub fn render_rib(rib: &str, extra_shader_dirs: &[PathBuf]) -> Film {
         frames: None,
     };
     let scenes = build_scenes(reqs, &ctx);
-    assert!(!scenes.is_empty(), "no scene: {:?}", diags.snapshot());
+    assert!(
+        !scenes.is_empty(),
+        "no scene: {}",
+        diags.render_plain(&sources)
+    );
     let library = ShaderLibrary::new(stdlib_options(extra_shader_dirs));
     let system = ShadeSystem {
         library: &library,
@@ -70,17 +80,38 @@ pub fn render_rib(rib: &str, extra_shader_dirs: &[PathBuf]) -> Film {
         textures: None,
         aovs: Vec::new(),
     };
-    let film = render_frame(&scenes[0], &system, &RenderOptions::default(), &diags);
+    let film = render_frame(&scenes[0], &system, opts, &diags);
     assert!(
         !diags.has_errors(),
-        "render errors: {:#?}",
-        diags
-            .snapshot()
-            .iter()
-            .map(|(d, _)| d.message.clone())
-            .collect::<Vec<_>>()
+        "render errors: {}",
+        diags.render_plain(&sources)
     );
-    film
+    let snapshot = diags.snapshot();
+    (film, snapshot, sources)
+}
+
+/// Renders the first frame of RIB text; panics with the diagnostics if anything is an error.
+pub fn render_rib(rib: &str, extra_shader_dirs: &[PathBuf]) -> Film {
+    render_rib_with(rib, extra_shader_dirs, &RenderOptions::default()).0
+}
+
+/// Writes `rib` to `dir/scene.rib` and renders it through the whole pipeline, as
+/// `arbor render` does (displays write their files), on one thread, with `dir` and the source
+/// tree's stdlib on the shader path. Returns the plain-text diagnostics and whether any is an
+/// error.
+pub fn render_scene_file(dir: &Path, rib: &str) -> (String, bool) {
+    let path = dir.join("scene.rib");
+    std::fs::write(&path, rib).expect("write scene");
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let stdlib = manifest_dir().join("stdlib").join("shaders");
+    let settings = Settings {
+        threads: 1,
+        shader_paths: vec![dir.display().to_string(), stdlib.display().to_string()],
+        ..Default::default()
+    };
+    render_paths(&[path], &settings, &sources, &diags);
+    (diags.render_plain(&sources), diags.has_errors())
 }
 
 /// The film's r, g, b channels as floats (row-major, 3 per pixel).
