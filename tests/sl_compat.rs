@@ -3,6 +3,8 @@
 //! same values for uniform and varying arguments, analytic checks of built-ins, IR snapshots
 //! and rendered diagnostics of broken shaders.
 
+mod common;
+
 use arbor::diag::{Diagnostics, SourceMap};
 use arbor::shade::exec::{Env, Exec};
 use arbor::shade::value::Slot;
@@ -484,4 +486,32 @@ fn specular_exponent_is_eight_over_roughness() {
     );
     let want = (22.5f32.to_radians().cos()).powf(16.0);
     assert!((v - want).abs() < 1e-4, "{v} vs {want}");
+}
+
+/// `Deriv(P, s)` where s changes only along u: Dv(s) is rounding noise (the patch's s is
+/// interpolated from non-representable corner values), and dividing by it must not blow up.
+/// dP/ds is the patch width over the s range everywhere: 4 / 0.6.
+#[test]
+fn deriv_ignores_a_direction_den_does_not_change_along() {
+    let dir = common::scratch_dir("sl_compat_deriv");
+    std::fs::write(
+        dir.join("derivs.sl"),
+        "surface derivs() { Oi = 1; Ci = length(Deriv(P, s)) * 0.6 / 8; }",
+    )
+    .unwrap();
+    let rib = "Format 24 24 1\nPixelSamples 1 1\nPixelFilter \"box\" 1 1\n\
+               Projection \"orthographic\"\nScreenWindow -2 2 -2 2\nTranslate 0 0 5\n\
+               Rotate 13 0 0 1\nWorldBegin\nSurface \"derivs\"\n\
+               Patch \"bilinear\" \"P\" [-2 -2 0  2 -2 0  -2 2 0  2 2 0] \
+               \"st\" [0.1 0.3  0.7 0.3  0.1 0.9  0.7 0.9]\nWorldEnd\n";
+    let film = common::render_rib(rib, &[dir]);
+    let rgb = common::film_rgb(&film);
+    // Pixels fully on the (rotated) patch read 0.5.
+    let w = 24;
+    for y in 8..16 {
+        for x in 8..16 {
+            let v = rgb[(y * w + x) * 3];
+            assert!((v - 0.5).abs() < 1e-3, "pixel {x},{y}: {v}");
+        }
+    }
 }

@@ -34,6 +34,22 @@ fn safe_div(a: f32, b: f32) -> f32 {
     }
 }
 
+/// `Deriv(num, den) = Du(num)/Du(den) + Dv(num)/Dv(den)` (RISpec) as weights on Du(num) and
+/// Dv(num). A direction along which `den` barely changes (relative to the other) contributes
+/// nothing: `den = s` on a patch has a Dv(s) of rounding noise (1e-8), and dividing by it
+/// made `Deriv(P, s)` explode in a pattern of the noise (superplank's grain scale).
+fn deriv_weights(du_den: f32, dv_den: f32) -> (f32, f32) {
+    let scale = du_den.abs().max(dv_den.abs());
+    let w = |x: f32| {
+        if x.abs() > 1e-4 * scale && x != 0.0 {
+            1.0 / x
+        } else {
+            0.0
+        }
+    };
+    (w(du_den), w(dv_den))
+}
+
 #[inline]
 fn safe_div3(a: Vec3, b: Vec3) -> Vec3 {
     Vec3::new(safe_div(a.x, b.x), safe_div(a.y, b.y), safe_div(a.z, b.z))
@@ -914,7 +930,10 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let (c, d) = (deriv_f(&den, nu, nv, 0, du), deriv_f(&den, nu, nv, 1, dv));
             out = Slot::VF(
                 (0..n)
-                    .map(|i| safe_div(a[i], c[i]) + safe_div(b[i], d[i]))
+                    .map(|i| {
+                        let (su, sv) = deriv_weights(c[i], d[i]);
+                        su * a[i] + sv * b[i]
+                    })
                     .collect(),
             );
         }
@@ -928,9 +947,8 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             out = Slot::VT(
                 (0..n)
                     .map(|i| {
-                        let x = if c[i] != 0.0 { a[i] / c[i] } else { Vec3::ZERO };
-                        let y = if d[i] != 0.0 { b[i] / d[i] } else { Vec3::ZERO };
-                        x + y
+                        let (su, sv) = deriv_weights(c[i], d[i]);
+                        su * a[i] + sv * b[i]
                     })
                     .collect(),
             );
