@@ -382,7 +382,7 @@ surface prprobe(DEFAULT_PSHAD_PARAMS;) {
     Ci = color(Pshad) * 0.25;
 }"#;
     assert_near(probe("prprobe", pref, SQUARE), [0.25, 0.25, 0.0], 2e-3, "no Pref");
-    let with = format!(r#"{SQUARE} "Pref" [2 0 0  4 0 0  4 2 0  2 2 0]"#);
+    let with = format!(r#"{SQUARE} "vertex point Pref" [2 0 0  4 0 0  4 2 0  2 2 0]"#);
     assert_near(probe("prprobe", pref, &with), [0.75, 0.25, 0.0], 2e-3, "Pref");
 }
 

@@ -263,4 +263,25 @@ float VLfBm(point p; float filtwidth; uniform float octaves, lacunarity, gain, s
 
 #define VLfBm_default(p) VLfBm((p), filterwidthp(p), 4, 2, 0.5, 1.0)
 
+/* BMRT's noises.h fBm: octaves of band-limited snoise (gain^i, lacunarity^i) until
+ * maxoctaves or until an octave's footprint reaches a whole noise cell. */
+float filtered_fBm(point p; float filtwidth; uniform float maxoctaves, lacunarity, gain)
+{
+    float sum = 0;
+    float fw = filtwidth;
+    point pp = p;
+    float amp = 1;
+    float i = 0;
+    while (i < maxoctaves && fw < 1) {
+        sum += amp * filteredsnoise(pp, fw);
+        amp *= gain;
+        pp *= lacunarity;
+        fw *= lacunarity;
+        i += 1;
+    }
+    return sum;
+}
+
+#define filtered_fBm_default(p) filtered_fBm((p), sqrt(area(p)), 4, 2, 0.5)
+
 #endif

@@ -96,13 +96,15 @@ float sqr(float x)
 
 /* A colour varied per tile (or any integer index): the hue shifted by up to ±varyhue/2 of a
  * turn, saturation and lightness scaled by 1 ± varysat/2 and 1 ± varylum/2, each by its own
- * cellnoise of the index, so every tile gets a fixed variation of the base colour. */
+ * cellnoise of the index, so every tile gets a fixed variation of the base colour.  The cells
+ * are the book's (index + 3, index - 14, index + 37): a scene varies its tiles the same way
+ * with this header as with the book's. */
 color varyEach(color Cin; float index, varyhue, varysat, varylum;)
 {
     color hsl = ctransform("hsl", Cin);
-    float h = comp(hsl, 0) + varyhue * (float cellnoise(index + 0.31) - 0.5);
-    float sat = comp(hsl, 1) * (1 - varysat * (float cellnoise(index + 17.53) - 0.5));
-    float lum = comp(hsl, 2) * (1 - varylum * (float cellnoise(index - 41.27) - 0.5));
+    float h = comp(hsl, 0) + varyhue * (float cellnoise(index + 3) - 0.5);
+    float sat = comp(hsl, 1) * (1 - varysat * (float cellnoise(index - 14) - 0.5));
+    float lum = comp(hsl, 2) * (1 - varylum * (float cellnoise(index + 37) - 0.5));
     color varied = color(mod(h, 1), clamp(sat, 0, 1), clamp(lum, 0, 1));
     return ctransform("hsl", "rgb", varied);
 }
@@ -143,6 +145,16 @@ void basicbrick(float x, y; uniform float tilewidth, tileheight;
     column = floor(bx);
     xtile = bx - column;
     ytile = by - row;
+}
+
+/* BMRT's patterns.h name for the same brick pattern. */
+void basictile(float x, y; uniform float tilewidth, tileheight;
+               uniform float rowstagger, rowstaggervary;
+               uniform float jaggedfreq, jaggedamp;
+               output float column, row; output float xtile, ytile;)
+{
+    basicbrick(x, y, tilewidth, tileheight, rowstagger, rowstaggervary, jaggedfreq, jaggedamp,
+               column, row, xtile, ytile);
 }
 
 #endif
