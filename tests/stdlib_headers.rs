@@ -194,7 +194,8 @@ fn every_book_header_is_embedded_and_its_functions_compile_from_anywhere() {
             panic!("shader using {header} does not compile:\n{log}");
         }
         // Each header may be included twice (guards) and alone.
-        let twice = format!("#include \"{header}\"\n#include \"{header}\"\nsurface t() {{ Ci = 1; }}\n");
+        let twice =
+            format!("#include \"{header}\"\n#include \"{header}\"\nsurface t() {{ Ci = 1; }}\n");
         if let Err(log) = compile_embedded(&twice) {
             panic!("{header} included twice:\n{log}");
         }
@@ -223,7 +224,14 @@ fn headers_mix_in_any_order() {
 fn log_has_warnings(src: &str) -> bool {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
-    compile_source("w.sl", src, None, &sources, &diags, &CompileOptions::default());
+    compile_source(
+        "w.sl",
+        src,
+        None,
+        &sources,
+        &diags,
+        &CompileOptions::default(),
+    );
     !diags.snapshot().is_empty()
 }
 
@@ -300,7 +308,12 @@ surface projprobe() {
     /* the seam of a spherical map is not a wide footprint */
     Ci = color(e, ds < 0.5 ? 0 : 1, 0);
 }"#;
-    assert_near(probe("projprobe", body, SQUARE), [0.0; 3], 1e-5, "ProjectTo2D");
+    assert_near(
+        probe("projprobe", body, SQUARE),
+        [0.0; 3],
+        1e-5,
+        "ProjectTo2D",
+    );
 }
 
 #[test]
@@ -350,7 +363,10 @@ surface dprobe(float truedisp = 1;) {
     Ci = color(length(P - P0), abs(Nd . N0), 0);
 }"#;
     let pr = |td: &str| {
-        let prims = SQUARE.replace("Polygon", &format!("Surface \"dprobe\" \"truedisp\" {td}\n  Polygon"));
+        let prims = SQUARE.replace(
+            "Polygon",
+            &format!("Surface \"dprobe\" \"truedisp\" {td}\n  Polygon"),
+        );
         probe("dprobe", body, &prims)
     };
     assert_near(pr("1"), [0.05, 1.0, 0.0], 1e-4, "true displacement");
@@ -366,13 +382,23 @@ surface psprobe(PSHAD_PARAMS("shader", 0.25);) {
     GET_PSHAD;
     Ci = color(Pshad);
 }"#;
-    assert_near(probe("psprobe", plain, SQUARE), [0.25, 0.25, 0.0], 2e-3, "GET_PSHAD");
+    assert_near(
+        probe("psprobe", plain, SQUARE),
+        [0.25, 0.25, 0.0],
+        2e-3,
+        "GET_PSHAD",
+    );
     // "current" space is camera space here: x and y run over [0, 1], z is 5.
     let cur = SQUARE.replace(
         "Polygon",
         "Surface \"psprobe\" \"shadingspace\" \"current\" \"shadingfreq\" 2\n  Polygon",
     );
-    assert_near(probe("psprobe", plain, &cur), [1.0, 1.0, 10.0], 2e-3, "GET_PSHAD current");
+    assert_near(
+        probe("psprobe", plain, &cur),
+        [1.0, 1.0, 10.0],
+        2e-3,
+        "GET_PSHAD current",
+    );
 
     // With USE_PREF: P when the primitive has no Pref, Pref (object space) when it has one.
     let pref = r#"#define USE_PREF 1
@@ -381,9 +407,19 @@ surface prprobe(DEFAULT_PSHAD_PARAMS;) {
     GET_PSHAD;
     Ci = color(Pshad) * 0.25;
 }"#;
-    assert_near(probe("prprobe", pref, SQUARE), [0.25, 0.25, 0.0], 2e-3, "no Pref");
+    assert_near(
+        probe("prprobe", pref, SQUARE),
+        [0.25, 0.25, 0.0],
+        2e-3,
+        "no Pref",
+    );
     let with = format!(r#"{SQUARE} "vertex point Pref" [2 0 0  4 0 0  4 2 0  2 2 0]"#);
-    assert_near(probe("prprobe", pref, &with), [0.75, 0.25, 0.0], 2e-3, "Pref");
+    assert_near(
+        probe("prprobe", pref, &with),
+        [0.75, 0.25, 0.0],
+        2e-3,
+        "Pref",
+    );
 }
 
 #[test]
@@ -407,18 +443,31 @@ surface ilprobe(float which = 0;) {
     Ci = c;
 }"#;
     let run = |w: u32| {
-        let prims = SQUARE.replace("Polygon", &format!("Surface \"ilprobe\" \"which\" {w}\n  Polygon"));
+        let prims = SQUARE.replace(
+            "Polygon",
+            &format!("Surface \"ilprobe\" \"which\" {w}\n  Polygon"),
+        );
         probe("ilprobe", body, &prims)
     };
     let a = 1.0 - 0.5 * 0.09 / (0.09 + 0.33);
     assert_near(run(0), [a; 3], 1e-4, "Oren-Nayar");
-    assert_near(run(1), [0.0; 3], 1e-4, "Oren-Nayar at roughness 0 is diffuse()");
+    assert_near(
+        run(1),
+        [0.0; 3],
+        1e-4,
+        "Oren-Nayar at roughness 0 is diffuse()",
+    );
     assert_near(run(2), [2.0; 3], 1e-3, "Ward");
     assert_near(run(3), [1.0; 3], 1e-4, "glossy");
     assert_near(run(4), [0.0; 3], 1e-4, "clay at roughness 0 is matte");
     assert_near(run(5), [1.0; 3], 1e-4, "wrapped diffuse");
     assert_near(run(6), [0.6, 0.3, 0.15], 1e-4, "Cortes glossy");
-    assert_near(run(7), [0.0; 3], 1e-6, "shiny metal with no map and no rays");
+    assert_near(
+        run(7),
+        [0.0; 3],
+        1e-6,
+        "shiny metal with no map and no rays",
+    );
 }
 
 #[test]
