@@ -254,7 +254,7 @@ surface tiles(float freq = 4, fuzz = 0.02;)
     topolar2d(rs - 0.5, rt - 0.5, r, theta);
     color c = blend(color(1, 0, 0), color(0, 0, 1), inside);
     if (odd(col + row)) c = blend(c, color 1, 0.5);
-    if (even(col)) c *= boxstep(0.5, r + 0.5);
+    if (even(col)) c *= boxstep(0, 0.5, r);
     Ci = c * (1 - lines) + theta * 0;
 }
 "#;
@@ -271,14 +271,15 @@ surface tiles(float freq = 4, fuzz = 0.02;)
 fn material_functions_are_in_the_standard_library() {
     let src = r#"
 #include "material.h"
-surface mats(float Ka = 1, Kd = 0.5, Ks = 0.5, Kr = 0.2, roughness = 0.1; string envname = "";)
+surface mats(float Ka = 1, Kd = 0.5, Ks = 0.5, Kr = 0.2, roughness = 0.1;
+             DECLARE_DEFAULTED_ENVPARAMS;)
 {
     normal Nf = faceforward(normalize(N), I);
     color c = MaterialPlastic(Nf, Cs, Ka, Kd, Ks, roughness)
             + MaterialMatte(Nf, Cs, Ka, Kd)
             + MaterialRoughMetal(Nf, Cs, Ka, Kd, Ks, roughness)
             + MaterialClay(Nf, Cs, Ka, Kd, 0.3)
-            + MaterialShinyMetal(Nf, Cs, Ka, Ks, Kr, roughness, envname);
+            + MaterialShinyMetal(Nf, Cs, Ka, Kd, Ks, roughness, Kr, 0, 0, ENVPARAMS);
     Oi = Os;
     Ci = Oi * c;
 }

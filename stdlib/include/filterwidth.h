@@ -14,7 +14,9 @@
 #define MINFILTWIDTH 1.0e-6
 
 /* Width of a float quantity across the footprint. */
+#ifndef filterwidth   /* rmannotes.h, included first, defines the same */
 #define filterwidth(x) max(abs(Du(x) * du) + abs(Dv(x) * dv), MINFILTWIDTH)
+#endif
 
 /* Width of a point (or vector) quantity: the square root of the area it sweeps. */
 #define filterwidthp(p) max(sqrt(area(p)), MINFILTWIDTH)
@@ -109,5 +111,10 @@ float filteredmod1(float x, w)
 {
     return x - filteredfloor(x, w);
 }
+
+/* A function g of known average g_avg whose finest features are featuresize across, faded to
+ * the average as the filter width fwidth approaches them (Advanced RenderMan's fadeout). */
+#define fadeout(g, g_avg, featuresize, fwidth) \
+        mix((g), (g_avg), smoothstep(0.2, 0.6, (fwidth) / (featuresize)))
 
 #endif

@@ -16,11 +16,14 @@
 #define ARBOR_NOISES_H 1
 
 #include "filterwidth.h"
+#include "patterns.h"   /* as in Advanced RenderMan: shaders expect its functions too */
 
 /* Signed noise in [−1, 1]. */
+#ifndef snoise   /* rmannotes.h and DPProctext.h define the same */
 #define snoise(p) (2 * (float noise(p)) - 1)
-#define snoisexy(x, y) (2 * (float noise(x, y)) - 1)
 #define snoise2(x, y) (2 * (float noise(x, y)) - 1)
+#endif
+#define snoisexy(x, y) (2 * (float noise(x, y)) - 1)
 #define snoiset(p, t) (2 * (float noise(p, t)) - 1)
 #define vsnoise(p) (2 * (vector noise(p)) - 1)
 #define vsnoiset(p, t) (2 * (vector noise(p, t)) - 1)
@@ -227,5 +230,58 @@ float voronoi(point P; float jitter)
     voronoi_f1_3d(P, jitter, f1, pos1);
     return f1;
 }
+
+/* ---- More of Advanced RenderMan's noises.h interface ---------------------------------- */
+
+/* The usual settings: 4 octaves, lacunarity 2, gain 1/2, filtered over p's footprint. */
+#define fBm_default(p) fBm((p), filterwidthp(p), 4, 2, 0.5)
+#define vfBm_default(p) vfBm((p), filterwidthp(p), 4, 2, 0.5)
+#define turbulence_default(p) turbulence((p), filterwidthp(p), 4, 2, 0.5)
+
+/* Ken Musgrave's "variable lacunarity" noise: noise at a point displaced by vector noise
+ * (scale sets how far), which breaks up the lattice's regularity. */
+#define VLNoise(Pt, scale) (snoise(vsnoise(Pt) * (scale) + (Pt)))
+#define filteredVLNoise(Pt, fwidth, scale) \
+        (filteredsnoise(filteredvsnoise((Pt), (fwidth)) * (scale) + (Pt), (fwidth)))
+
+/* fBm of VLNoise: octave i is filteredVLNoise at p·lacunarity^i weighted gain^i. */
+float VLfBm(point p; float filtwidth; uniform float octaves, lacunarity, gain, scale)
+{
+    float sum = 0;
+    float fw = filtwidth;
+    point pp = p;
+    uniform float amp = 1;
+    uniform float i;
+    for (i = 0; i < octaves; i += 1) {
+        sum += amp * filteredVLNoise(pp, fw, scale);
+        amp *= gain;
+        pp *= lacunarity;
+        fw *= lacunarity;
+    }
+    return sum;
+}
+
+#define VLfBm_default(p) VLfBm((p), filterwidthp(p), 4, 2, 0.5, 1.0)
+
+/* BMRT's noises.h fBm: octaves of band-limited snoise (gain^i, lacunarity^i) until
+ * maxoctaves or until an octave's footprint reaches a whole noise cell. */
+float filtered_fBm(point p; float filtwidth; uniform float maxoctaves, lacunarity, gain)
+{
+    float sum = 0;
+    float fw = filtwidth;
+    point pp = p;
+    float amp = 1;
+    float i = 0;
+    while (i < maxoctaves && fw < 1) {
+        sum += amp * filteredsnoise(pp, fw);
+        amp *= gain;
+        pp *= lacunarity;
+        fw *= lacunarity;
+        i += 1;
+    }
+    return sum;
+}
+
+#define filtered_fBm_default(p) filtered_fBm((p), sqrt(area(p)), 4, 2, 0.5)
 
 #endif

@@ -390,6 +390,9 @@ color LocIllumBlinn(normal Nn; vector V; float exponent)
     return C;
 }
 
+/* locillum.h (Advanced RenderMan's interface), when included first, has these two names
+ * scaled like diffuse()/specular() (pi times these): its versions are kept. */
+#ifndef LOCILLUM_H
 color LocIllumWardAnisotropic(normal Nn; vector V; vector xdir; float xroughness, yroughness)
 {
     color C = 0;
@@ -409,6 +412,7 @@ color LocIllumOrenNayar(normal Nn; vector V; float sigma)
     }
     return C;
 }
+#endif /* LOCILLUM_H */
 
 /* A stand-in environment for shaders without a map or ray tracing: a sky gradient over a
  * darker ground, looked up by a world-space direction (so reflections and refractions of

@@ -15,17 +15,48 @@
 #define pulse(a, b, fuzz, x) (smoothstep((a) - (fuzz), (a), (x)) - \
                               smoothstep((b) - (fuzz), (b), (x)))
 
-/* A step at a (0 below, 1 at and above). */
-#define boxstep(a, x) step((a), (x))
+/* The same pulse under the name the RenderMan Repository's copy of the header gives it (it
+ * renamed it so as not to clash with patterns.h's three-argument pulse). */
+#define smoothPulse(a, b, fuzz, x) pulse(a, b, fuzz, x)
+
+/* 0 below a, 1 above b, a straight ramp between. */
+#ifndef boxstep
+#define boxstep(a, b, x) clamp(((x) - (a)) / ((b) - (a)), 0, 1)
+#endif
 
 /* Tiling: position within the current tile, and which tile (frequency = tiles per unit). */
+#ifndef repeat   /* rmannotes.h and patterns.h both define these four */
 #define repeat(x, freq) (mod((x) * (freq), 1.0))
 #define whichtile(x, freq) (floor((x) * (freq)))
 #define odd(x) (mod((x), 2) == 1)
 #define even(x) (mod((x), 2) == 0)
+#endif
 
-/* Layer compositing: b over a with opacity x. */
+/* Layer compositing: b over a with opacity x (lerp is the same). */
 #define blend(a, b, x) ((a) * (1 - (x)) + (b) * (x))
+#define lerp(a, b, x) ((a) * (1 - (x)) + (b) * (x))
+
+/* Signed noise in [-1, 1] (unless noises.h or another header defined it already). */
+#ifndef snoise
+#define snoise(x) (2 * (float noise(x)) - 1)
+#define snoise2(x, y) (2 * (float noise(x, y)) - 1)
+#endif
+
+/* Noise spread more evenly over [lo, hi] (the middle half of noise's range stretched). */
+#define udn(x, lo, hi) (smoothstep(0.25, 0.75, noise(x)) * ((hi) - (lo)) + (lo))
+#define udn2(x, y, lo, hi) (smoothstep(0.25, 0.75, noise(x, y)) * ((hi) - (lo)) + (lo))
+
+/* Footprint sizes (after Apodaca's 1992 course notes), unless filterwidth.h defined them. */
+#ifndef MINFILTERWIDTH
+#define MINFILTERWIDTH 1e-7
+#define MINDERIV 0.0003
+#endif
+#ifndef filterwidth
+#define filterwidth(x) max(abs(Du(x) * du) + abs(Dv(x) * dv), MINFILTERWIDTH)
+#endif
+#ifndef filterwidth_point
+#define filterwidth_point(p) max(sqrt(area(p)), MINFILTERWIDTH)
+#endif
 
 /* Opacities as sets. */
 #define union(a, b) ((a) + (b) - (a) * (b))
