@@ -331,7 +331,10 @@ fn job_cmd(
         .collect();
     frames.sort();
     frames.dedup();
-    let unnumbered = scenes.iter().filter(|sc| !sc.jobs_only && sc.frame.is_none()).count();
+    let unnumbered = scenes
+        .iter()
+        .filter(|sc| !sc.jobs_only && sc.frame.is_none())
+        .count();
     if unnumbered > 0 && !frames.is_empty() {
         diags.report(Diag::warning(
             "farm::job",
@@ -340,7 +343,10 @@ fn job_cmd(
             ),
         ));
     }
-    if scenes.iter().any(|sc| !sc.jobs_only && pipeline::depth_pass(sc)) {
+    if scenes
+        .iter()
+        .any(|sc| !sc.jobs_only && pipeline::depth_pass(sc))
+    {
         diags.report(
             Diag::warning(
                 "farm::job",
@@ -482,7 +488,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(dir) = &cli.directory {
         if let Err(e) = std::fs::create_dir_all(dir).and_then(|_| std::env::set_current_dir(dir)) {
-            eprintln!("error: cannot change to folder `{}` (-C): {e}", dir.display());
+            eprintln!(
+                "error: cannot change to folder `{}` (-C): {e}",
+                dir.display()
+            );
             return ExitCode::from(2);
         }
     }

@@ -290,9 +290,11 @@ pub fn render_paths(
 /// True for a frame whose displays are all depth maps (zfile/shadow): a shadow pass.
 pub fn depth_pass(scene: &Scene) -> bool {
     !scene.options.displays.is_empty()
-        && scene.options.displays.iter().all(|d| {
-            matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow")
-        })
+        && scene
+            .options
+            .displays
+            .iter()
+            .all(|d| matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow"))
 }
 
 /// `-o` replaces the first display of the first frame that makes a picture: depth passes
@@ -321,7 +323,13 @@ pub fn output_override(
 pub fn tile_display(scene: &Scene, override_path: Option<&Path>) -> PathBuf {
     override_path
         .map(Path::to_path_buf)
-        .or_else(|| scene.options.displays.first().map(|d| PathBuf::from(&d.name)))
+        .or_else(|| {
+            scene
+                .options
+                .displays
+                .first()
+                .map(|d| PathBuf::from(&d.name))
+        })
         .unwrap_or_else(|| PathBuf::from("ri.png"))
 }
 
@@ -345,8 +353,10 @@ pub fn tile_plan(
     t: crate::farm::TileSpec,
 ) -> Result<TilePlan, Diag> {
     if opts.crop.is_some() {
-        return Err(Diag::error("farm::tiles", "--tile and --crop cannot be combined")
-            .help("put the CropWindow in the scene; the tiles split it"));
+        return Err(
+            Diag::error("farm::tiles", "--tile and --crop cannot be combined")
+                .help("put the CropWindow in the scene; the tiles split it"),
+        );
     }
     let o = crate::render::driver::effective_options(&scene.options, opts);
     let region = crate::render::crop_region(o.xres, o.yres, o.crop_window);

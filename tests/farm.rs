@@ -120,7 +120,10 @@ fn direct(dir: &Path) {
 fn same_files(a: &Path, b: &Path, frames: &[u32]) {
     for &f in frames {
         for p in pictures(f) {
-            let (x, y) = (std::fs::read(a.join(&p)).unwrap(), std::fs::read(b.join(&p)).unwrap());
+            let (x, y) = (
+                std::fs::read(a.join(&p)).unwrap(),
+                std::fs::read(b.join(&p)).unwrap(),
+            );
             assert!(x == y, "{p}: merged tiles differ from the direct render");
         }
     }
@@ -159,8 +162,14 @@ fn merged_tiles_equal_a_direct_render() {
         ]));
     }
     assert!(b.join("farm1.tile2of3.exr").exists());
-    assert!(outputs(&b).is_empty(), "tiles wrote pictures: {:?}", outputs(&b));
-    let out = ok(arbor().current_dir(&b).args(["merge", "scene.rib", "--tiles", "3"]));
+    assert!(
+        outputs(&b).is_empty(),
+        "tiles wrote pictures: {:?}",
+        outputs(&b)
+    );
+    let out = ok(arbor()
+        .current_dir(&b)
+        .args(["merge", "scene.rib", "--tiles", "3"]));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("wrote farm2_facing.exr"), "{err}");
     same_files(&a, &b, &[1, 2]);
@@ -174,19 +183,32 @@ fn merge_refuses_missing_tiles() {
     let d = tmpdir("missing");
     write_scene(&d, 3);
     for i in [1, 3] {
-        ok(arbor()
-            .current_dir(&d)
-            .args(["-q", "render", "scene.rib", "--frames", "1", "--tile", &format!("{i}/4")]));
+        ok(arbor().current_dir(&d).args([
+            "-q",
+            "render",
+            "scene.rib",
+            "--frames",
+            "1",
+            "--tile",
+            &format!("{i}/4"),
+        ]));
     }
-    let out = run(arbor()
-        .current_dir(&d)
-        .args(["merge", "scene.rib", "--frames", "1", "--tiles", "4"]));
+    let out =
+        run(arbor()
+            .current_dir(&d)
+            .args(["merge", "scene.rib", "--frames", "1", "--tiles", "4"]));
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("farm::missing-tile"), "{err}");
     assert!(err.contains("2 of 4 tiles missing"), "{err}");
-    assert!(err.contains("farm1.tile2of4.exr") && err.contains("farm1.tile4of4.exr"), "{err}");
-    assert!(err.contains("--tile 2/4"), "the help says how to render it: {err}");
+    assert!(
+        err.contains("farm1.tile2of4.exr") && err.contains("farm1.tile4of4.exr"),
+        "{err}"
+    );
+    assert!(
+        err.contains("--tile 2/4"),
+        "the help says how to render it: {err}"
+    );
     assert!(outputs(&d).is_empty(), "left behind: {:?}", outputs(&d));
 }
 
@@ -195,17 +217,33 @@ fn merge_refuses_tiles_of_another_size() {
     let d = tmpdir("size");
     write_scene(&d, 3);
     for i in 1..=4 {
-        ok(arbor()
-            .current_dir(&d)
-            .args(["-q", "render", "scene.rib", "--frames", "2", "--tile", &format!("{i}/4")]));
+        ok(arbor().current_dir(&d).args([
+            "-q",
+            "render",
+            "scene.rib",
+            "--frames",
+            "2",
+            "--tile",
+            &format!("{i}/4"),
+        ]));
     }
     // Tile 3 again at another resolution: its pixels no longer fit the picture.
     ok(arbor().current_dir(&d).args([
-        "-q", "render", "scene.rib", "--frames", "2", "--tile", "3/4", "--res", "32", "24",
+        "-q",
+        "render",
+        "scene.rib",
+        "--frames",
+        "2",
+        "--tile",
+        "3/4",
+        "--res",
+        "32",
+        "24",
     ]));
-    let out = run(arbor()
-        .current_dir(&d)
-        .args(["merge", "scene.rib", "--frames", "2", "--tiles", "4"]));
+    let out =
+        run(arbor()
+            .current_dir(&d)
+            .args(["merge", "scene.rib", "--frames", "2", "--tiles", "4"]));
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("farm::tile-size"), "{err}");
@@ -214,9 +252,10 @@ fn merge_refuses_tiles_of_another_size() {
     assert!(outputs(&d).is_empty(), "left behind: {:?}", outputs(&d));
     // A tile file whose pixels were cut down (same header claims) is refused too.
     std::fs::copy(d.join("farm2.tile1of4.exr"), d.join("farm2.tile3of4.exr")).unwrap();
-    let out = run(arbor()
-        .current_dir(&d)
-        .args(["merge", "scene.rib", "--frames", "2", "--tiles", "4"]));
+    let out =
+        run(arbor()
+            .current_dir(&d)
+            .args(["merge", "scene.rib", "--frames", "2", "--tiles", "4"]));
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("farm::tile-index"), "{err}");
@@ -228,29 +267,52 @@ fn merge_refuses_tiles_rendered_with_other_settings() {
     let d = tmpdir("settings");
     write_scene(&d, 3);
     for i in [1, 2, 4] {
-        ok(arbor()
-            .current_dir(&d)
-            .args(["-q", "render", "scene.rib", "--frames", "1", "--tile", &format!("{i}/4")]));
+        ok(arbor().current_dir(&d).args([
+            "-q",
+            "render",
+            "scene.rib",
+            "--frames",
+            "1",
+            "--tile",
+            &format!("{i}/4"),
+        ]));
     }
     // Tile 3 from an edited scene (fewer pixel samples), then the scene as it was.
     write_scene(&d, 2);
-    ok(arbor()
-        .current_dir(&d)
-        .args(["-q", "render", "scene.rib", "--frames", "1", "--tile", "3/4"]));
+    ok(arbor().current_dir(&d).args([
+        "-q",
+        "render",
+        "scene.rib",
+        "--frames",
+        "1",
+        "--tile",
+        "3/4",
+    ]));
     write_scene(&d, 3);
-    let out = run(arbor()
-        .current_dir(&d)
-        .args(["merge", "scene.rib", "--frames", "1", "--tiles", "4"]));
+    let out =
+        run(arbor()
+            .current_dir(&d)
+            .args(["merge", "scene.rib", "--frames", "1", "--tiles", "4"]));
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("farm::tile-settings"), "{err}");
     assert!(err.contains("farm1.tile3of4.exr"), "{err}");
-    assert!(!err.contains("farm1.tile1of4.exr"), "only tile 3 differs: {err}");
+    assert!(
+        !err.contains("farm1.tile1of4.exr"),
+        "only tile 3 differs: {err}"
+    );
     assert!(outputs(&d).is_empty(), "left behind: {:?}", outputs(&d));
     // A shader define given to the merge but not to the renders differs as well.
-    let out = run(arbor()
-        .current_dir(&d)
-        .args(["merge", "scene.rib", "--frames", "1", "--tiles", "4", "-D", "X=1"]));
+    let out = run(arbor().current_dir(&d).args([
+        "merge",
+        "scene.rib",
+        "--frames",
+        "1",
+        "--tiles",
+        "4",
+        "-D",
+        "X=1",
+    ]));
     assert_eq!(out.status.code(), Some(1));
     assert!(outputs(&d).is_empty());
 }
@@ -271,7 +333,11 @@ fn openjd() -> PathBuf {
     }
     let _ = std::fs::remove_dir_all(&venv);
     let req = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/farm/requirements.txt");
-    match Command::new("python3").args(["-m", "venv"]).arg(&venv).output() {
+    match Command::new("python3")
+        .args(["-m", "venv"])
+        .arg(&venv)
+        .output()
+    {
         Ok(o) if o.status.success() => {}
         Ok(o) => panic!(
             "cannot make a Python virtual environment for openjd-cli (python3 -m venv): {}",
@@ -289,7 +355,11 @@ fn openjd() -> PathBuf {
         "pip could not install openjd-cli (is PyPI reachable?):\n{}",
         String::from_utf8_lossy(&pip.stderr)
     );
-    assert!(bin.exists(), "pip installed openjd-cli but {} is missing", bin.display());
+    assert!(
+        bin.exists(),
+        "pip installed openjd-cli but {} is missing",
+        bin.display()
+    );
     std::fs::write(&done, "").unwrap();
     bin
 }
@@ -316,13 +386,17 @@ fn openjd_runs_the_job_and_reproduces_a_direct_render() {
         "job.yaml",
     ]));
     let text = std::fs::read_to_string(&job).unwrap();
-    assert!(text.contains("specificationVersion: 'jobtemplate-2023-09'"), "{text}");
+    assert!(
+        text.contains("specificationVersion: 'jobtemplate-2023-09'"),
+        "{text}"
+    );
     let oj = openjd();
     ok(Command::new(&oj).arg("check").arg(&job));
-    let out = ok(Command::new(&oj)
-        .arg("run")
-        .arg(&job)
-        .args(["--step", "Merge", "--run-dependencies"]));
+    let out =
+        ok(Command::new(&oj)
+            .arg("run")
+            .arg(&job)
+            .args(["--step", "Merge", "--run-dependencies"]));
     let log = String::from_utf8_lossy(&out.stdout);
     // 2 frames × 4 tiles, then 2 merges.
     for f in [1, 2] {

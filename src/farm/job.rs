@@ -61,10 +61,7 @@ fn args_list(args: &[String]) -> String {
 /// The template text.
 pub fn template(spec: &JobSpec) -> String {
     let has_frames = !spec.frames.is_empty();
-    let mut common = vec![
-        "-C".to_string(),
-        "{{Param.OutputDir}}".to_string(),
-    ];
+    let mut common = vec!["-C".to_string(), "{{Param.OutputDir}}".to_string()];
     let frame_args = |v: &mut Vec<String>| {
         if has_frames {
             v.push("--frames".into());
@@ -106,7 +103,8 @@ pub fn template(spec: &JobSpec) -> String {
     y += "parameterDefinitions:\n";
     y += "- name: Arbor\n  type: STRING\n";
     y += &format!("  default: {}\n", q(&spec.arbor));
-    y += "  description: 'The arbor command on the workers (a name on PATH or an absolute path).'\n";
+    y +=
+        "  description: 'The arbor command on the workers (a name on PATH or an absolute path).'\n";
     y += "- name: ScenePath\n  type: PATH\n  objectType: FILE\n  dataFlow: IN\n";
     y += &format!("  default: {}\n", q(&spec.scene));
     y += "  description: 'The RIB file to render.'\n";
@@ -119,7 +117,10 @@ pub fn template(spec: &JobSpec) -> String {
     y += "  description: 'One task per frame and tile: the tile''s pixels with their filter margins.'\n";
     y += "  parameterSpace:\n    taskParameterDefinitions:\n";
     if has_frames {
-        y += &format!("    - name: Frame\n      type: INT\n      range: {}\n", q(&frames));
+        y += &format!(
+            "    - name: Frame\n      type: INT\n      range: {}\n",
+            q(&frames)
+        );
     }
     y += &format!(
         "    - name: Tile\n      type: INT\n      range: {}\n",
@@ -136,7 +137,10 @@ pub fn template(spec: &JobSpec) -> String {
     y += "  dependencies:\n  - dependsOn: Render\n";
     if has_frames {
         y += "  parameterSpace:\n    taskParameterDefinitions:\n";
-        y += &format!("    - name: Frame\n      type: INT\n      range: {}\n", q(&frames));
+        y += &format!(
+            "    - name: Frame\n      type: INT\n      range: {}\n",
+            q(&frames)
+        );
     }
     y += "  script:\n    actions:\n      onRun:\n        command: '{{Param.Arbor}}'\n";
     y += &format!("        args: {}\n", args_list(&merge));
@@ -154,7 +158,11 @@ pub fn relative_to(target: &Path, base: &Path) -> Option<String> {
     }
     let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
     let mut parts: Vec<String> = vec!["..".into(); b.len() - common];
-    parts.extend(t[common..].iter().map(|c| c.as_os_str().to_string_lossy().into_owned()));
+    parts.extend(
+        t[common..]
+            .iter()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
     Some(if parts.is_empty() {
         ".".into()
     } else {
@@ -168,7 +176,10 @@ pub fn job_name(scene: &Path, tiles: u32) -> String {
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
         .unwrap_or_else(|| "scene".into());
-    let name: String = format!("arbor {base} ({tiles} tiles)").chars().filter(|c| !c.is_control()).collect();
+    let name: String = format!("arbor {base} ({tiles} tiles)")
+        .chars()
+        .filter(|c| !c.is_control())
+        .collect();
     name.chars().take(128).collect()
 }
 
@@ -180,7 +191,10 @@ mod tests {
     fn relative_defaults() {
         let r = |a: &str, b: &str| relative_to(Path::new(a), Path::new(b)).unwrap();
         assert_eq!(r("/shows/a/scene.rib", "/shows/a"), "scene.rib");
-        assert_eq!(r("/shows/a/scene.rib", "/shows/jobs/x"), "../../a/scene.rib");
+        assert_eq!(
+            r("/shows/a/scene.rib", "/shows/jobs/x"),
+            "../../a/scene.rib"
+        );
         assert_eq!(r("/shows/a", "/shows/a"), ".");
         assert_eq!(r("/shows/a/out", "/shows/a"), "out");
     }

@@ -49,9 +49,15 @@ pub fn merge_paths(
                 continue;
             }
             let hash = super::settings_hash(sources, scene_sources.clone(), settings, scene.frame);
-            if let Some((film, imager_applied)) =
-                assemble(path, scene, settings, count, hash, override_path.as_deref(), diags)
-            {
+            if let Some((film, imager_applied)) = assemble(
+                path,
+                scene,
+                settings,
+                count,
+                hash,
+                override_path.as_deref(),
+                diags,
+            ) {
                 let opts = RenderOptions {
                     resolution: settings.resolution,
                     ..RenderOptions::default()
@@ -131,7 +137,10 @@ fn assemble(
     let missing: Vec<&(TileSpec, PathBuf, PixelRect)> =
         tiles.iter().filter(|(_, p, _)| !p.exists()).collect();
     if !missing.is_empty() {
-        let names: Vec<String> = missing.iter().map(|(_, p, _)| format!("`{}`", p.display())).collect();
+        let names: Vec<String> = missing
+            .iter()
+            .map(|(_, p, _)| format!("`{}`", p.display()))
+            .collect();
         diags.report(labelled(
             Diag::error(
                 "farm::missing-tile",
@@ -141,7 +150,10 @@ fn assemble(
                     names.join(", ")
                 ),
             )
-            .help(format!("render them first, e.g. {}", rerender(missing[0].0.index))),
+            .help(format!(
+                "render them first, e.g. {}",
+                rerender(missing[0].0.index)
+            )),
             span,
             "the tiles are named after this Display",
         ));
@@ -218,14 +230,18 @@ fn mismatch(
     hash: u64,
 ) -> Option<(&'static str, String)> {
     let m = &t.meta;
-    let frame = |f: Option<i32>| f.map_or_else(|| "no frame number".into(), |f| format!("frame {f}"));
+    let frame =
+        |f: Option<i32>| f.map_or_else(|| "no frame number".into(), |f| format!("frame {f}"));
     if m.frame != scene.frame {
         return Some(("farm::tile-frame", format!("it holds {}", frame(m.frame))));
     }
     if m.tile != spec {
         return Some((
             "farm::tile-index",
-            format!("it is tile {}/{}, not {}/{}", m.tile.index, m.tile.count, spec.index, spec.count),
+            format!(
+                "it is tile {}/{}, not {}/{}",
+                m.tile.index, m.tile.count, spec.index, spec.count
+            ),
         ));
     }
     if (m.xres, m.yres) != res {

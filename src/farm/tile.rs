@@ -185,12 +185,7 @@ impl TileMeta {
 pub fn write(path: &Path, film: &Film, meta: &TileMeta) -> Result<(), Diag> {
     use exr::prelude::*;
     let r = meta.rect;
-    let tile = film.cropped(
-        r.x0 as usize,
-        r.y0 as usize,
-        r.x1 as usize,
-        r.y1 as usize,
-    );
+    let tile = film.cropped(r.x0 as usize, r.y0 as usize, r.x1 as usize, r.y1 as usize);
     let (w, h, n) = (tile.width, tile.height, tile.channels());
     let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
     for (c, name) in tile.channel_names.iter().enumerate() {
@@ -199,9 +194,10 @@ pub fn write(path: &Path, film: &Film, meta: &TileMeta) -> Result<(), Diag> {
     }
     let mut attributes = LayerAttributes::default();
     attributes.layer_position = Vec2(r.x0, r.y0);
-    attributes
-        .other
-        .insert(Text::from(ATTRIBUTE), AttributeValue::Text(Text::from(meta.to_text().as_str())));
+    attributes.other.insert(
+        Text::from(ATTRIBUTE),
+        AttributeValue::Text(Text::from(meta.to_text().as_str())),
+    );
     let encoding = Encoding {
         compression: Compression::ZIP16,
         blocks: Blocks::ScanLines,
@@ -209,7 +205,8 @@ pub fn write(path: &Path, film: &Film, meta: &TileMeta) -> Result<(), Diag> {
     };
     let layer = Layer::new((w, h), attributes, encoding, AnyChannels::sort(channels));
     let mut image = Image::from_layer(layer);
-    image.attributes.display_window = IntegerBounds::new((0, 0), (meta.xres as usize, meta.yres as usize));
+    image.attributes.display_window =
+        IntegerBounds::new((0, 0), (meta.xres as usize, meta.yres as usize));
     crate::film::write_atomically(path, |f| {
         image
             .write()
@@ -250,9 +247,8 @@ pub fn read(path: &Path) -> Result<TileFile, Diag> {
         .map_err(|e| fail(e.to_string()))?;
     let layer = &image.layer_data;
     let meta = match layer.attributes.other.get(&Text::from(ATTRIBUTE)) {
-        Some(AttributeValue::Text(t)) => {
-            TileMeta::from_text(&t.to_string()).ok_or_else(|| fail("unreadable `arbor.tile` attribute".into()))?
-        }
+        Some(AttributeValue::Text(t)) => TileMeta::from_text(&t.to_string())
+            .ok_or_else(|| fail("unreadable `arbor.tile` attribute".into()))?,
         _ => return Err(fail("no `arbor.tile` attribute".into())),
     };
     let (width, height) = (layer.size.0, layer.size.1);
@@ -265,7 +261,12 @@ pub fn read(path: &Path) -> Result<TileFile, Diag> {
             .iter()
             .find(|ch| ch.name.to_string() == *name)
             .ok_or_else(|| fail(format!("channel `{name}` is missing")))?;
-        for (i, v) in ch.sample_data.values_as_f32().enumerate().take(width * height) {
+        for (i, v) in ch
+            .sample_data
+            .values_as_f32()
+            .enumerate()
+            .take(width * height)
+        {
             data[i * n + c] = v;
         }
     }
@@ -285,12 +286,23 @@ mod tests {
     use crate::render::crop_region;
 
     fn region(w: i32, h: i32) -> PixelRect {
-        PixelRect { x0: 0, y0: 0, x1: w, y1: h }
+        PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: w,
+            y1: h,
+        }
     }
 
     #[test]
     fn tiles_partition_the_region_and_their_windows_round_to_them() {
-        for (xres, yres) in [(64u32, 48u32), (641, 479), (1920, 1080), (7, 5), (8192, 4320)] {
+        for (xres, yres) in [
+            (64u32, 48u32),
+            (641, 479),
+            (1920, 1080),
+            (7, 5),
+            (8192, 4320),
+        ] {
             for n in [1u32, 2, 3, 4, 6, 7, 12] {
                 let full = region(xres as i32, yres as i32);
                 let mut covered = vec![0u8; (xres * yres) as usize];
@@ -326,9 +338,22 @@ mod tests {
             PathBuf::from("out/beauty.tile3of4.exr")
         );
         // A tile inside a crop region.
-        let reg = PixelRect { x0: 10, y0: 4, x1: 30, y1: 24 };
+        let reg = PixelRect {
+            x0: 10,
+            y0: 4,
+            x1: 30,
+            y1: 24,
+        };
         let r = rect(reg, TileSpec { index: 4, count: 4 }).unwrap();
-        assert_eq!(r, PixelRect { x0: 20, y0: 14, x1: 30, y1: 24 });
+        assert_eq!(
+            r,
+            PixelRect {
+                x0: 20,
+                y0: 14,
+                x1: 30,
+                y1: 24
+            }
+        );
         assert!(rect(region(2, 2), TileSpec { index: 1, count: 9 }).is_err());
     }
 
@@ -347,7 +372,12 @@ mod tests {
             xres: 8,
             yres: 6,
             region: region(8, 6),
-            rect: PixelRect { x0: 4, y0: 3, x1: 8, y1: 6 },
+            rect: PixelRect {
+                x0: 4,
+                y0: 3,
+                x1: 8,
+                y1: 6,
+            },
             settings: 0xdead_beef_0123_4567,
             imager_applied: true,
             channels: names,

@@ -378,7 +378,10 @@ pub(crate) mod tests {
         let v = ortho_view(64);
         let q = Quad::rect(-0.0625, -0.0625, 0.0625, 0.0625, 1.0, 0);
         let widened = q.bound().grow(20.0);
-        assert_eq!(decide(&q, &widened, 1.0, &v), Decision::Dice { nu: 4, nv: 4 });
+        assert_eq!(
+            decide(&q, &widened, 1.0, &v),
+            Decision::Dice { nu: 4, nv: 4 }
+        );
     }
 
     #[test]
