@@ -73,6 +73,13 @@ impl SourceMap {
         }));
         (files.len() - 1) as u32
     }
+    /// How many files are registered (the next file's id).
+    pub fn len(&self) -> usize {
+        self.files.read().unwrap_or_else(|e| e.into_inner()).len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
     pub fn get(&self, id: u32) -> Option<Arc<SourceFile>> {
         let files = self.files.read().unwrap_or_else(|e| e.into_inner());
         files.get(id as usize).cloned()

@@ -6,6 +6,7 @@
 
 pub mod diag;
 pub mod encoding;
+pub mod farm;
 pub mod film;
 pub mod geom;
 pub mod lsp;

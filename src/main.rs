@@ -22,6 +22,10 @@ struct Cli {
     /// More detail (every repeated warning's count, timings).
     #[arg(short, long, global = true)]
     verbose: bool,
+    /// Run as if started in DIR, made if missing (relative file names, Display outputs and
+    /// tiles go there; farm tasks use it for the job's output folder).
+    #[arg(short = 'C', long = "directory", value_name = "DIR", global = true)]
+    directory: Option<PathBuf>,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -30,6 +34,10 @@ struct Cli {
 enum Cmd {
     /// Render RIB files (stdin when none or "-") to the images their Display requests name.
     Render(RenderArgs),
+    /// Assemble the tile files of `arbor render --tile I/N` into each Display's picture.
+    Merge(MergeArgs),
+    /// Write an Open Job Description template rendering a scene as frame × tile tasks on a farm.
+    Job(JobArgs),
     /// Validate RIB files (parse and build) and compile shading-language files; render nothing.
     Check(CheckArgs),
     /// Print a shader's type and parameters (like sloinfo): a .sl path or a shader name.
@@ -160,6 +168,57 @@ struct RenderArgs {
     /// Print time per stage and counts (grids, micropolygons, samples…).
     #[arg(long)]
     stats: bool,
+    /// Render only tile I of N of each frame (1-based, row-major) into a tile file
+    /// `DISPLAY.tileIofN.exr` next to the frame's first Display; `arbor merge` assembles them.
+    #[arg(long, value_name = "I/N")]
+    tile: Option<String>,
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The RIB files the tiles were rendered from.
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    /// How many tiles each frame was split into (`--tile I/N` of the renders).
+    #[arg(long, value_name = "N")]
+    tiles: u32,
+    #[command(flatten)]
+    paths: PathArgs,
+    /// Image resolution replacing Format (as given to the renders).
+    #[arg(long, num_args = 2, value_names = ["W", "H"])]
+    res: Option<Vec<u32>>,
+    /// Frames to merge: N or A-B.
+    #[arg(long, value_name = "A-B")]
+    frames: Option<String>,
+    /// Output file replacing the first picture Display's (as given to the renders).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct JobArgs {
+    /// The RIB file to render on the farm.
+    scene: PathBuf,
+    /// Tiles per frame.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    tiles: u32,
+    /// Frames to render: N or A-B (default: every frame of the file).
+    #[arg(long, value_name = "A-B")]
+    frames: Option<String>,
+    #[command(flatten)]
+    paths: PathArgs,
+    /// Image resolution replacing Format (passed to every render and merge task).
+    #[arg(long, num_args = 2, value_names = ["W", "H"])]
+    res: Option<Vec<u32>>,
+    /// The arbor command on the workers (default: this executable's absolute path).
+    #[arg(long, value_name = "CMD")]
+    arbor: Option<String>,
+    /// Folder the outputs go to on the farm (default: the current folder).
+    #[arg(long, value_name = "DIR")]
+    output_dir: Option<PathBuf>,
+    /// Template file to write (default: standard output).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -223,6 +282,179 @@ fn parse_frames(s: &str) -> Option<(i32, i32)> {
     }
 }
 
+/// `--frames` as a range; a bad value is a usage error (exit 2).
+fn frames_arg(f: Option<&str>) -> Result<Option<(i32, i32)>, ExitCode> {
+    match f {
+        Some(f) => match parse_frames(f) {
+            Some(r) => Ok(Some(r)),
+            None => {
+                eprintln!("error: --frames takes N or A-B, found `{f}`");
+                Err(ExitCode::from(2))
+            }
+        },
+        None => Ok(None),
+    }
+}
+
+/// An absolute form of a path (the job runs elsewhere): canonical when it exists.
+fn absolute(p: &std::path::Path) -> PathBuf {
+    std::fs::canonicalize(p).unwrap_or_else(|_| {
+        std::env::current_dir()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|_| p.to_path_buf())
+    })
+}
+
+/// `arbor job`: reads the scene for its frame numbers and writes the OpenJD template.
+fn job_cmd(
+    a: JobArgs,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+    quiet: bool,
+    verbose: bool,
+) -> ExitCode {
+    let mut s = settings_from(&a.paths);
+    s.resolution = a.res.as_ref().and_then(|v| Some((*v.first()?, *v.get(1)?)));
+    s.frames = match frames_arg(a.frames.as_deref()) {
+        Ok(f) => f,
+        Err(code) => return code,
+    };
+    if a.tiles == 0 {
+        eprintln!("error: --tiles must be at least 1");
+        return ExitCode::from(2);
+    }
+    let scenes = pipeline::load_scenes(&a.scene, &s, sources, diags);
+    let mut frames: Vec<i32> = scenes
+        .iter()
+        .filter(|sc| !sc.jobs_only)
+        .filter_map(|sc| sc.frame)
+        .collect();
+    frames.sort();
+    frames.dedup();
+    let unnumbered = scenes
+        .iter()
+        .filter(|sc| !sc.jobs_only && sc.frame.is_none())
+        .count();
+    if unnumbered > 0 && !frames.is_empty() {
+        diags.report(Diag::warning(
+            "farm::job",
+            format!(
+                "{unnumbered} world block(s) outside FrameBegin/FrameEnd: every task renders them"
+            ),
+        ));
+    }
+    if scenes
+        .iter()
+        .any(|sc| !sc.jobs_only && pipeline::depth_pass(sc))
+    {
+        diags.report(
+            Diag::warning(
+                "farm::job",
+                "the scene has depth passes (zfile/shadow displays): each task renders its own \
+                 frame only, so a later frame's MakeShadow does not see an earlier frame's map",
+            )
+            .help("render shadow maps first (arbor render) and ship them with the job"),
+        );
+    }
+    if scenes.iter().all(|sc| sc.jobs_only) && !diags.has_errors() {
+        diags.report(Diag::error(
+            "farm::job",
+            format!("`{}` has no frame to render", a.scene.display()),
+        ));
+    }
+    // Settings the renders and merges must share, with absolute search paths.
+    let mut args: Vec<String> = Vec::new();
+    if let Some((w, h)) = s.resolution {
+        args.extend(["--res".into(), w.to_string(), h.to_string()]);
+    }
+    let abs_list = |l: &[String]| -> String {
+        l.iter()
+            .map(|p| absolute(std::path::Path::new(p)).display().to_string())
+            .collect::<Vec<_>>()
+            .join(":")
+    };
+    for (flag, list) in [
+        ("--shaders", &s.shader_paths),
+        ("--textures", &s.texture_paths),
+        ("--archives", &s.archive_paths),
+    ] {
+        if !list.is_empty() {
+            args.extend([flag.to_string(), abs_list(list)]);
+        }
+    }
+    for d in &s.include_dirs {
+        args.extend(["-I".into(), absolute(d).display().to_string()]);
+    }
+    for (n, v) in &s.defines {
+        args.extend([
+            "-D".into(),
+            match v {
+                Some(v) => format!("{n}={v}"),
+                None => n.clone(),
+            },
+        ]);
+    }
+    // OpenJD joins PATH defaults to the template's folder and wants them relative.
+    let job_dir = match &a.output {
+        Some(o) => absolute(
+            o.parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new(".")),
+        ),
+        None => absolute(std::path::Path::new(".")),
+    };
+    let relative_default = |p: &std::path::Path, base: &std::path::Path| {
+        arbor::farm::job::relative_to(p, base).unwrap_or_else(|| {
+            diags.report(Diag::warning(
+                "farm::job",
+                format!(
+                    "`{}` shares no root with the template's folder: its default stays \
+                     absolute, which openjd refuses; pass -p with a value",
+                    p.display()
+                ),
+            ));
+            p.display().to_string()
+        })
+    };
+    let spec = arbor::farm::job::JobSpec {
+        name: arbor::farm::job::job_name(&a.scene, a.tiles),
+        arbor: a.arbor.clone().unwrap_or_else(|| {
+            std::env::current_exe()
+                .map(|p| p.display().to_string())
+                .unwrap_or_else(|_| "arbor".into())
+        }),
+        scene: relative_default(&absolute(&a.scene), &job_dir),
+        output_dir: relative_default(
+            &absolute(a.output_dir.as_deref().unwrap_or(std::path::Path::new("."))),
+            &job_dir,
+        ),
+        frames,
+        tiles: a.tiles,
+        settings_args: args,
+    };
+    let failed = report(diags, sources, quiet, verbose);
+    if failed {
+        return ExitCode::from(1);
+    }
+    let text = arbor::farm::job::template(&spec);
+    match &a.output {
+        Some(o) => {
+            if let Err(d) = arbor::film::write_atomically(o, |f| {
+                std::io::Write::write_all(f, text.as_bytes()).map_err(|e| e.to_string())
+            }) {
+                diags.report(d);
+                report(diags, sources, quiet, verbose);
+                return ExitCode::from(1);
+            }
+            if !quiet {
+                eprintln!("wrote {}", o.display());
+            }
+        }
+        None => print!("{text}"),
+    }
+    ExitCode::SUCCESS
+}
+
 /// Prints every diagnostic (warnings only unless quiet, notes only when verbose) and returns
 /// whether errors occurred.
 fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool, verbose: bool) -> bool {
@@ -254,9 +486,44 @@ fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool, verbose: bool) 
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(dir) = &cli.directory {
+        if let Err(e) = std::fs::create_dir_all(dir).and_then(|_| std::env::set_current_dir(dir)) {
+            eprintln!(
+                "error: cannot change to folder `{}` (-C): {e}",
+                dir.display()
+            );
+            return ExitCode::from(2);
+        }
+    }
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     match cli.cmd {
+        Cmd::Merge(a) => {
+            let mut s = settings_from(&a.paths);
+            s.resolution = a.res.as_ref().and_then(|v| Some((*v.first()?, *v.get(1)?)));
+            s.frames = match frames_arg(a.frames.as_deref()) {
+                Ok(f) => f,
+                Err(code) => return code,
+            };
+            s.output = a.output.clone();
+            if a.tiles == 0 {
+                eprintln!("error: --tiles must be at least 1");
+                return ExitCode::from(2);
+            }
+            let written = arbor::farm::merge::merge_paths(&a.files, &s, a.tiles, &sources, &diags);
+            let failed = report(&diags, &sources, cli.quiet, cli.verbose);
+            if !cli.quiet {
+                for w in &written {
+                    eprintln!("wrote {}", w.display());
+                }
+            }
+            if failed {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Cmd::Job(a) => job_cmd(a, &sources, &diags, cli.quiet, cli.verbose),
         Cmd::Render(a) => {
             let mut s = settings_from(&a.paths);
             s.resolution = a.res.as_ref().and_then(|v| Some((*v.first()?, *v.get(1)?)));
@@ -264,14 +531,16 @@ fn main() -> ExitCode {
                 .crop
                 .as_ref()
                 .and_then(|v| (v.len() == 4).then(|| [v[0], v[1], v[2], v[3]]));
-            s.frames = match a.frames.as_deref() {
-                Some(f) => match parse_frames(f) {
-                    Some(r) => Some(r),
-                    None => {
-                        eprintln!("error: --frames takes N or A-B, found `{f}`");
-                        return ExitCode::from(2);
-                    }
-                },
+            s.frames = match frames_arg(a.frames.as_deref()) {
+                Ok(f) => f,
+                Err(code) => return code,
+            };
+            s.tile = match a.tile.as_deref().map(arbor::farm::TileSpec::parse) {
+                Some(Ok(t)) => Some(t),
+                Some(Err(e)) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(2);
+                }
                 None => None,
             };
             s.threads = a.threads;

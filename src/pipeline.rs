@@ -31,6 +31,8 @@ pub struct Settings {
     pub threads: usize,
     pub bucket_size: Option<[u32; 2]>,
     pub output: Option<PathBuf>,
+    /// Render only this tile of each frame (`--tile I/N`), into a tile file.
+    pub tile: Option<crate::farm::TileSpec>,
     pub stats: bool,
     pub progress: bool,
 }
@@ -164,7 +166,9 @@ pub fn render_paths(
     let mut written = Vec::new();
     let mut first_display = true;
     for path in paths {
+        let first_source = sources.len() as u32;
         let scenes = load_scenes(path, settings, sources, diags);
+        let scene_sources = first_source..sources.len() as u32;
         let archive_only = || {
             diags
                 .snapshot()
@@ -203,7 +207,6 @@ pub fn render_paths(
                 textures: Some(&textures),
                 aovs: aovs.iter().map(|a| a.name.clone()).collect(),
             };
-            system.preload_lights(scene);
             let stats = Stats::default();
             let bar = if settings.progress {
                 Some(progress_bar())
@@ -216,7 +219,7 @@ pub fn render_paths(
                     b.set_position(done as u64);
                 }
             };
-            let opts = RenderOptions {
+            let mut opts = RenderOptions {
                 threads: settings.threads,
                 bucket_size: settings.bucket_size,
                 crop: settings.crop,
@@ -225,6 +228,23 @@ pub fn render_paths(
                 progress: if bar.is_some() { Some(&progress) } else { None },
                 aovs,
             };
+            let override_path = output_override(scene, settings, &mut first_display);
+            // A tile renders the crop window of its pixels (with their filter margins);
+            // depth passes render whole, since later frames' MakeShadow reads them.
+            let tile = match settings.tile.filter(|_| !depth_pass(scene)) {
+                Some(t) => match tile_plan(scene, &opts, t) {
+                    Ok(plan) => {
+                        opts.crop = Some(plan.window);
+                        Some(plan)
+                    }
+                    Err(d) => {
+                        diags.report(d);
+                        continue;
+                    }
+                },
+                None => None,
+            };
+            system.preload_lights(scene);
             let start = Instant::now();
             let film = render_frame(scene, &system, &opts, diags);
             if let Some(b) = &bar {
@@ -233,42 +253,42 @@ pub fn render_paths(
             let mut options = crate::render::driver::effective_options(&scene.options, &opts);
             // Imager shaders (the film applies the standard `background` itself).
             let mut film = film;
-            if system.run_imager(scene, &crate::render::Camera::new(scene), &mut film) {
+            let imager_applied =
+                system.run_imager(scene, &crate::render::Camera::new(scene), &mut film);
+            if imager_applied {
                 options.imager = None;
             }
-            // A cropped render writes only the crop region.
-            let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
-            let film = if r.width() < film.width || r.height() < film.height {
-                film.cropped(
-                    r.x0.max(0) as usize,
-                    r.y0.max(0) as usize,
-                    r.x1.max(0) as usize,
-                    r.y1.max(0) as usize,
-                )
+            if let Some(plan) = tile {
+                let display = tile_display(scene, override_path.as_deref());
+                let file = crate::farm::tile::path(&display, plan.spec);
+                let meta = crate::farm::tile::TileMeta {
+                    frame: scene.frame,
+                    tile: plan.spec,
+                    xres: options.xres,
+                    yres: options.yres,
+                    region: plan.region,
+                    rect: plan.rect,
+                    settings: crate::farm::settings_hash(
+                        sources,
+                        scene_sources.clone(),
+                        settings,
+                        scene.frame,
+                    ),
+                    imager_applied,
+                    channels: film.channel_names.clone(),
+                };
+                match crate::farm::tile::write(&file, &film, &meta) {
+                    Ok(()) => written.push(file),
+                    Err(d) => diags.report(d),
+                }
             } else {
-                film
-            };
-            // -o replaces the first display of the first frame that makes a picture: depth
-            // passes (zfile/shadow displays) of multi-pass files keep their files, since
-            // later frames' MakeShadow reads them.
-            let depth_pass = options.displays.first().is_some_and(|d| {
-                matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow")
-            });
-            let override_path = if first_display && !depth_pass {
-                first_display = false;
-                settings.output.clone()
-            } else {
-                None
-            };
-            match crate::film::output::write_displays_with_matrices(
-                &film,
-                &options,
-                diags,
-                override_path.as_deref(),
-                Some(depth_matrices(scene, &options)),
-            ) {
-                Ok(files) => written.extend(files),
-                Err(d) => diags.report(d),
+                written.extend(write_frame(
+                    scene,
+                    film,
+                    &options,
+                    override_path.as_deref(),
+                    diags,
+                ));
             }
             if settings.stats {
                 eprintln!(
@@ -284,6 +304,123 @@ pub fn render_paths(
         }
     }
     written
+}
+
+/// True for a frame whose displays are all depth maps (zfile/shadow): a shadow pass.
+pub fn depth_pass(scene: &Scene) -> bool {
+    !scene.options.displays.is_empty()
+        && scene
+            .options
+            .displays
+            .iter()
+            .all(|d| matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow"))
+}
+
+/// `-o` replaces the first display of the first frame that makes a picture: depth passes
+/// (zfile/shadow displays) of multi-pass files keep their files, since later frames'
+/// MakeShadow reads them.
+pub fn output_override(
+    scene: &Scene,
+    settings: &Settings,
+    first_display: &mut bool,
+) -> Option<PathBuf> {
+    let depth = scene
+        .options
+        .displays
+        .first()
+        .is_some_and(|d| matches!(d.kind.to_ascii_lowercase().as_str(), "zfile" | "shadow"));
+    if *first_display && !depth {
+        *first_display = false;
+        settings.output.clone()
+    } else {
+        None
+    }
+}
+
+/// The picture a frame's tile files are named after: `-o`, else its first Display, else
+/// `ri.png` (as the display writer defaults).
+pub fn tile_display(scene: &Scene, override_path: Option<&Path>) -> PathBuf {
+    override_path
+        .map(Path::to_path_buf)
+        .or_else(|| {
+            scene
+                .options
+                .displays
+                .first()
+                .map(|d| PathBuf::from(&d.name))
+        })
+        .unwrap_or_else(|| PathBuf::from("ri.png"))
+}
+
+/// Where a tile of a frame lies.
+#[derive(Clone, Copy, Debug)]
+pub struct TilePlan {
+    pub spec: crate::farm::TileSpec,
+    /// The frame's output region (its CropWindow pixels).
+    pub region: crate::render::PixelRect,
+    /// This tile's pixels.
+    pub rect: crate::render::PixelRect,
+    /// The crop window that renders exactly `rect`.
+    pub window: [f32; 4],
+}
+
+/// The tile `t` of a frame rendered with `opts` (resolution override applied; the scene's own
+/// CropWindow is the region the tiles split).
+pub fn tile_plan(
+    scene: &Scene,
+    opts: &RenderOptions,
+    t: crate::farm::TileSpec,
+) -> Result<TilePlan, Diag> {
+    if opts.crop.is_some() {
+        return Err(
+            Diag::error("farm::tiles", "--tile and --crop cannot be combined")
+                .help("put the CropWindow in the scene; the tiles split it"),
+        );
+    }
+    let o = crate::render::driver::effective_options(&scene.options, opts);
+    let region = crate::render::crop_region(o.xres, o.yres, o.crop_window);
+    let rect = crate::farm::tile::rect(region, t)?;
+    Ok(TilePlan {
+        spec: t,
+        region,
+        rect,
+        window: crate::farm::tile::ndc_window(rect, o.xres, o.yres),
+    })
+}
+
+/// Writes a rendered frame's displays: a cropped render writes only the crop region. `film` is
+/// the full-resolution film (imager already run); `options` the effective options.
+pub fn write_frame(
+    scene: &Scene,
+    film: crate::film::Film,
+    options: &crate::scene::Options,
+    override_path: Option<&Path>,
+    diags: &Diagnostics,
+) -> Vec<PathBuf> {
+    let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
+    let film = if r.width() < film.width || r.height() < film.height {
+        film.cropped(
+            r.x0.max(0) as usize,
+            r.y0.max(0) as usize,
+            r.x1.max(0) as usize,
+            r.y1.max(0) as usize,
+        )
+    } else {
+        film
+    };
+    match crate::film::output::write_displays_with_matrices(
+        &film,
+        options,
+        diags,
+        override_path,
+        Some(depth_matrices(scene, options)),
+    ) {
+        Ok(files) => files,
+        Err(d) => {
+            diags.report(d);
+            Vec::new()
+        }
+    }
 }
 
 /// Texture search path of a scene: CLI paths, `Option "searchpath" "texture"` (relative to
