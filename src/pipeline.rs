@@ -183,6 +183,7 @@ pub fn render_paths(
                 diags,
                 textures: Some(&textures),
                 aovs: aovs.iter().map(|a| a.name.clone()).collect(),
+                rays: Default::default(),
             };
             system.preload_lights(scene);
             let stats = Stats::default();
@@ -351,6 +352,7 @@ pub fn render_text(
             diags,
             textures: None,
             aovs: aovs.iter().map(|a| a.name.clone()).collect(),
+            rays: Default::default(),
         };
         system.preload_lights(scene);
         let opts = RenderOptions {

@@ -41,6 +41,7 @@ fn render(
         diags: &diags,
         textures: None,
         aovs: Vec::new(),
+        rays: Default::default(),
     };
     let film = render_frame(&scenes[0], &system, opts, &diags);
     assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));

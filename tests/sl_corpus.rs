@@ -130,6 +130,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         info: &info,
         textures: None,
         seed: 11,
+        rays: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

@@ -69,6 +69,7 @@ pub fn render_rib(rib: &str, extra_shader_dirs: &[PathBuf]) -> Film {
         diags: &diags,
         textures: None,
         aovs: Vec::new(),
+        rays: Default::default(),
     };
     let film = render_frame(&scenes[0], &system, &RenderOptions::default(), &diags);
     assert!(
