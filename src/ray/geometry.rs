@@ -291,8 +291,8 @@ impl RateModel {
                     dev_v = dev_v.max((g.p[k] - 0.5 * (g.p[k - n] + g.p[k + n])).length());
                 }
             }
-            // A quarter of the edge length: well under a pixel where the camera sees it.
-            let tol = 0.25 * edge;
+            // A twentieth of the edge length: a tenth of a pixel where the camera sees it.
+            let tol = 0.05 * edge;
             let need = |dev: f32| (2.0 * (dev / tol).sqrt()).ceil().max(1.0);
             nu = nu.min(need(dev_u));
             nv = nv.min(need(dev_v));
