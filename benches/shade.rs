@@ -60,6 +60,7 @@ fn fixed_iterations(iters: usize) {
         diags: &diags,
         textures: None,
         aovs: vec![],
+        rays: Default::default(),
     };
     let mut g = grid(32);
     for _ in 0..iters {
@@ -105,6 +106,7 @@ fn bench(c: &mut Criterion) {
         diags: &diags,
         textures: None,
         aovs: vec![],
+        rays: Default::default(),
     };
     let mut group = c.benchmark_group("plastic_3_lights");
     for n in [16usize, 32, 64] {

@@ -13,6 +13,7 @@ pub mod lsp;
 pub mod num;
 pub mod pattern;
 pub mod pipeline;
+pub mod ray;
 pub mod render;
 pub mod rib;
 pub mod scene;

@@ -206,6 +206,7 @@ pub fn render_paths(
                 diags,
                 textures: Some(&textures),
                 aovs: aovs.iter().map(|a| a.name.clone()).collect(),
+                rays: Default::default(),
             };
             let stats = Stats::default();
             let bar = if settings.progress {
@@ -507,6 +508,7 @@ pub fn render_text(
             diags,
             textures: None,
             aovs: aovs.iter().map(|a| a.name.clone()).collect(),
+            rays: Default::default(),
         };
         system.preload_lights(scene);
         let opts = RenderOptions {

@@ -282,6 +282,7 @@ pub fn render_swatch(
         diags,
         textures: None,
         aovs: Vec::new(),
+        rays: Default::default(),
     };
     let opts = RenderOptions::default();
     let film = render_frame(scene, &system, &opts, diags);

@@ -53,6 +53,7 @@ fn run(prog: &Program, n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
         info: &info,
         textures: None,
         seed: 7,
+        rays: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

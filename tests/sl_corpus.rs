@@ -127,6 +127,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         info: &info,
         textures: None,
         seed: 11,
+        rays: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();
@@ -297,20 +298,24 @@ fn shader_kind_words_are_names_outside_definitions() {
 
 #[test]
 fn extensions_warn_once_and_give_their_fallback() {
+    // occlusion/indirectdiffuse are ray functions now (no warning); without a ray tracer they
+    // read unoccluded and black. caustic() is still an extension: one warning, black.
     let (progs, diags) = compile_text(
         "surface t() { float o = occlusion(P, N, 16, \"maxdist\", 1); \
          float o2 = occlusion(P, N, 4); color ind = indirectdiffuse(P, N, 8); \
-         Ci = color(1 - o - o2) + ind; }",
+         color c1 = caustic(P, N); color c2 = caustic(P, N); \
+         Ci = color(1 - o - o2) + ind + c1 + c2; }",
     );
     assert_eq!(progs.len(), 1, "{diags:?}");
-    let occ: Vec<_> = diags
+    assert!(
+        !diags.iter().any(|d| d.2.contains("`occlusion`")),
+        "occlusion is a ray function: {diags:?}"
+    );
+    let c: Vec<_> = diags
         .iter()
-        .filter(|d| d.0 == "sl::extension" && d.2.contains("`occlusion`"))
+        .filter(|d| d.0 == "sl::extension" && d.2.contains("`caustic`"))
         .collect();
-    assert_eq!(occ.len(), 1, "one warning per extension: {diags:?}");
-    assert!(diags
-        .iter()
-        .any(|d| d.0 == "sl::extension" && d.2.contains("`indirectdiffuse`")));
+    assert_eq!(c.len(), 1, "one warning per extension: {diags:?}");
     assert!(diags.iter().all(|d| !d.1), "{diags:?}");
     // Unoccluded and no indirect light: Ci = 1 everywhere.
     let (bad, ci) = run(&progs[0]);

@@ -36,6 +36,7 @@ fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32
         diags: &diags,
         textures: None,
         aovs: Vec::new(),
+        rays: Default::default(),
     };
     let opts = RenderOptions {
         threads,

@@ -164,6 +164,12 @@ impl Builder<'_> {
             return;
         }
         let mut shader = self.shader_ref(call);
+        let ray_shadows = self
+            .attrs()
+            .user
+            .get("light:shadows")
+            .and_then(|p| p.data.strings().first().cloned())
+            .is_some_and(|s| s.eq_ignore_ascii_case("on"));
         if self.world.is_none() {
             // RenderMan Companion style: a light before WorldBegin lives in camera space and
             // shines in every world of its frame (or of the whole file outside frames).
@@ -174,6 +180,7 @@ impl Builder<'_> {
                     shader: Arc::new(shader),
                     handle,
                     area,
+                    ray_shadows,
                 },
                 in_frame,
             });
@@ -188,6 +195,7 @@ impl Builder<'_> {
             shader,
             handle: handle.clone(),
             area,
+            ray_shadows,
         });
         // A reused handle names the newest light.
         self.light_handles.insert(handle, idx);

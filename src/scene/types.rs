@@ -388,6 +388,9 @@ pub struct Light {
     /// The handle as written (an integer or a string).
     pub handle: String,
     pub area: bool,
+    /// BMRT's `Attribute "light" "shadows" "on"` when the light was declared: the renderer
+    /// traces a shadow ray for it at every lit point (whatever the light shader does).
+    pub ray_shadows: bool,
 }
 
 /// Geometry as given by the request, in object space. Angles are in degrees as in RIB.

@@ -85,6 +85,22 @@ pub struct Env<'a> {
     pub textures: Option<&'a dyn TextureLookup>,
     /// Seed for random(): a hash of the grid's identity so results are deterministic.
     pub seed: u32,
+    /// Ray queries (None: no ray tracing here; ray functions return their miss values).
+    pub rays: Option<&'a dyn RayTracer>,
+}
+
+/// Ray queries from shaders, answered by the shading system over the frame's ray geometry.
+/// Points are in camera ("current") space.
+pub trait RayTracer {
+    /// Ray depth of the grid being shaded (0 for grids the camera sees).
+    fn depth(&self) -> u32;
+    /// The hit's shaded `Ci` along each active ray (black on a miss or past the depth limit;
+    /// partly transparent hits are seen through) and the distance to the first hit
+    /// (infinite on a miss), in units of `dir`'s length.
+    fn trace(&self, org: &[Vec3], dir: &[Vec3], active: &[bool], ci: &mut [Vec3], dist: &mut [f32]);
+    /// The fraction of light passing from `from` to `to` (1: nothing in the way), through the
+    /// opacity `Os` of every shadow-casting surface between.
+    fn transmission(&self, from: &[Vec3], to: &[Vec3], active: &[bool], out: &mut [Vec3]);
 }
 
 /// A value answered by attribute()/option()/rendererinfo()/message passing.
@@ -242,6 +258,9 @@ pub struct Exec<'a> {
     relit: Option<Rc<RelitLights>>,
     /// The light set of the running illuminance body (None: `env.lights`).
     lights_in_use: Option<Rc<RelitLights>>,
+    /// True inside `solar()` (a ray-traced shadow then looks along L to infinity rather than
+    /// to the point `Ps − L`).
+    pub in_solar: bool,
 }
 
 /// Runs the grid's lights with the lit points at `ps`, for the lights flagged in `want` (by
@@ -313,6 +332,7 @@ impl<'a> Exec<'a> {
             n,
             env,
             frames: Vec::new(),
+            in_solar: false,
             light: None,
             current_light: None,
             iterations: 0,
@@ -536,7 +556,21 @@ impl<'a> Exec<'a> {
             } => self.illuminance(*category, *pos, *axis, body, mask),
             Instr::Illuminate { pos, axis, body } => self.illuminate(Some(*pos), *axis, body, mask),
             Instr::Solar { axis, body } => self.illuminate(None, *axis, body, mask),
-            Instr::Gather { otherwise } => self.block(otherwise, mask),
+            Instr::Gather {
+                pos,
+                dir,
+                angle,
+                samples,
+                outputs,
+                body,
+                otherwise,
+            } => self.gather(
+                [*pos, *dir, *angle, *samples],
+                outputs,
+                body,
+                otherwise,
+                mask,
+            ),
             Instr::SetIndex {
                 kind: _,
                 base,
@@ -936,6 +970,96 @@ impl<'a> Exec<'a> {
         self.lights_in_use = outer;
     }
 
+    /// gather: per sample, the rays that hit run `body`, the others `otherwise` (see
+    /// [`Instr::Gather`]). Without a ray tracer every ray misses.
+    fn gather(
+        &mut self,
+        [pos, dir, angle, samples]: [Reg; 4],
+        outputs: &'a [(String, Reg)],
+        body: &'a [Instr],
+        otherwise: &'a [Instr],
+        mask: &mut Mask,
+    ) {
+        let n = self.n;
+        let Some(rt) = self.env.rays else {
+            self.block(otherwise, mask);
+            return;
+        };
+        let p: Vec<Vec3> = {
+            let t = self.regs[pos as usize].t();
+            (0..n).map(|i| t.at(i)).collect()
+        };
+        let d: Vec<Vec3> = {
+            let t = self.regs[dir as usize].t();
+            (0..n).map(|i| t.at(i).normalize_or_zero()).collect()
+        };
+        let cone = self.regs[angle as usize].f().first();
+        let count = self.regs[samples as usize].f().first().round().clamp(1.0, 4096.0) as u32;
+        let salt = crate::pattern::hash::hash_u32(pos ^ (dir << 16) ^ 0x6a7);
+        let start = mask.clone();
+        let mut ci = vec![Vec3::ZERO; n];
+        let mut oi = vec![Vec3::ZERO; n];
+        let mut dist = vec![0f32; n];
+        for k in 0..count {
+            let dirs: Vec<Vec3> = (0..n)
+                .map(|i| {
+                    let (u1, u2) = crate::ray::stratified(crate::ray::point_seed(p[i], salt), k, count);
+                    crate::ray::cosine_dir(d[i], u1, u2, cone)
+                })
+                .collect();
+            rt.trace(&p, &dirs, &start.bits, &mut ci, &mut dist);
+            let _ = &mut oi;
+            let hit: Vec<bool> = (0..n)
+                .map(|i| start.bits[i] && dist[i].is_finite())
+                .collect();
+            for (name, reg) in outputs {
+                let r = *reg as usize;
+                let vals: Option<Vec<Vec3>> = match name.as_str() {
+                    "surface:Ci" => Some(ci.clone()),
+                    "surface:Oi" => Some(vec![Vec3::ONE; n]),
+                    "ray:direction" => Some(dirs.clone()),
+                    "ray:origin" => Some(p.clone()),
+                    "primitive:P" | "surface:P" => {
+                        Some((0..n).map(|i| p[i] + dirs[i] * dist[i].min(1e30)).collect())
+                    }
+                    "ray:length" => {
+                        let cur = self.regs[r].f();
+                        let v: Vec<f32> = (0..n)
+                            .map(|i| if hit[i] { dist[i] } else { cur.at(i) })
+                            .collect();
+                        self.regs[r] = if self.prog.regs[r].varying {
+                            Slot::VF(v)
+                        } else {
+                            Slot::F(v.first().copied().unwrap_or(0.0))
+                        };
+                        None
+                    }
+                    _ => None,
+                };
+                if let Some(vals) = vals {
+                    let cur = self.regs[r].t();
+                    let v: Vec<Vec3> = (0..n)
+                        .map(|i| if hit[i] { vals[i] } else { cur.at(i) })
+                        .collect();
+                    self.regs[r] = if self.prog.regs[r].varying {
+                        Slot::VT(v)
+                    } else {
+                        Slot::T(v.first().copied().unwrap_or(Vec3::ZERO))
+                    };
+                }
+            }
+            let miss: Vec<bool> = (0..n).map(|i| start.bits[i] && !hit[i]).collect();
+            let mut hm = Mask::from_bits(hit);
+            if !hm.is_none() {
+                self.block(body, &mut hm);
+            }
+            let mut mm = Mask::from_bits(miss);
+            if !mm.is_none() {
+                self.block(otherwise, &mut mm);
+            }
+        }
+    }
+
     fn illuminate(
         &mut self,
         pos: Option<Reg>,
@@ -947,6 +1071,7 @@ impl<'a> Exec<'a> {
         let Some(state) = self.light.take() else {
             return;
         };
+        self.in_solar = pos.is_none();
         let lreg = self.reg_of("L");
         // L reuses the register's buffer; the lit mask a pooled one.
         let mut l = match lreg {

@@ -7,6 +7,7 @@ pub mod color;
 pub mod exec;
 pub mod grid;
 pub mod ops;
+pub mod rays;
 pub mod system;
 pub mod value;
 

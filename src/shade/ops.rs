@@ -17,6 +17,9 @@ use crate::shade::value::*;
 use crate::sl::builtins::Builtin;
 use crate::sl::ir::*;
 
+#[path = "rayops.rs"]
+mod rayops;
+
 fn take(ex: &mut Exec, r: Reg) -> Slot {
     std::mem::take(&mut ex.regs[r as usize])
 }
@@ -400,7 +403,11 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                 ex.warn(*span, "array index out of range (clamped)");
             }
         }
-        Instr::Call { f, dst, args, span } => call(ex, *f, *dst, args, *span),
+        Instr::Call { f, dst, args, span } => {
+            if !rayops::call(ex, *f, *dst, args, *span, mask) {
+                call(ex, *f, *dst, args, *span)
+            }
+        }
         _ => {}
     }
 }
@@ -1274,6 +1281,15 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 }
             });
         }
+        CalculateNormal if ex.env.nu * ex.env.nv != n => {
+            // A grid of ray hits has no neighbours to differentiate: the surface normal.
+            out = ex
+                .prog
+                .global("N")
+                .or_else(|| ex.prog.global("Ng"))
+                .map(|g| ex.regs[g.reg as usize].clone())
+                .unwrap_or(Slot::T(Vec3::ZERO));
+        }
         CalculateNormal => {
             let (du, dv) = du_dv(ex);
             let p = vec_t(arg(ex, args, 0), n);
@@ -1534,13 +1550,13 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 Slot::VT(vn),
             ]);
         }
-        Trace => {
+        // Ray functions run in `rayops` (they need the running mask); not reached.
+        Trace | Occlusion | IndirectDiffuse | Transmission | Visibility | IsShadowRay => {
             out = if ex.prog.regs[dst as usize].kind == Kind::Float {
                 Slot::F(0.0)
             } else {
                 Slot::T(Vec3::ZERO)
             };
-            ex.warn(span, "trace() returns black: arbor does not ray trace");
         }
         TextureF | TextureC | EnvironmentF | EnvironmentC | Shadow | Bump => {
             out = texture_call(ex, f, dst, args, span);
@@ -2081,7 +2097,7 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             }
             None => (ex.env.info)(&which, &name),
         },
-        "attribute" | "option" | "rendererinfo" => (ex.env.info)(&which, &name),
+        "attribute" | "option" | "rendererinfo" | "rayinfo" => (ex.env.info)(&which, &name),
         other => {
             ex.warn(
                 ex.prog.span,

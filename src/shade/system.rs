@@ -30,6 +30,8 @@ pub struct ShadeSystem<'a> {
     pub textures: Option<&'a dyn TextureLookup>,
     /// Output variables the displays want (shader output parameters or globals by name).
     pub aovs: Vec<String>,
+    /// The frame's ray-traceable geometry, built on the first ray a shader casts.
+    pub rays: crate::ray::RayCache,
 }
 
 fn uses_lights(instrs: &[Instr]) -> bool {
@@ -49,7 +51,9 @@ fn uses_lights(instrs: &[Instr]) -> bool {
         Instr::Function { body } | Instr::Illuminate { body, .. } | Instr::Solar { body, .. } => {
             uses_lights(body)
         }
-        Instr::Gather { otherwise } => uses_lights(otherwise),
+        Instr::Gather {
+            body, otherwise, ..
+        } => uses_lights(body) || uses_lights(otherwise),
         _ => false,
     })
 }
@@ -71,7 +75,27 @@ fn uses_bare_solar(instrs: &[Instr]) -> bool {
         | Instr::Illuminate { body, .. }
         | Instr::Solar { body, .. }
         | Instr::Illuminance { body, .. } => uses_bare_solar(body),
-        Instr::Gather { otherwise } => uses_bare_solar(otherwise),
+        Instr::Gather {
+            body, otherwise, ..
+        } => uses_bare_solar(body) || uses_bare_solar(otherwise),
+        _ => false,
+    })
+}
+
+/// Whether a light program calls `solar()` at all.
+fn uses_solar(instrs: &[Instr]) -> bool {
+    instrs.iter().any(|i| match i {
+        Instr::Solar { .. } => true,
+        Instr::If {
+            then, otherwise, ..
+        } => uses_solar(then) || uses_solar(otherwise),
+        Instr::Loop {
+            cond_code,
+            body,
+            step,
+            ..
+        } => uses_solar(cond_code) || uses_solar(body) || uses_solar(step),
+        Instr::Function { body } | Instr::Illuminate { body, .. } => uses_solar(body),
         _ => false,
     })
 }
@@ -81,6 +105,10 @@ struct GridLight<'s> {
     shader: &'s ShaderRef,
     prog: Arc<Program>,
     bare_solar: bool,
+    /// BMRT `Attribute "light" "shadows" "on"`: trace a shadow ray to the light.
+    ray_shadows: bool,
+    /// The light uses solar() (its L is a direction, the light at infinity).
+    solar: bool,
 }
 
 /// Per-run facts shared by the programs of one grid.
@@ -92,6 +120,11 @@ struct RunCtx<'s> {
     seed: u32,
     /// Per-point alpha for imager shaders (1 elsewhere).
     alpha: Option<&'s [f32]>,
+    /// Ray depth of the grid (0: seen by the camera).
+    depth: u32,
+    /// The grid is a batch of ray hits: neighbouring points are unrelated, so derivatives
+    /// across it read as zero.
+    hits: bool,
 }
 
 impl<'a> ShadeSystem<'a> {
@@ -250,6 +283,8 @@ impl<'a> ShadeSystem<'a> {
             camera_from_object: camera.camera_from_world * p.world_from_object,
             seed: crate::pattern::hash::hash_u32(prim as u32 ^ 0x9e37_79b9),
             alpha: None,
+            depth: 0,
+            hits: false,
         }
     }
 
@@ -298,6 +333,8 @@ impl<'a> ShadeSystem<'a> {
                 camera_from_object: Mat4::IDENTITY,
                 seed: 0x1a6e,
                 alpha: Some(&alpha),
+                depth: 0,
+                hits: false,
             };
             if let Some(mut regs) =
                 self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None, None)
@@ -331,10 +368,30 @@ impl<'a> ShadeSystem<'a> {
 
     /// Runs surface (with lights) and atmosphere shaders; fills ci/oi.
     pub fn shade(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
+        let ctx = self.ctx(scene, camera, prim);
+        self.shade_with(ctx, prim, grid)
+    }
+
+    /// Shades a grid of ray hits on `prim` at ray depth `depth` (see `shade::rays`).
+    pub fn shade_ray_hits(
+        &self,
+        scene: &Scene,
+        camera: &Camera,
+        prim: usize,
+        grid: &mut Grid,
+        depth: u32,
+    ) {
+        let mut ctx = self.ctx(scene, camera, prim);
+        ctx.depth = depth;
+        ctx.hits = true;
+        self.shade_with(ctx, prim, grid)
+    }
+
+    fn shade_with(&self, ctx: RunCtx, prim: usize, grid: &mut Grid) {
+        let scene = ctx.scene;
         let Some(p) = scene.primitives.get(prim) else {
             return;
         };
-        let ctx = self.ctx(scene, camera, prim);
         let surface = match &p.attributes.surface {
             Some(s) => self
                 .program(s, ShaderKind::Surface)
@@ -501,10 +558,13 @@ impl<'a> ShadeSystem<'a> {
                 let light = ctx.scene.lights.get(li)?;
                 let prog = self.program(&light.shader, ShaderKind::Light)?;
                 let bare_solar = uses_bare_solar(&prog.body);
+                let solar = uses_solar(&prog.body);
                 Some(GridLight {
                     shader: &light.shader,
                     prog,
                     bare_solar,
+                    ray_shadows: light.ray_shadows,
+                    solar,
                 })
             })
             .collect()
@@ -570,6 +630,33 @@ impl<'a> ShadeSystem<'a> {
             let mut cl = get("Cl", Vec3::ZERO);
             let ol = get("Ol", Vec3::ONE);
             let lit = if ambient { vec![true; n] } else { state.lit };
+            if gl.ray_shadows && !ambient {
+                // The segment from each lit point to the light (along L to infinity for
+                // distant lights, whose L is the same everywhere).
+                let tracer = crate::shade::rays::Tracer {
+                    sys: self,
+                    scene: ctx.scene,
+                    camera: ctx.camera,
+                    depth: ctx.depth,
+                };
+                let to: Vec<Vec3> = (0..n)
+                    .map(|i| {
+                        if gl.solar {
+                            ps[i] + l[i].normalize_or_zero() * 1.0e8
+                        } else {
+                            ps[i] + l[i]
+                        }
+                    })
+                    .collect();
+                let active: Vec<bool> = (0..n)
+                    .map(|i| lit[i] && cl[i] != Vec3::ZERO)
+                    .collect();
+                let mut t = vec![Vec3::ONE; n];
+                crate::shade::exec::RayTracer::transmission(&tracer, &ps[..], &to, &active, &mut t);
+                for (c, t) in cl.iter_mut().zip(&t) {
+                    *c *= *t;
+                }
+            }
             if !lit.iter().all(|&b| b) {
                 for (c, &on) in cl.iter_mut().zip(&lit) {
                     if !on {
@@ -636,16 +723,36 @@ impl<'a> ShadeSystem<'a> {
         };
         let attrs = ctx.attrs;
         let scene = ctx.scene;
+        let depth = ctx.depth;
         let info = move |which: &str, name: &str| -> Option<InfoValue> {
+            if which == "rayinfo" {
+                // rayinfo("depth"): the ray level of this grid; the rest is per ray and not kept.
+                return match name {
+                    "depth" => Some(InfoValue::Floats(vec![depth as f32])),
+                    "maxdepth" => Some(InfoValue::Floats(vec![
+                        crate::shade::rays::max_depth(scene) as f32,
+                    ])),
+                    _ => None,
+                };
+            }
             info_query(scene, attrs, camera, which, name)
         };
         let flip = match (grid.ng.first(), grid.dpdu.first(), grid.dpdv.first()) {
             (Some(ng), Some(a), Some(b)) => ng.dot(a.cross(*b)) < 0.0,
             _ => false,
         };
+        let tracer = crate::shade::rays::Tracer {
+            sys: self,
+            scene,
+            camera,
+            depth: ctx.depth,
+        };
+        // A grid of ray hits has no neighbours to differentiate across (0 × 0: every
+        // derivative reads zero).
+        let (env_nu, env_nv) = if ctx.hits { (0, 0) } else { (grid.nu, grid.nv) };
         let env = Env {
-            nu: grid.nu,
-            nv: grid.nv,
+            nu: env_nu,
+            nv: env_nv,
             spaces: &spaces,
             lights,
             flip_normals: flip,
@@ -656,6 +763,7 @@ impl<'a> ShadeSystem<'a> {
             info: &info,
             textures: self.textures,
             seed: ctx.seed,
+            rays: Some(&tracer),
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);

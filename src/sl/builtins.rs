@@ -144,8 +144,15 @@ pub enum Builtin {
     ShaderName,
     ArrayLength,
     IsNan,
-    /// BMRT/PRMan `raylevel()` and `isshadowray()`: arbor shades camera rays only, so 0.
+    /// BMRT/PRMan `raylevel()`: the ray depth of the grid being shaded.
     RayLevel,
+    /// `isshadowray()`: arbor never shades for shadow rays (they read `Os`), so 0.
+    IsShadowRay,
+    // ray tracing (free-form parameters; lowered specially): shade/rayops.rs
+    Occlusion,
+    IndirectDiffuse,
+    Transmission,
+    Visibility,
     // horizon mapping (Max): src/texture/horizon.rs
     Horizon,
     HorizonHeight,
@@ -305,7 +312,7 @@ pub static SIGS: &[Sig] = sigs! {
     "trace" 'f' "pv" Trace;
     "isnan" 'f' "f" IsNan;
     "raylevel" 'f' "" RayLevel;
-    "isshadowray" 'f' "" RayLevel;
+    "isshadowray" 'f' "" IsShadowRay;
     "horizon" 'f' "sffv" Horizon;
     "horizon" 'f' "sffvsf" Horizon;
     "horizon" 'f' "sffvsfsf" Horizon;
@@ -336,6 +343,11 @@ pub const SPECIAL: &[&str] = &[
     "rendererinfo",
     "shadername",
     "arraylength",
+    "rayinfo",
+    "occlusion",
+    "indirectdiffuse",
+    "transmission",
+    "visibility",
     "spline",
     "transform",
     "vtransform",
@@ -457,7 +469,12 @@ pub static DOCS: &[(&str, &[&str], &str)] = &[
     ("specular", &[], "Specular highlight (RISpec's model) for normal N, view V and roughness."),
     ("specularbrdf", &[], "The specular() term of one light direction L."),
     ("phong", &[], "Phong highlight for normal N, view V and exponent size."),
-    ("trace", &[], "Colour seen along a ray from P in direction R (arbor: black, no ray tracing)."),
+    ("trace", &[], "Colour seen along a ray from P in direction R: the hit surface's shaded Ci (black on a miss)."),
+    ("occlusion", &["float occlusion(point P, normal N, float samples [, ...params])"], "Fraction of the hemisphere around N blocked by shadow-casting geometry (stratified cosine sampling); params: maxdist, coneangle, bias, samples."),
+    ("indirectdiffuse", &["color indirectdiffuse(point P, normal N, float samples [, ...params])"], "Diffuse light from the surfaces around P: the mean shaded Ci of cosine-distributed rays; params: maxdist, coneangle, bias."),
+    ("transmission", &["color transmission(point Psrc, point Pdst [, ...params])"], "Light passing from Psrc to Pdst through the opacity of what lies between (1: nothing in the way); params: samples, samplecone, bias."),
+    ("visibility", &["color visibility(point P1, point P2)"], "BMRT: 1 where nothing blocks the segment P1–P2, through partly transparent blockers' opacity."),
+    ("rayinfo", &["float rayinfo(string name, output var)"], "Ray facts: \"depth\" (0 for camera grids), \"origin\", \"direction\", \"length\" (of the ray that hit this point); 1 when known."),
     ("texture", &["float texture(string name[channel] [, float s, t [, ...4 corners]] [, ...params])", "color texture(string name[channel] [, float s, t] [, ...params])"], "Filtered texture-map lookup at (s,t) or a quadrilateral; params: blur, width, swidth, twidth, filter, fill."),
     ("environment", &["float environment(string name[channel], vector R [, ...params])", "color environment(string name[channel], vector R [, ...params])"], "Filtered environment-map lookup in direction R (lat-long or cube)."),
     ("shadow", &["float shadow(string name[channel], point P [, ...params])"], "Fraction of P in shadow in a shadow map (percentage-closer filtered): 0 lit, 1 shadowed."),

@@ -253,8 +253,17 @@ pub enum Instr {
         axis: Option<(Reg, Reg)>,
         body: Vec<Instr>,
     },
-    /// gather: no ray tracing; runs the `otherwise` branch (all rays miss).
+    /// gather(category, P, dir, angle, samples, "name", var…): per sample, rays from `pos`
+    /// in a cone of half-angle `angle` around `dir`; `body` runs where the ray hit (with the
+    /// `outputs` temporaries set: "surface:Ci", "surface:Oi", "ray:length", "ray:direction",
+    /// "ray:origin", "primitive:P"), `otherwise` where it missed.
     Gather {
+        pos: Reg,
+        dir: Reg,
+        angle: Reg,
+        samples: Reg,
+        outputs: Vec<(String, Reg)>,
+        body: Vec<Instr>,
         otherwise: Vec<Instr>,
     },
 }
@@ -326,7 +335,9 @@ impl Program {
                         | Instr::Illuminance { body, .. }
                         | Instr::Illuminate { body, .. }
                         | Instr::Solar { body, .. } => count(body),
-                        Instr::Gather { otherwise } => count(otherwise),
+                        Instr::Gather {
+                            body, otherwise, ..
+                        } => count(body) + count(otherwise),
                         _ => 0,
                     }
                 })
@@ -399,8 +410,30 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 writeln!(f, "{pad}solar axis={:?}", axis)?;
                 list(f, body, depth + 1)?;
             }
-            Instr::Gather { otherwise } => {
-                writeln!(f, "{pad}gather (no rays) else")?;
+            Instr::Gather {
+                pos,
+                dir,
+                angle,
+                samples,
+                outputs,
+                body,
+                otherwise,
+            } => {
+                let outs: Vec<String> = outputs
+                    .iter()
+                    .map(|(n, reg)| format!("{n}→{}", r(*reg)))
+                    .collect();
+                writeln!(
+                    f,
+                    "{pad}gather P={} dir={} angle={} samples={} [{}]",
+                    r(*pos),
+                    r(*dir),
+                    r(*angle),
+                    r(*samples),
+                    outs.join(", ")
+                )?;
+                list(f, body, depth + 1)?;
+                writeln!(f, "{pad}else")?;
                 list(f, otherwise, depth + 1)?;
             }
             Instr::Call {
@@ -555,11 +588,18 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
                 out.extend([*a, *b]);
             }
         }
-        Instr::Break(_)
-        | Instr::Continue(_)
-        | Instr::Function { .. }
-        | Instr::Return
-        | Instr::Gather { .. } => {}
+        Instr::Gather {
+            pos,
+            dir,
+            angle,
+            samples,
+            outputs,
+            ..
+        } => {
+            out.extend([*pos, *dir, *angle, *samples]);
+            out.extend(outputs.iter().map(|(_, r)| *r));
+        }
+        Instr::Break(_) | Instr::Continue(_) | Instr::Function { .. } | Instr::Return => {}
     }
 }
 
@@ -578,7 +618,9 @@ fn nested(ins: &Instr) -> Vec<&[Instr]> {
         | Instr::Illuminance { body, .. }
         | Instr::Illuminate { body, .. }
         | Instr::Solar { body, .. } => vec![body],
-        Instr::Gather { otherwise } => vec![otherwise],
+        Instr::Gather {
+            body, otherwise, ..
+        } => vec![body, otherwise],
         _ => vec![],
     }
 }

@@ -359,30 +359,6 @@ impl<'a> Lowerer<'a> {
     /// nothing baked). None for any other name.
     fn extension_call(&mut self, name: &str, args: &[Expr], span: Span) -> Option<Val> {
         let (key, ty, value, what): (&'static str, BaseType, Const, &str) = match name {
-            "occlusion" => (
-                "occlusion",
-                BaseType::Float,
-                Const::F(0.0),
-                "0 (unoccluded)",
-            ),
-            "indirectdiffuse" => (
-                "indirectdiffuse",
-                BaseType::Color,
-                Const::T(Vec3::ZERO),
-                "black (no indirect light)",
-            ),
-            "transmission" => (
-                "transmission",
-                BaseType::Color,
-                Const::T(Vec3::ONE),
-                "white (nothing in the way)",
-            ),
-            "visibility" => (
-                "visibility",
-                BaseType::Color,
-                Const::T(Vec3::ONE),
-                "white (visible)",
-            ),
             "caustic" => ("caustic", BaseType::Color, Const::T(Vec3::ZERO), "black"),
             "photonmap" => ("photonmap", BaseType::Color, Const::T(Vec3::ZERO), "black"),
             "subsurface" => ("subsurface", BaseType::Color, Const::T(Vec3::ZERO), "black"),
@@ -938,26 +914,117 @@ impl<'a> Lowerer<'a> {
                 body,
                 otherwise,
             } => {
-                // Type-check everything; without ray tracing every ray misses.
-                for a in args {
-                    self.expr(a, None);
+                // gather(category, P, dir, angle, samples, "name", var, …)
+                let tys = [
+                    BaseType::String,
+                    BaseType::Point,
+                    BaseType::Vector,
+                    BaseType::Float,
+                    BaseType::Float,
+                ];
+                if args.len() < 5 {
+                    self.diags.push(
+                        Diag::error(
+                            "sl::call",
+                            format!("`gather` takes (category, P, dir, angle, samples, …), found {} arguments", args.len()),
+                        )
+                        .label(s.span, "gather")
+                        .help("gather(\"illuminance\", P, R, 0, 4, \"surface:Ci\", c) { … }"),
+                    );
+                }
+                let mut regs = Vec::new();
+                for (k, a) in args.iter().take(5).enumerate() {
+                    let v = self.expr(a, Some(tys[k]));
+                    let v = self.coerce(v, tys[k], a.span);
+                    regs.push(v.reg);
+                }
+                while regs.len() < 5 {
+                    regs.push(self.const_float(0.0));
+                }
+                // Output pairs: a literal name and a variable.
+                let mut outs: Vec<(String, Var, Val, Span)> = Vec::new();
+                let mut k = 5;
+                while k < args.len() {
+                    let name = match &args[k].kind {
+                        ExprKind::Str(n) => n.clone(),
+                        _ => {
+                            self.expr(&args[k], None);
+                            self.diags.push(
+                                Diag::error("sl::call", "`gather` output names are string literals")
+                                    .label(args[k].span, "not a literal name"),
+                            );
+                            k += 2;
+                            continue;
+                        }
+                    };
+                    let Some(target) = args.get(k + 1) else {
+                        self.diags.push(
+                            Diag::error("sl::call", format!("`gather` output \"{name}\" without a variable"))
+                                .label(args[k].span, "no variable"),
+                        );
+                        break;
+                    };
+                    let var = match &target.kind {
+                        ExprKind::Ident(n) => self.lookup(n).filter(|v| v.writable),
+                        _ => None,
+                    };
+                    let Some(var) = var else {
+                        self.diags.push(
+                            Diag::error("sl::call", format!("`gather` stores \"{name}\" into a writable variable"))
+                                .label(target.span, "not a writable variable"),
+                        );
+                        k += 2;
+                        continue;
+                    };
+                    let known = matches!(
+                        name.as_str(),
+                        "surface:Ci" | "surface:Oi" | "ray:length" | "ray:direction" | "ray:origin"
+                            | "primitive:P" | "surface:P"
+                    );
+                    if !known {
+                        self.diags.push(
+                            Diag::warning("sl::unsupported", format!("`gather` output \"{name}\" is not computed by arbor; the variable keeps its value"))
+                                .label(args[k].span, "unsupported output")
+                                .help("arbor gives surface:Ci, surface:Oi, ray:length, ray:direction, ray:origin, primitive:P"),
+                        );
+                    }
+                    let want = if name == "ray:length" { BaseType::Float } else { BaseType::Color };
+                    let ty_ok = if want == BaseType::Float { var.ty == BaseType::Float } else { var.ty.is_triple() };
+                    if !ty_ok {
+                        self.diags.push(
+                            Diag::error("sl::type", format!("`gather` output \"{name}\" needs a {} variable", if want == BaseType::Float { "float" } else { "triple" }))
+                                .label(target.span, "wrong type"),
+                        );
+                        k += 2;
+                        continue;
+                    }
+                    let t = self.temp(var.ty, true);
+                    outs.push((name, var, t, target.span));
+                    k += 2;
                 }
                 self.varying_ctx += 1;
-                let _ = self.with_block(|lw| lw.scoped_stmt(body));
+                let (bb, ()) = self.with_block(|lw| {
+                    for (_, var, t, sp) in &outs {
+                        lw.store_reg(var, var.reg, *t, *sp);
+                        lw.mark_written(var.reg);
+                    }
+                    lw.scoped_stmt(body)
+                });
                 let (eb, ()) = self.with_block(|lw| {
                     if let Some(o) = otherwise {
                         lw.scoped_stmt(o)
                     }
                 });
                 self.varying_ctx -= 1;
-                self.diags.push(
-                    Diag::warning(
-                        "sl::unsupported",
-                        "`gather` traces no rays in arbor: its else branch runs",
-                    )
-                    .label(s.span, "gather"),
-                );
-                self.emit(Instr::Gather { otherwise: eb });
+                self.emit(Instr::Gather {
+                    pos: regs[1],
+                    dir: regs[2],
+                    angle: regs[3],
+                    samples: regs[4],
+                    outputs: outs.iter().map(|(n, _, t, _)| (n.clone(), t.reg)).collect(),
+                    body: bb,
+                    otherwise: eb,
+                });
             }
         }
     }
@@ -2024,8 +2091,11 @@ impl<'a> Lowerer<'a> {
             "filterstep" => return self.filterstep(args, span),
             "printf" | "format" => return self.printf(name, args, span),
             "atmosphere" | "displacement" | "lightsource" | "surface" | "incident" | "opposite"
-            | "attribute" | "option" | "rendererinfo" | "textureinfo" => {
+            | "attribute" | "option" | "rendererinfo" | "textureinfo" | "rayinfo" => {
                 return self.message(name, args, span)
+            }
+            "occlusion" | "indirectdiffuse" | "transmission" | "visibility" => {
+                return self.ray_call(name, args, span)
             }
             "shadername" => {
                 let mut regs = Vec::new();
@@ -2851,6 +2921,95 @@ impl<'a> Lowerer<'a> {
         // Always varying: the filter footprint comes from the coordinates' derivatives, which
         // differ per point even when the coordinates are uniform expressions of s and t.
         let t = self.temp(ty, true);
+        self.emit(Instr::Call {
+            f,
+            dst: t.reg,
+            args: regs,
+            span,
+        });
+        t
+    }
+
+    /// Ray functions with positional arguments then "name", value pairs:
+    /// `occlusion(P, N, samples, …)`, `indirectdiffuse(P, N, samples, …)`,
+    /// `transmission(Psrc, Pdst, …)`, `visibility(P1, P2)`.
+    fn ray_call(&mut self, name: &str, args: &[Expr], span: Span) -> Val {
+        let (f, ret, pos): (Builtin, BaseType, &[BaseType]) = match name {
+            "occlusion" => (
+                Builtin::Occlusion,
+                BaseType::Float,
+                &[BaseType::Point, BaseType::Normal, BaseType::Float],
+            ),
+            "indirectdiffuse" => (
+                Builtin::IndirectDiffuse,
+                BaseType::Color,
+                &[BaseType::Point, BaseType::Normal, BaseType::Float],
+            ),
+            "transmission" => (
+                Builtin::Transmission,
+                BaseType::Color,
+                &[BaseType::Point, BaseType::Point],
+            ),
+            _ => (
+                Builtin::Visibility,
+                BaseType::Color,
+                &[BaseType::Point, BaseType::Point],
+            ),
+        };
+        let mut regs = Vec::new();
+        let mut k = 0;
+        while k < args.len() && k < pos.len() {
+            let v = self.expr(&args[k], Some(pos[k]));
+            if v.ty == BaseType::String {
+                break;
+            }
+            let v = self.coerce(v, pos[k], args[k].span);
+            regs.push(v.reg);
+            k += 1;
+        }
+        // PRMan's occlusion/indirectdiffuse without a sample count: 16 (arbor's default).
+        if regs.len() == 2 && pos.len() == 3 {
+            regs.push(self.const_float(16.0));
+        }
+        if regs.len() != pos.len() {
+            return self.error(
+                Diag::error(
+                    "sl::call",
+                    format!("`{name}` takes {} positional arguments, found {}", pos.len(), k),
+                )
+                .label(span, "call")
+                .help(match name {
+                    "occlusion" => "occlusion(P, N, samples, \"maxdist\", d)",
+                    "indirectdiffuse" => "indirectdiffuse(P, N, samples)",
+                    _ => "transmission(Ps, lightposition)",
+                }),
+            );
+        }
+        while k < args.len() {
+            let pn = self.expr(&args[k], Some(BaseType::String));
+            if pn.ty != BaseType::String {
+                self.diags.push(
+                    Diag::error(
+                        "sl::call",
+                        format!("`{name}` parameters come in \"name\", value pairs"),
+                    )
+                    .label(args[k].span, "expected a parameter name"),
+                );
+                break;
+            }
+            let Some(val) = args.get(k + 1) else {
+                self.diags.push(
+                    Diag::error("sl::call", format!("`{name}` parameter without a value"))
+                        .label(args[k].span, "no value"),
+                );
+                break;
+            };
+            let pv = self.expr(val, None);
+            regs.push(pn.reg);
+            regs.push(pv.reg);
+            k += 2;
+        }
+        let t = self.temp(ret, true);
         self.emit(Instr::Call {
             f,
             dst: t.reg,

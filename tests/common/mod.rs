@@ -79,6 +79,7 @@ pub fn render_rib_with(
         diags: &diags,
         textures: None,
         aovs: Vec::new(),
+        rays: Default::default(),
     };
     let film = render_frame(&scenes[0], &system, opts, &diags);
     assert!(

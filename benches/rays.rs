@@ -1,0 +1,164 @@
+//! Ray throughput: incoherent rays through a scene of about a million ray micropolygons
+//! (a 16 × 16 field of spheres under a matte shader and a distant light), each hit shaded
+//! by its surface shader in batches, on one thread. Reports rays per second.
+//!
+//! `ARBOR_RAYS_ITERS=N` runs N batches without criterion (for callgrind or `perf`).
+
+use criterion::{criterion_group, Criterion, Throughput};
+use glam::Vec3;
+
+use arbor::diag::{Diagnostics, SourceMap};
+use arbor::render::Camera;
+use arbor::scene::{build_scenes, BuildContext, Scene};
+use arbor::shade::exec::RayTracer;
+use arbor::shade::rays::Tracer;
+use arbor::shade::system::ShadeSystem;
+use arbor::sl::{CompileOptions, ShaderLibrary};
+
+fn scene_rib() -> String {
+    let mut s = String::from(
+        "Format 640 480 1\nProjection \"perspective\" \"fov\" [50]\nTranslate 0 0 20\n\
+         WorldBegin\nLightSource \"distantlight\" 1 \"from\" [1 1 -1] \"to\" [0 0 0]\n\
+         Surface \"matte\"\nShadingRate 0.02\n",
+    );
+    for j in 0..16 {
+        for i in 0..16 {
+            s.push_str(&format!(
+                "AttributeBegin\nTranslate {} {} {}\nSphere 0.45 -0.45 0.45 360\nAttributeEnd\n",
+                i as f32 - 7.5,
+                j as f32 - 7.5,
+                ((i * 7 + j * 3) % 5) as f32
+            ));
+        }
+    }
+    s.push_str("WorldEnd\n");
+    s
+}
+
+struct Rig {
+    sources: SourceMap,
+    diags: Diagnostics,
+    scene: Scene,
+    library: ShaderLibrary,
+}
+
+fn rig() -> Rig {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let rib = scene_rib();
+    let reqs = arbor::rib::parse_bytes("<bench>", rib.as_bytes(), &sources, &diags);
+    let ctx = BuildContext {
+        sources: &sources,
+        diags: &diags,
+        shader_paths: Vec::new(),
+        texture_paths: Vec::new(),
+        archive_paths: Vec::new(),
+        base_dir: None,
+        frames: None,
+    };
+    let scene = build_scenes(reqs, &ctx).remove(0);
+    let library = ShaderLibrary::new(CompileOptions::default());
+    Rig {
+        sources,
+        diags,
+        scene,
+        library,
+    }
+}
+
+/// A batch of incoherent rays: origins scattered through the field, directions uniform.
+fn rays(count: usize, seed: u32) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut h = seed;
+    let mut rnd = || {
+        h = arbor::pattern::hash::hash_u32(h.wrapping_add(0x9e37_79b9));
+        arbor::ray::unit(h) * 2.0 - 1.0
+    };
+    let mut o = Vec::with_capacity(count);
+    let mut d = Vec::with_capacity(count);
+    for _ in 0..count {
+        // Camera space: the field spans x, y in [−8, 8] around z = 20…24.
+        o.push(Vec3::new(rnd() * 8.0, rnd() * 8.0, 22.0 + rnd() * 3.0));
+        d.push(Vec3::new(rnd(), rnd(), rnd()).normalize_or(Vec3::Z));
+    }
+    (o, d)
+}
+
+const BATCH: usize = 4096;
+
+fn bench(c: &mut Criterion) {
+    let r = rig();
+    let camera = Camera::new(&r.scene);
+    let sys = ShadeSystem {
+        library: &r.library,
+        sources: &r.sources,
+        diags: &r.diags,
+        textures: None,
+        aovs: vec![],
+        rays: Default::default(),
+    };
+    let tracer = Tracer {
+        sys: &sys,
+        scene: &r.scene,
+        camera: &camera,
+        depth: 0,
+    };
+    let t0 = std::time::Instant::now();
+    let rs = tracer.geometry().expect("ray geometry");
+    eprintln!(
+        "ray geometry: {} micropolygons in {} grids, built in {:.2} s",
+        rs.micropolygons,
+        rs.grids.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    let active = vec![true; BATCH];
+    let mut ci = vec![Vec3::ZERO; BATCH];
+    let mut dist = vec![0f32; BATCH];
+    let batches: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..16).map(|k| rays(BATCH, k)).collect();
+    let hits = {
+        tracer.trace(&batches[0].0, &batches[0].1, &active, &mut ci, &mut dist);
+        dist.iter().filter(|d| d.is_finite()).count()
+    };
+    eprintln!("hit fraction: {:.2}", hits as f64 / BATCH as f64);
+    if let Some(n) = std::env::var("ARBOR_RAYS_ITERS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        let t = std::time::Instant::now();
+        for k in 0..n {
+            let (o, d) = &batches[k % batches.len()];
+            tracer.trace(o, d, &active, &mut ci, &mut dist);
+        }
+        let s = t.elapsed().as_secs_f64();
+        eprintln!(
+            "{} rays in {:.3} s: {:.2} M rays/s",
+            n * BATCH,
+            s,
+            (n * BATCH) as f64 / s / 1e6
+        );
+        return;
+    }
+    let mut g = c.benchmark_group("rays");
+    g.throughput(Throughput::Elements(BATCH as u64));
+    g.sample_size(20);
+    let mut k = 0;
+    g.bench_function("incoherent_shaded", |b| {
+        b.iter(|| {
+            let (o, d) = &batches[k % batches.len()];
+            k += 1;
+            tracer.trace(o, d, &active, &mut ci, &mut dist);
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+
+fn main() {
+    // One thread: the figure is rays per second per core.
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build_global()
+        .ok();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

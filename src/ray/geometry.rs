@@ -1,0 +1,302 @@
+//! Ray-traceable geometry: every ray-visible primitive diced once into micropolygon grids at a
+//! ray-appropriate rate, displaced, and put in a [`Bvh`].
+//!
+//! Input: the scene, the frame's camera (grids are in camera space, as shading is) and a
+//! displacement hook. Output: a [`RayScene`]: the grids (every standard global and primitive
+//! variable the hit shading needs, per vertex) and the BVH over their micropolygons.
+//! Invariants: built sequentially in primitive order, with dicing decisions that depend only on
+//! the surface and the camera, so the same scene gives the same ray geometry (and the same hits)
+//! whatever the thread count or bucket size. Nothing is culled: reflections see behind the
+//! camera.
+//!
+//! Which primitives rays see (RISpec leaves it to the renderer): BMRT made every primitive
+//! visible to reflection and shadow rays; PRMan 11+ made none visible unless
+//! `Attribute "visibility" "trace" 1`. arbor follows BMRT — the scenes that call `trace` are
+//! mostly BMRT scenes — unless some primitive of the scene sets `"visibility" "trace"`
+//! explicitly to 1: the scene is then written for PRMan, and primitives without the attribute
+//! are invisible to rays, as PRMan made them. `"visibility" "trace" 0` (and BMRT's
+//! `"render" "visibility"` without its reflection bit 2) always hides a primitive from
+//! reflection rays; `"visibility" "transmission"` (`"opaque"`/`"Os"`/1 cast shadows,
+//! `"transparent"`/0 do not) and BMRT's `"render" "casts_shadows"` (`"none"` does not) decide
+//! whether it blocks shadow rays, by default yes (with its opacity `Os`).
+
+use glam::{Mat4, Vec3};
+
+use crate::diag::Diagnostics;
+use crate::geom::{Bound, Surface};
+use crate::render::Camera;
+use crate::scene::{Primitive, Scene};
+use crate::shade::Grid;
+
+use super::bvh::{Bvh, Quad};
+
+/// Most micropolygons per side of a ray grid (larger surfaces split).
+const MAX_SIDE: usize = 24;
+/// Most splits along one path (then the surface dices at the clamped rate).
+const MAX_DEPTH: u32 = 20;
+
+/// One diced, displaced grid of ray geometry.
+#[derive(Debug)]
+pub struct RayGrid {
+    pub prim: usize,
+    pub grid: Grid,
+    /// Seen by reflection/refraction rays (`trace`, `gather`, `indirectdiffuse`).
+    pub trace: bool,
+    /// Blocks shadow rays (`transmission`, `shadow("raytrace")`, `occlusion`).
+    pub shadows: bool,
+}
+
+/// The ray-traceable scene.
+#[derive(Debug, Default)]
+pub struct RayScene {
+    pub grids: Vec<RayGrid>,
+    pub bvh: Bvh,
+    /// Total micropolygons.
+    pub micropolygons: usize,
+    /// The bound of everything, camera space.
+    pub bound: Option<Bound>,
+}
+
+/// Ray visibility of one primitive: (trace, shadows).
+fn visibility(prim: &Primitive, prman_style: bool) -> (bool, bool) {
+    let u = &prim.attributes.user;
+    let num = |k: &str| u.get(k).and_then(|p| p.data.floats().first().copied());
+    let text = |k: &str| {
+        u.get(k)
+            .and_then(|p| p.data.strings().first().map(|s| s.to_ascii_lowercase()))
+    };
+    let mut trace = !prman_style;
+    let mut shadows = !prman_style;
+    if let Some(v) = num("render:visibility") {
+        let bits = v as i32;
+        trace = bits & 2 != 0;
+        shadows = bits & 4 != 0;
+    }
+    if let Some(v) = num("visibility:trace") {
+        trace = v != 0.0;
+        // PRMan 11–12: trace-visible primitives also occlude rays unless told otherwise.
+        shadows = shadows || trace;
+    }
+    match text("visibility:transmission") {
+        Some(s) => shadows = s != "transparent",
+        None => {
+            if let Some(v) = num("visibility:transmission") {
+                shadows = v != 0.0;
+            }
+        }
+    }
+    if let Some(s) = text("render:casts_shadows") {
+        shadows = s != "none";
+    }
+    (trace, shadows)
+}
+
+/// Builds the ray geometry (see the module invariants). `displace` runs the primitive's
+/// displacement shader over a grid.
+pub fn build(
+    scene: &Scene,
+    camera: &Camera,
+    displace: &dyn Fn(usize, &mut Grid),
+    diags: &Diagnostics,
+) -> RayScene {
+    let prman_style = scene.primitives.iter().any(|p| {
+        p.attributes
+            .user
+            .get("visibility:trace")
+            .and_then(|v| v.data.floats().first().copied())
+            .is_some_and(|v| v != 0.0)
+    });
+    let rate_of = RateModel::new(camera);
+    // The scene's size sets a floor on the distance used for the dicing rate.
+    let mut all: Vec<(usize, Vec<Box<dyn Surface>>, (bool, bool))> = Vec::new();
+    let mut scene_bound = Bound::EMPTY;
+    for (i, prim) in scene.primitives.iter().enumerate() {
+        let vis = visibility(prim, prman_style);
+        if !vis.0 && !vis.1 {
+            continue;
+        }
+        let surfs = crate::geom::surfaces_for(i, prim, camera.camera_from_world, diags);
+        for s in &surfs {
+            let b = s.bound();
+            if !b.is_empty() && b.min.is_finite() && b.max.is_finite() {
+                scene_bound = scene_bound.union(b);
+            }
+        }
+        all.push((i, surfs, vis));
+    }
+    let diag = if scene_bound.is_empty() {
+        1.0
+    } else {
+        (scene_bound.max - scene_bound.min).length().max(1e-6)
+    };
+    let min_dist = (0.05 * diag).max(camera.near.max(1e-6));
+    let mut out = RayScene::default();
+    let mut quads = Vec::new();
+    for (prim, surfs, (trace, shadows)) in all {
+        let a = &scene.primitives[prim].attributes;
+        let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
+            a.shading_rate.clamp(0.05, 1e4)
+        } else {
+            1.0
+        };
+        // Ray grids are coarser than camera grids: hits are shaded where they land (with the
+        // interpolated normal), so the tessellation only has to hold the silhouette.
+        let ray_rate = user_rate(a).unwrap_or(rate * 4.0);
+        // Displacement puts detail between the diced points: such surfaces dice at the full
+        // rate; others only as finely as their curvature needs.
+        let displaced = a.displacement.is_some();
+        let mut stack: Vec<(Box<dyn Surface>, u32)> = surfs.into_iter().map(|s| (s, 0)).collect();
+        // Depth-first in a fixed order: children are visited in the order split() gives them.
+        stack.reverse();
+        while let Some((s, depth)) = stack.pop() {
+            let b = s.bound();
+            if b.is_empty() || !b.min.is_finite() || !b.max.is_finite() {
+                continue;
+            }
+            let dice = if s.diceable() {
+                rate_of.dice(&*s, &b, ray_rate, min_dist, displaced)
+            } else {
+                None
+            };
+            let (nu, nv) = match dice {
+                Some((nu, nv)) if nu <= MAX_SIDE && nv <= MAX_SIDE => (nu, nv),
+                Some((nu, nv)) if depth >= MAX_DEPTH => (nu.min(64), nv.min(64)),
+                _ if depth >= MAX_DEPTH && s.diceable() => (8, 8),
+                _ if depth >= MAX_DEPTH => continue,
+                _ => {
+                    let mut kids = s.split();
+                    kids.reverse();
+                    stack.extend(kids.into_iter().map(|k| (k, depth + 1)));
+                    continue;
+                }
+            };
+            let mut grid = s.dice(nu + 1, nv + 1);
+            if grid.nu < 2 || grid.nv < 2 || grid.p.len() != grid.nu * grid.nv {
+                continue;
+            }
+            for (i, p) in grid.i.iter_mut().zip(&grid.p) {
+                *i = if camera.perspective {
+                    *p
+                } else {
+                    Vec3::new(0.0, 0.0, p.z)
+                };
+            }
+            displace(prim, &mut grid);
+            if grid.p.iter().any(|p| !p.is_finite()) {
+                continue;
+            }
+            let gi = out.grids.len() as u32;
+            let (gu, gv) = (grid.nu, grid.nv);
+            for j in 0..gv - 1 {
+                for i in 0..gu - 1 {
+                    let k = j * gu + i;
+                    quads.push(Quad {
+                        p: [grid.p[k], grid.p[k + 1], grid.p[k + gu], grid.p[k + gu + 1]],
+                        grid: gi,
+                        index: (j * (gu - 1) + i) as u32,
+                    });
+                }
+            }
+            out.micropolygons += (gu - 1) * (gv - 1);
+            out.grids.push(RayGrid {
+                prim,
+                grid,
+                trace,
+                shadows,
+            });
+        }
+    }
+    out.bound = (!scene_bound.is_empty()).then_some(scene_bound);
+    out.bvh = Bvh::build(quads);
+    out
+}
+
+/// `Attribute "trace" "shadingrate"` (arbor: micropolygon area, in pixels as seen from the
+/// camera, of the ray tessellation; default four times ShadingRate).
+fn user_rate(a: &crate::scene::Attributes) -> Option<f32> {
+    a.user
+        .get("trace:shadingrate")
+        .and_then(|p| p.data.floats().first().copied())
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .map(|r| r.clamp(0.05, 1e4))
+}
+
+/// Turns camera-space lengths into "pixels" as the camera would see them at a distance.
+struct RateModel {
+    /// Raster pixels per camera-space unit at distance 1 (perspective) or anywhere (ortho).
+    ppu: f32,
+    perspective: bool,
+}
+
+impl RateModel {
+    fn new(camera: &Camera) -> RateModel {
+        let m: Mat4 = camera.raster_from_camera();
+        let a = m.project_point3(Vec3::new(0.0, 0.0, 1.0));
+        let b = m.project_point3(Vec3::new(1.0, 0.0, 1.0));
+        let ppu = (b.x - a.x).abs();
+        RateModel {
+            ppu: if ppu.is_finite() && ppu > 0.0 { ppu } else { 100.0 },
+            perspective: camera.perspective,
+        }
+    }
+
+    /// Micropolygons along u and v for a surface, from a 5 × 5 trial dice: edges of about
+    /// √rate pixels as the camera would see them at the surface's distance, but no finer than
+    /// the surface's bending needs (a chord's sagitta shrinks with the square of the number of
+    /// segments, so a flat polygon is one micropolygon however large it is). Hits are shaded
+    /// at the hit with interpolated normals, so only the silhouette needs the vertices.
+    fn dice(
+        &self,
+        s: &dyn Surface,
+        b: &Bound,
+        rate: f32,
+        min_dist: f32,
+        displaced: bool,
+    ) -> Option<(usize, usize)> {
+        let n = 5;
+        let g = s.dice(n, n);
+        if g.p.len() < n * n || g.p.iter().any(|p| !p.is_finite()) {
+            return None;
+        }
+        let (mut ulen, mut vlen) = (0f32, 0f32);
+        for j in 0..n {
+            let (mut lu, mut lv) = (0f32, 0f32);
+            for i in 0..n - 1 {
+                lu += (g.p[j * n + i] - g.p[j * n + i + 1]).length();
+                lv += (g.p[i * n + j] - g.p[(i + 1) * n + j]).length();
+            }
+            ulen = ulen.max(lu);
+            vlen = vlen.max(lv);
+        }
+        let dist = if self.perspective {
+            // Distance from the eye (the origin) to the bound.
+            let c = Vec3::ZERO.clamp(b.min, b.max);
+            c.length().max(min_dist)
+        } else {
+            1.0
+        };
+        let edge = rate.sqrt() * dist / self.ppu;
+        let mut nu = (ulen / edge).ceil().clamp(1.0, 1e6);
+        let mut nv = (vlen / edge).ceil().clamp(1.0, 1e6);
+        if !displaced {
+            // Second differences along the trial lines: a point's distance from the middle of
+            // its neighbours is the sagitta of a chord spanning half the patch.
+            let mut dev_u = 0f32;
+            let mut dev_v = 0f32;
+            for j in 0..n {
+                for i in 1..n - 1 {
+                    let k = j * n + i;
+                    dev_u = dev_u.max((g.p[k] - 0.5 * (g.p[k - 1] + g.p[k + 1])).length());
+                    let k = i * n + j;
+                    dev_v = dev_v.max((g.p[k] - 0.5 * (g.p[k - n] + g.p[k + n])).length());
+                }
+            }
+            // A twentieth of the edge length: a tenth of a pixel where the camera sees it.
+            let tol = 0.05 * edge;
+            let need = |dev: f32| (2.0 * (dev / tol).sqrt()).ceil().max(1.0);
+            nu = nu.min(need(dev_u));
+            nv = nv.min(need(dev_v));
+        }
+        Some((nu as usize, nv as usize))
+    }
+}

@@ -1,0 +1,334 @@
+//! Ray queries for shaders: the shading system's answer to [`RayTracer`].
+//!
+//! Input: rays from a running shader (camera space), the frame's ray geometry (built on the
+//! first ray, see [`crate::ray`]). Output: hit colours and transmissions.
+//! Invariants: the hits of one call that land on one primitive are gathered, in ray order, into
+//! one grid (`nu` = hits, `nv` = 1, derivatives across it read as zero) and shaded by that
+//! primitive's own surface shader with its lights, one ray level deeper — the shade tree serves
+//! rays as it serves micropolygons. Past `Option "trace" "maxdepth"` (default 10, as PRMan;
+//! BMRT's `Option "render" "max_raylevel"` is read too) rays return black. Nothing depends on
+//! the thread or the bucket: the answer for a ray is a function of the ray.
+
+use glam::Vec3;
+
+use crate::render::Camera;
+use crate::scene::{ParamData, Scene};
+use crate::shade::exec::RayTracer;
+use crate::shade::system::ShadeSystem;
+use crate::shade::{Grid, GridVar};
+
+use crate::ray::{RayGrid, RayScene};
+
+/// Default most ray depth (PRMan's `Option "trace" "maxdepth"`).
+pub const DEFAULT_MAX_DEPTH: u32 = 10;
+/// Layers of partly transparent surfaces a ray passes through before it stops.
+const MAX_LAYERS: usize = 16;
+
+thread_local! {
+    /// Set while this thread builds the ray geometry (a displacement shader that casts rays
+    /// then sees nothing instead of waiting for itself).
+    static BUILDING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+pub struct Tracer<'a, 's> {
+    pub sys: &'a ShadeSystem<'a>,
+    pub scene: &'s Scene,
+    pub camera: &'s Camera,
+    pub depth: u32,
+}
+
+/// `Option "trace" "maxdepth"` (or BMRT's `"render" "max_raylevel"`).
+pub fn max_depth(scene: &Scene) -> u32 {
+    let o = &scene.options;
+    for key in ["trace:maxdepth", "render:max_raylevel"] {
+        if let Some([x, ..]) = o.user_floats(key) {
+            if x.is_finite() && *x >= 0.0 {
+                return (*x as u32).min(64);
+            }
+        }
+    }
+    DEFAULT_MAX_DEPTH
+}
+
+/// The ray bias: `Attribute "trace" "bias"`, `Option "trace" "bias"` or BMRT's
+/// `Option "render" "minshadowbias"`, else 0.01 (as PRMan).
+pub fn bias(scene: &Scene) -> f32 {
+    for key in ["trace:bias", "render:minshadowbias"] {
+        if let Some([x, ..]) = scene.options.user_floats(key) {
+            if x.is_finite() && *x >= 0.0 {
+                return *x;
+            }
+        }
+    }
+    0.01
+}
+
+impl<'a> Tracer<'a, '_> {
+    /// The frame's ray geometry (None while it is being built on this thread).
+    pub fn geometry(&self) -> Option<std::sync::Arc<RayScene>> {
+        if BUILDING.with(|b| b.get()) {
+            return None;
+        }
+        let (sys, scene, camera) = (self.sys, self.scene, self.camera);
+        Some(sys.rays.get_or_build(|| {
+            BUILDING.with(|b| b.set(true));
+            let displace = |prim: usize, grid: &mut Grid| sys.displace(scene, camera, prim, grid);
+            let rs = crate::ray::geometry::build(scene, camera, &displace, sys.diags);
+            BUILDING.with(|b| b.set(false));
+            rs
+        }))
+    }
+
+    fn bias_for(&self) -> f32 {
+        bias(self.scene)
+    }
+}
+
+/// Interpolates the per-vertex data of a ray grid at a hit.
+fn lerp_weights(rg: &RayGrid, index: u32, a: f32, b: f32) -> ([usize; 4], [f32; 4]) {
+    let g = &rg.grid;
+    let qu = g.nu - 1;
+    let (i, j) = (index as usize % qu, index as usize / qu);
+    let k = j * g.nu + i;
+    let a = a.clamp(0.0, 1.0);
+    let b = b.clamp(0.0, 1.0);
+    (
+        [k, k + 1, k + g.nu, k + g.nu + 1],
+        [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b],
+    )
+}
+
+#[inline]
+fn mix3(v: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
+    v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
+}
+#[inline]
+fn mix1(v: &[f32], k: &[usize; 4], w: &[f32; 4]) -> f32 {
+    v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
+}
+
+/// One hit to shade: which ray, where.
+#[derive(Clone, Copy)]
+struct PendingHit {
+    ray: usize,
+    grid: u32,
+    index: u32,
+    a: f32,
+    b: f32,
+    p: Vec3,
+    /// Incident vector (hit − origin).
+    i: Vec3,
+}
+
+/// Builds the grid of hits on one primitive (all `hits` come from grids of that primitive).
+fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
+    let n = hits.len();
+    let mut g = Grid::with_size(n, 1);
+    let first = &rs.grids[hits[0].grid as usize].grid;
+    g.du = first.du;
+    g.dv = first.dv;
+    // Primitive variables: the first grid's layout (every grid of a primitive has the same).
+    let mut pv: Vec<GridVar> = first
+        .primvars
+        .iter()
+        .map(|v| GridVar {
+            name: v.name.clone(),
+            ty: v.ty,
+            array_len: v.array_len,
+            uniform: v.uniform,
+            floats: if v.uniform {
+                v.floats.clone()
+            } else {
+                vec![0.0; n * v.width()]
+            },
+            strings: v.strings.clone(),
+        })
+        .collect();
+    for (h, hit) in hits.iter().enumerate() {
+        let rg = &rs.grids[hit.grid as usize];
+        let src = &rg.grid;
+        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
+        g.p[h] = hit.p;
+        g.i[h] = hit.i;
+        g.n[h] = mix3(&src.n, &k, &w);
+        g.ng[h] = mix3(&src.ng, &k, &w);
+        g.dpdu[h] = mix3(&src.dpdu, &k, &w);
+        g.dpdv[h] = mix3(&src.dpdv, &k, &w);
+        g.u[h] = mix1(&src.u, &k, &w);
+        g.v[h] = mix1(&src.v, &k, &w);
+        g.s[h] = mix1(&src.s, &k, &w);
+        g.t[h] = mix1(&src.t, &k, &w);
+        g.cs[h] = mix3(&src.cs, &k, &w);
+        g.os[h] = mix3(&src.os, &k, &w);
+        for (dst, sv) in pv.iter_mut().zip(&src.primvars) {
+            if dst.uniform || sv.uniform || sv.width() != dst.width() {
+                continue;
+            }
+            let wd = dst.width();
+            for c in 0..wd {
+                let mut x = 0.0;
+                for q in 0..4 {
+                    x += sv.floats.get(k[q] * wd + c).copied().unwrap_or(0.0) * w[q];
+                }
+                dst.floats[h * wd + c] = x;
+            }
+        }
+    }
+    g.primvars = pv;
+    g
+}
+
+impl RayTracer for Tracer<'_, '_> {
+    fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    fn trace(&self, org: &[Vec3], dir: &[Vec3], active: &[bool], ci: &mut [Vec3], dist: &mut [f32]) {
+        let n = org.len();
+        for c in ci.iter_mut() {
+            *c = Vec3::ZERO;
+        }
+        for d in dist.iter_mut() {
+            *d = f32::INFINITY;
+        }
+        if self.depth >= max_depth(self.scene) {
+            return;
+        }
+        let Some(rs) = self.geometry() else {
+            return;
+        };
+        if rs.bvh.is_empty() {
+            return;
+        }
+        let bias = self.bias_for();
+        // Per ray: current origin, the weight still passing (1 − accumulated opacity).
+        let mut o: Vec<Vec3> = org.to_vec();
+        let mut weight = vec![Vec3::ONE; n];
+        let mut live: Vec<bool> = (0..n)
+            .map(|k| active.get(k).copied().unwrap_or(false) && dir[k].length_squared() > 0.0)
+            .collect();
+        let mut travelled = vec![0f32; n];
+        for _layer in 0..MAX_LAYERS {
+            let mut pending: Vec<PendingHit> = Vec::new();
+            for k in 0..n {
+                if !live[k] {
+                    continue;
+                }
+                let d = dir[k];
+                let hit = closest_where(&rs, o[k], d, bias / d.length(), |g| g.trace);
+                match hit {
+                    Some(h) => {
+                        let p = o[k] + d * h.t;
+                        if dist[k].is_infinite() {
+                            dist[k] = travelled[k] + h.t;
+                        }
+                        travelled[k] += h.t;
+                        pending.push(PendingHit {
+                            ray: k,
+                            grid: h.grid,
+                            index: h.index,
+                            a: h.a,
+                            b: h.b,
+                            p,
+                            i: p - org[k],
+                        });
+                    }
+                    None => live[k] = false,
+                }
+            }
+            if pending.is_empty() {
+                break;
+            }
+            // Group by primitive, keeping ray order inside each group.
+            pending.sort_by_key(|h| (rs.grids[h.grid as usize].prim, h.ray));
+            let mut s = 0;
+            while s < pending.len() {
+                let prim = rs.grids[pending[s].grid as usize].prim;
+                let mut e = s + 1;
+                while e < pending.len() && rs.grids[pending[e].grid as usize].prim == prim {
+                    e += 1;
+                }
+                let group = &pending[s..e];
+                let mut g = hit_grid(&rs, group);
+                self.sys
+                    .shade_ray_hits(self.scene, self.camera, prim, &mut g, self.depth + 1);
+                for (h, hit) in group.iter().enumerate() {
+                    let k = hit.ray;
+                    ci[k] += weight[k] * g.ci[h];
+                    weight[k] *= Vec3::ONE - g.oi[h].clamp(Vec3::ZERO, Vec3::ONE);
+                    o[k] = hit.p;
+                    if weight[k].max_element() < 1.0 / 256.0 {
+                        live[k] = false;
+                    }
+                }
+                s = e;
+            }
+        }
+    }
+
+    fn transmission(&self, from: &[Vec3], to: &[Vec3], active: &[bool], out: &mut [Vec3]) {
+        for v in out.iter_mut() {
+            *v = Vec3::ONE;
+        }
+        let Some(rs) = self.geometry() else {
+            return;
+        };
+        if rs.bvh.is_empty() {
+            return;
+        }
+        let bias = self.bias_for();
+        for k in 0..from.len() {
+            if !active.get(k).copied().unwrap_or(false) {
+                continue;
+            }
+            let d = to[k] - from[k];
+            let len = d.length();
+            if !(len > 2.0 * bias) || !len.is_finite() {
+                continue;
+            }
+            let mut t = Vec3::ONE;
+            let tmin = bias / len;
+            let tmax = 1.0 - bias / len;
+            rs.bvh.each_hit(from[k], d, tmin, tmax, &mut |h| {
+                let rg = &rs.grids[h.grid as usize];
+                if !rg.shadows {
+                    return false;
+                }
+                let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
+                let os = mix3(&rg.grid.os, &kk, &w).clamp(Vec3::ZERO, Vec3::ONE);
+                t *= Vec3::ONE - os;
+                t.max_element() <= 0.0
+            });
+            out[k] = t;
+        }
+    }
+}
+
+/// The closest hit on grids passing `keep`.
+pub fn closest_where(
+    rs: &RayScene,
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    keep: impl Fn(&RayGrid) -> bool,
+) -> Option<crate::ray::Hit> {
+    // Fast path: every grid kept.
+    let h = rs.bvh.closest(o, d, tmin, f32::INFINITY)?;
+    if keep(&rs.grids[h.grid as usize]) {
+        return Some(h);
+    }
+    let mut best: Option<crate::ray::Hit> = None;
+    rs.bvh.each_hit(o, d, tmin, f32::INFINITY, &mut |hit| {
+        if keep(&rs.grids[hit.grid as usize]) && best.is_none_or(|b| hit.t < b.t) {
+            best = Some(hit);
+        }
+        false
+    });
+    best
+}
+
+/// Reads a string user attribute or option value (for `visibility` and friends).
+#[allow(dead_code)]
+fn param_str(d: &ParamData) -> Option<&str> {
+    d.strings().first().map(String::as_str)
+}
