@@ -15,7 +15,7 @@ use crate::film::SampleBuffer;
 use crate::num::floor_i32;
 
 use super::super::camera::PixelRect;
-use super::super::sampler::sample_position;
+use super::super::sampler::pixel_positions;
 use super::super::stats::Stats;
 use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
 
@@ -41,13 +41,7 @@ pub fn empty_buffer(cfg: &HiderConfig, rect: PixelRect) -> SampleBuffer {
     let mut positions = Vec::with_capacity(n);
     for py in rect.y0..rect.y1 {
         for px in rect.x0..rect.x1 {
-            for sy in 0..ys {
-                for sx in 0..xs {
-                    positions.push(sample_position(
-                        px, py, sx, sy, xs, ys, cfg.jitter, cfg.seed,
-                    ));
-                }
-            }
+            pixel_positions(px, py, cfg.spp, cfg.jitter, cfg.seed, &mut positions);
         }
     }
     let channels = cfg.channels();
@@ -82,6 +76,17 @@ struct VisPoint {
     aov: u32,
 }
 
+/// The shading of a sample's nearest opaque point, kept beside its depth: an opaque hit is
+/// written here directly instead of joining the sample's list of visible points.
+#[derive(Clone, Copy, Debug, Default)]
+struct Shade {
+    set: bool,
+    matte: bool,
+    c: [f32; 3],
+    o: [f32; 3],
+    aov: u32,
+}
+
 /// (depth, grid key, micropolygon) total order.
 #[inline]
 fn before(z: f32, key: u64, sub: u32, oz: f32, okey: u64, osub: u32) -> bool {
@@ -94,6 +99,7 @@ struct Bucket<'c> {
     heads: Vec<u32>,
     /// Nearest opaque point per sample (depth, key, sub), and the second nearest's depth.
     front: Vec<(f32, u64, u32)>,
+    front_shade: Vec<Shade>,
     second: Vec<f32>,
     points: Vec<VisPoint>,
     aovs: Vec<f32>,
@@ -148,6 +154,17 @@ impl<'c> Bucket<'c> {
                 }
                 cur = p.next;
             }
+            // The list now holds only points before this one: it composites last.
+            let aov_off = self.aovs.len() as u32;
+            self.aovs.extend_from_slice(aov);
+            self.front_shade[s] = Shade {
+                set: true,
+                matte,
+                c,
+                o,
+                aov: aov_off,
+            };
+            return;
         }
         let idx = self.points.len() as u32;
         let aov_off = self.aovs.len() as u32;
@@ -166,9 +183,9 @@ impl<'c> Bucket<'c> {
     }
 }
 
-/// Canonical edge function: the same bits for edge (a, b) and (b, a) up to sign, and whether
+/// Canonical edge function (the reference [`Edge`] is tested against): the same bits for edge (a, b) and (b, a) up to sign, and whether
 /// this direction owns samples exactly on the edge (exactly one of the two directions does).
-#[inline]
+#[cfg(test)]
 fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
     if (a[0], a[1]) < (b[0], b[1]) {
         (
@@ -183,9 +200,55 @@ fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
     }
 }
 
-#[inline]
+#[cfg(test)]
 fn inside(e: (f32, bool)) -> bool {
     e.0 > 0.0 || (e.0 == 0.0 && e.1)
+}
+
+/// [`edge`] with its per-edge part done once per micropolygon: the canonical origin and
+/// direction, and the sign. Evaluates to the same bits as `edge(a, b, p)` (negation and the
+/// products are the same operations in the same order).
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    o: [f32; 2],
+    d: [f32; 2],
+    neg: bool,
+}
+
+impl Edge {
+    #[inline]
+    fn new(a: [f32; 2], b: [f32; 2]) -> Edge {
+        if (a[0], a[1]) < (b[0], b[1]) {
+            Edge {
+                o: a,
+                d: [b[0] - a[0], b[1] - a[1]],
+                neg: false,
+            }
+        } else {
+            Edge {
+                o: b,
+                d: [a[0] - b[0], a[1] - b[1]],
+                neg: true,
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn eval(&self, p: [f32; 2]) -> f32 {
+        let e = self.d[0] * (p[1] - self.o[1]) - self.d[1] * (p[0] - self.o[0]);
+        if self.neg {
+            -e
+        } else {
+            e
+        }
+    }
+
+    /// The sample is inside (or on the edge this direction owns).
+    #[inline(always)]
+    fn inside(&self, p: [f32; 2]) -> bool {
+        let e = self.eval(p);
+        e > 0.0 || (e == 0.0 && !self.neg)
+    }
 }
 
 impl Hider for ZBuffer {
@@ -201,6 +264,7 @@ impl Hider for ZBuffer {
             cfg,
             heads: vec![NONE; n],
             front: vec![(f32::INFINITY, u64::MAX, u32::MAX); n],
+            front_shade: vec![Shade::default(); n],
             second: vec![f32::INFINITY; n],
             points: Vec::new(),
             aovs: Vec::new(),
@@ -245,12 +309,21 @@ impl Hider for ZBuffer {
 struct Micro<'a> {
     m: usize,
     /// The two triangles sharing the diagonal corner 0 – corner 2, as the old two-triangle
-    /// test saw them: vertices (counter-clockwise), grid point indices, 1 / area; None when
-    /// degenerate.
-    tris: [Option<([[f32; 2]; 3], [usize; 3], f32)>; 2],
+    /// test saw them: vertices (counter-clockwise), grid point indices, 1 / area, and the
+    /// edges v2→v0 and v0→v1 whose values are the barycentric weights; None when degenerate.
+    tris: [Option<Tri>; 2],
     cc: [f32; 3],
     co: [f32; 3],
     mean_aov: &'a [f32],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Tri {
+    v: [[f32; 2]; 3],
+    idx: [usize; 3],
+    inv_area: f32,
+    e1: Edge,
+    e2: Edge,
 }
 
 /// Candidate strata (0-based, clamped to `0..n`) of a pixel at integer coordinate
@@ -325,7 +398,13 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 v.swap(1, 2);
                 idx.swap(1, 2);
             }
-            tris[t] = Some((v, idx, 1.0 / area.abs()));
+            tris[t] = Some(Tri {
+                v,
+                idx,
+                inv_area: 1.0 / area.abs(),
+                e1: Edge::new(v[2], v[0]),
+                e2: Edge::new(v[0], v[1]),
+            });
         }
         let mp = Micro {
             m,
@@ -350,30 +429,34 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
             // Outer edges counter-clockwise; the diagonal as triangle 0 sees it.
             let o = if ccw { [0, 1, 2, 3] } else { [0, 3, 2, 1] };
             let edges = [
-                (p[o[0]], p[o[1]]),
-                (p[o[1]], p[o[2]]),
-                (p[o[2]], p[o[3]]),
-                (p[o[3]], p[o[0]]),
+                Edge::new(p[o[0]], p[o[1]]),
+                Edge::new(p[o[1]], p[o[2]]),
+                Edge::new(p[o[2]], p[o[3]]),
+                Edge::new(p[o[3]], p[o[0]]),
             ];
-            let diag0 = if ccw { (p[2], p[0]) } else { (p[0], p[2]) };
+            let diag0 = if ccw {
+                Edge::new(p[2], p[0])
+            } else {
+                Edge::new(p[0], p[2])
+            };
             for_samples(b, buf, rect, bx, |b, s, pos| {
-                for &(a, c) in &edges {
-                    if !inside(edge(a, c, pos)) {
-                        return;
-                    }
+                // Non-short-circuiting: four independent tests, one branch.
+                let all = edges[0].inside(pos)
+                    & edges[1].inside(pos)
+                    & edges[2].inside(pos)
+                    & edges[3].inside(pos);
+                if !all {
+                    return;
                 }
-                let t = if inside(edge(diag0.0, diag0.1, pos)) {
-                    0
-                } else {
-                    1
-                };
+                let t = if diag0.inside(pos) { 0 } else { 1 };
                 hit(b, g, cfg, &mp, t, s, pos, &mut interp_aov);
             });
         } else {
             for t in 0..2 {
-                let Some((v, _, _)) = mp.tris[t] else {
+                let Some(Tri { v, .. }) = mp.tris[t] else {
                     continue;
                 };
+                let te = [Edge::new(v[1], v[2]), Edge::new(v[2], v[0]), Edge::new(v[0], v[1])];
                 let tb = [
                     v[0][0].min(v[1][0]).min(v[2][0]).max(bx[0]),
                     v[0][1].min(v[1][1]).min(v[2][1]).max(bx[1]),
@@ -384,10 +467,7 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                     continue;
                 }
                 for_samples(b, buf, rect, tb, |b, s, pos| {
-                    if inside(edge(v[1], v[2], pos))
-                        && inside(edge(v[2], v[0], pos))
-                        && inside(edge(v[0], v[1], pos))
-                    {
+                    if te[0].inside(pos) & te[1].inside(pos) & te[2].inside(pos) {
                         hit(b, g, cfg, &mp, t, s, pos, &mut interp_aov);
                     }
                 });
@@ -449,13 +529,18 @@ fn hit(
     pos: [f32; 2],
     interp_aov: &mut [f32],
 ) {
-    let Some((v, idx, inv_area)) = mp.tris[t] else {
+    let Some(Tri {
+        idx,
+        inv_area,
+        e1,
+        e2,
+        ..
+    }) = mp.tris[t]
+    else {
         return;
     };
     let aw = g.aov_width;
-    let e1 = edge(v[2], v[0], pos);
-    let e2 = edge(v[0], v[1], pos);
-    let (w1, w2) = (e1.0 * inv_area, e2.0 * inv_area);
+    let (w1, w2) = (e1.eval(pos) * inv_area, e2.eval(pos) * inv_area);
     let w0 = 1.0 - w1 - w2;
     // Relative to vertex 0, so a constant depth stays exact.
     let dq = [g.depth[idx[0]], g.depth[idx[1]], g.depth[idx[2]]];
@@ -510,7 +595,8 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
     let stop = 1.0 - cfg.othreshold;
     for s in 0..b.heads.len() {
         let mut cur = b.heads[s];
-        if cur == NONE {
+        let front = &b.front_shade[s];
+        if cur == NONE && !front.set {
             continue;
         }
         list.clear();
@@ -529,20 +615,25 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
         let out = &mut buf.values[s * ch..(s + 1) * ch];
         let mut tr = [1f32; 3];
         let mut alpha = 0f32;
-        for &pi in &list {
+        // The transparent points before the opaque front, in order, then the front itself.
+        let points = list.iter().map(|&pi| {
             let p = &b.points[pi as usize];
-            if !p.matte {
-                let w = (tr[0] * p.o[0] + tr[1] * p.o[1] + tr[2] * p.o[2]) * (1.0 / 3.0);
+            (p.matte, p.c, p.o, p.aov)
+        });
+        let last = front.set.then_some((front.matte, front.c, front.o, front.aov));
+        for (matte, c, o, aov) in points.chain(last) {
+            if !matte {
+                let w = (tr[0] * o[0] + tr[1] * o[1] + tr[2] * o[2]) * (1.0 / 3.0);
                 for q in 0..3 {
-                    out[q] += tr[q] * p.c[q];
+                    out[q] += tr[q] * c[q];
                 }
                 alpha += w;
                 for q in 0..naov {
-                    out[5 + q] += w * b.aovs[p.aov as usize + q];
+                    out[5 + q] += w * b.aovs[aov as usize + q];
                 }
             }
             for q in 0..3 {
-                tr[q] *= 1.0 - p.o[q];
+                tr[q] *= 1.0 - o[q];
             }
             if tr[0] <= stop && tr[1] <= stop && tr[2] <= stop {
                 break;
@@ -554,5 +645,36 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
             DepthFilter::Midpoint if b.second[s].is_finite() => 0.5 * (fz + b.second[s]),
             _ => fz,
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn precomputed_edges_give_the_reference_bits() {
+        // Pseudo-random vertices and points, plus points exactly on an edge and its ends.
+        let mut k = 12345u32;
+        let mut r = || {
+            k = k.wrapping_mul(747796405).wrapping_add(2891336453);
+            (k >> 8) as f32 / (1u32 << 24) as f32 * 40.0 - 20.0
+        };
+        for _ in 0..2000 {
+            let (a, b) = ([r(), r()], [r(), r()]);
+            let on = [a[0] + 0.5 * (b[0] - a[0]), a[1] + 0.5 * (b[1] - a[1])];
+            for p in [[r(), r()], a, b, on] {
+                for (x, y) in [(a, b), (b, a)] {
+                    let e = Edge::new(x, y);
+                    let want = edge(x, y, p);
+                    assert_eq!(e.eval(p).to_bits(), want.0.to_bits());
+                    assert_eq!(e.inside(p), inside(want));
+                }
+                // Exactly one direction owns a sample lying on the edge.
+                if Edge::new(a, b).eval(p) == 0.0 && a != b {
+                    assert!(Edge::new(a, b).inside(p) ^ Edge::new(b, a).inside(p));
+                }
+            }
+        }
     }
 }
