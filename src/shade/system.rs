@@ -396,7 +396,7 @@ impl<'a> ShadeSystem<'a> {
             Some(s) => self
                 .program(s, ShaderKind::Surface)
                 .map(|prog| (prog, s.clone()))
-                .or_else(|| self.stand_in_surface(s, p, camera)),
+                .or_else(|| self.stand_in_surface(s, p, ctx.camera)),
             None => None,
         };
         let (prog, sref) = match surface {
