@@ -46,6 +46,7 @@ fn mesh(
         },
         data: ParamData::Floats(p.to_vec()),
         span: Span::default(),
+        motion: None,
     };
     Primitive {
         geometry: Arc::new(geometry),

@@ -14,6 +14,7 @@ pub mod dice;
 pub mod driver;
 pub mod hider;
 pub mod limits;
+pub mod motion;
 pub mod sampler;
 pub mod stats;
 
