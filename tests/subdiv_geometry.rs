@@ -46,7 +46,6 @@ fn mesh(
         },
         data: ParamData::Floats(p.to_vec()),
         span: Span::default(),
-        motion: None,
     };
     Primitive {
         geometry: Arc::new(geometry),
@@ -54,6 +53,7 @@ fn mesh(
         attributes: Arc::new(Attributes::default()),
         world_from_object: Mat4::IDENTITY,
         span: Span::default(),
+        motion: None,
     }
 }
 
