@@ -173,6 +173,7 @@ fn teapot_supported() -> bool {
         attributes: Arc::new(Default::default()),
         world_from_object: glam::Mat4::IDENTITY,
         span: Default::default(),
+        motion: None,
     };
     let scratch = Diagnostics::new();
     !crate::geom::surfaces_for(

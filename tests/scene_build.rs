@@ -624,12 +624,17 @@ WorldEnd
     );
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
     let w = b.warnings();
-    assert_eq!(w.len(), 2, "{w:#?}");
-    assert!(w[0].0.contains("`MotionBegin`"));
-    assert_eq!(w[0].1, 2);
-    assert!(w[1].0.contains("`Blobby` is not implemented"));
-    // Only the first sample of each motion block is used.
-    assert_eq!(b.one().primitives[0].world_from_object, Mat4::IDENTITY);
+    assert_eq!(w.len(), 1, "{w:#?}");
+    assert!(w[0].0.contains("`Blobby` is not implemented"));
+    // Motion blocks apply (and compose): the sphere moves from x = 0 to x = 2.
+    let p = &b.one().primitives[0];
+    assert_eq!(p.world_from_object, Mat4::IDENTITY);
+    let m = p.motion.as_ref().expect("a moving primitive");
+    assert_eq!(m.times, vec![0.0, 1.0]);
+    assert_eq!(
+        m.world_from_object[1].transform_point3(glam::Vec3::ZERO),
+        glam::Vec3::new(2.0, 0.0, 0.0)
+    );
 }
 
 #[test]

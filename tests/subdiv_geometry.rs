@@ -53,6 +53,7 @@ fn mesh(
         attributes: Arc::new(Attributes::default()),
         world_from_object: Mat4::IDENTITY,
         span: Span::default(),
+        motion: None,
     }
 }
 

@@ -257,6 +257,21 @@ impl Surface for BezierPatch {
     }
 
     fn split(&self) -> Vec<Box<dyn Surface>> {
+        self.split_as(self.split_choice())
+    }
+
+    fn split_as(&self, choice: u8) -> Vec<Box<dyn Surface>> {
+        let in_u = choice == 0;
+        let (a, b) = self.halves(in_u, 0.5);
+        let (mut x, mut y) = (with_ctrl(self, a), with_ctrl(self, b));
+        let k = if in_u { 0 } else { 2 };
+        let m = 0.5 * (self.rect[k] + self.rect[k + 1]);
+        x.rect[k + 1] = m;
+        y.rect[k] = m;
+        vec![Box::new(x), Box::new(y)]
+    }
+
+    fn split_choice(&self) -> u8 {
         // Split across the direction whose control polygon is longer in camera space.
         let (p1, q1) = (self.p + 1, self.q + 1);
         let (mut lu, mut lv) = (0.0f32, 0.0f32);
@@ -274,14 +289,7 @@ impl Surface for BezierPatch {
             }
             lv = lv.max(l);
         }
-        let in_u = lu >= lv;
-        let (a, b) = self.halves(in_u, 0.5);
-        let (mut x, mut y) = (with_ctrl(self, a), with_ctrl(self, b));
-        let k = if in_u { 0 } else { 2 };
-        let m = 0.5 * (self.rect[k] + self.rect[k + 1]);
-        x.rect[k + 1] = m;
-        y.rect[k] = m;
-        vec![Box::new(x), Box::new(y)]
+        (lu < lv) as u8
     }
 
     fn dice(&self, nu: usize, nv: usize) -> Grid {

@@ -21,6 +21,7 @@
 
 mod bezier;
 mod curves;
+pub mod motion;
 mod patch;
 mod patches;
 mod points;
@@ -124,6 +125,20 @@ pub trait Surface: Send + Sync + std::fmt::Debug {
         let _ = raster_from_camera;
         None
     }
+    /// The bound at shutter open (a moving surface's `bound` covers its whole motion).
+    fn still_bound(&self) -> Bound {
+        self.bound()
+    }
+    /// How [`Surface::split`] would split this surface, as a small number (motion blur: the
+    /// other keys of a deforming surface split the way its shutter-open key does).
+    fn split_choice(&self) -> u8 {
+        0
+    }
+    /// Splits the way `choice` (from [`Surface::split_choice`] of another key) says.
+    fn split_as(&self, choice: u8) -> Vec<Box<dyn Surface>> {
+        let _ = choice;
+        self.split()
+    }
 }
 
 /// Grows a bound by a small multiple of its coordinates' size so that floating-point rounding in
@@ -144,6 +159,18 @@ pub fn surfaces_for(
     index: usize,
     prim: &Primitive,
     camera_from_world: Mat4,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    surfaces_cut_as(index, prim, camera_from_world, None, diags)
+}
+
+/// [`surfaces_for`], polygon faces cut into patches as camera-space positions `decomp`
+/// would cut them (one key of a deforming mesh; see [`motion`]).
+pub(crate) fn surfaces_cut_as(
+    index: usize,
+    prim: &Primitive,
+    camera_from_world: Mat4,
+    decomp: Option<Arc<Vec<Vec3>>>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
     let m = camera_from_world * prim.world_from_object;
@@ -256,12 +283,13 @@ pub fn surfaces_for(
             verts,
             nvertices,
         } => {
-            return polygons(
+            return polygons_cut_as(
                 index,
                 prim,
                 m,
                 flip,
                 (nloops, nverts, verts, *nvertices),
+                decomp,
                 diags,
             )
         }
@@ -371,6 +399,20 @@ fn polygons(
     (nloops, nverts, verts, nvertices): PolyTopology,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
+    polygons_cut_as(index, prim, m, flip, (nloops, nverts, verts, nvertices), None, diags)
+}
+
+/// [`polygons`], with faces cut into patches as positions `decomp` would cut them (motion
+/// blur: every key of a deforming mesh is cut as its shutter-open key).
+pub(crate) fn polygons_cut_as(
+    index: usize,
+    prim: &Primitive,
+    m: Mat4,
+    flip: bool,
+    (nloops, nverts, verts, nvertices): PolyTopology,
+    decomp: Option<Arc<Vec<Vec3>>>,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
     let err = |msg: String| {
         diags.report(
             Diag::error("geom::invalid", msg)
@@ -456,6 +498,7 @@ fn polygons(
         color: prim.attributes.color,
         opacity: prim.attributes.opacity,
         split_triangles: prim.attributes.displacement.is_some(),
+        decomp_p: decomp,
     };
     vec![Box::new(Mesh {
         data: Arc::new(data),

@@ -96,9 +96,17 @@ impl Surface for ParamPatch {
     }
 
     fn split(&self) -> Vec<Box<dyn Surface>> {
+        self.split_as(self.split_choice())
+    }
+
+    fn split_choice(&self) -> u8 {
         let (lu, lv) = self.mid_lengths();
+        (lu < lv) as u8
+    }
+
+    fn split_as(&self, choice: u8) -> Vec<Box<dyn Surface>> {
         let (mut a, mut b) = (self.clone(), self.clone());
-        if lu >= lv {
+        if choice == 0 {
             let m = 0.5 * (self.u0 + self.u1);
             a.u1 = m;
             b.u0 = m;

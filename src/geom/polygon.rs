@@ -51,6 +51,9 @@ pub(crate) struct MeshData {
     /// Cut triangles into three quads instead of one collapsed patch (set when the primitive
     /// has a displacement shader, which needs derivatives at every grid point).
     pub split_triangles: bool,
+    /// Motion blur (deformation): the shutter-open key's camera-space positions, which decide
+    /// how faces are cut into patches so every key is cut the same way.
+    pub decomp_p: Option<Arc<Vec<Vec3>>>,
 }
 
 /// A range of a mesh's faces.
@@ -92,6 +95,10 @@ impl Mesh {
             return;
         }
         let pos = |local: usize| d.p[d.verts[fv0 + local] as usize];
+        let dpos = |local: usize| match &d.decomp_p {
+            Some(q) => q[d.verts[fv0 + local] as usize],
+            None => pos(local),
+        };
         // Newell normal of the outline (camera space); its size is twice the projected area.
         let mut newell = Vec3::ZERO;
         for k in outline.clone() {
@@ -112,8 +119,23 @@ impl Mesh {
             return; // zero-area face: nothing to see
         }
         let ng = if d.flip { -newell } else { newell }.normalize();
-        // Project to the dominant plane.
-        let ax = newell.abs();
+        // Project to the dominant plane (of the shutter-open key when the mesh deforms).
+        let ax = match &d.decomp_p {
+            None => newell.abs(),
+            Some(_) => {
+                let mut nd = Vec3::ZERO;
+                for k in outline.clone() {
+                    let next = if k + 1 == outline.end { outline.start } else { k + 1 };
+                    let (a, b) = (dpos(k), dpos(next));
+                    nd += Vec3::new(
+                        (a.y - b.y) * (a.z + b.z),
+                        (a.z - b.z) * (a.x + b.x),
+                        (a.x - b.x) * (a.y + b.y),
+                    );
+                }
+                nd.abs()
+            }
+        };
         let proj = |p: Vec3| {
             if ax.z >= ax.x && ax.z >= ax.y {
                 Vec2::new(p.x, p.y)
@@ -124,7 +146,7 @@ impl Mesh {
             }
         };
         let nfv = d.fv_start[f + 1] - fv0;
-        let pts: Vec<Vec2> = (0..nfv).map(|k| proj(pos(k))).collect();
+        let pts: Vec<Vec2> = (0..nfv).map(|k| proj(dpos(k))).collect();
         if loops.len() == 1 && outline.len() == 4 && convex_quad(&pts[0..4]) {
             // Bilinear corner order (0,0) (1,0) (0,1) (1,1) = polygon vertices 0 1 3 2.
             out.push(self.patch(f, [0, 1, 3, 2], ng));

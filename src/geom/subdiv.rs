@@ -810,6 +810,7 @@ pub(crate) fn subdivision(
         color: prim.attributes.color,
         opacity: prim.attributes.opacity,
         split_triangles: prim.attributes.displacement.is_some(),
+        decomp_p: None,
     };
     vec![Box::new(Mesh {
         data: Arc::new(data),

@@ -130,6 +130,7 @@ pub(super) fn surfaces(
         attributes: prim.attributes.clone(),
         world_from_object: prim.world_from_object,
         span: prim.span,
+        motion: None,
     };
     super::polygons(
         index,

@@ -18,6 +18,7 @@ fn prim(geometry: Geometry, params: Vec<Param>, attrs: Attributes, m: Mat4) -> P
         attributes: Arc::new(attrs),
         world_from_object: m,
         span: Span::default(),
+        motion: None,
     }
 }
 

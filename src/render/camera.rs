@@ -28,6 +28,41 @@ pub struct Camera {
     pub yres: u32,
     /// camera_from_named for every CoordinateSystem of the scene plus "world".
     pub named: HashMap<String, Mat4>,
+    /// DepthOfField as a thin lens (None: a pinhole, including an infinite f-stop).
+    pub dof: Option<Dof>,
+}
+
+/// A thin lens (RISpec §4.1.1 DepthOfField). Seen from lens point `L` (in the unit disk,
+/// scaled by the aperture radius `R = focallength / (2 fstop)`), a point at camera depth `z`
+/// appears in screen space at its pinhole position minus `R·L·(1/z − 1/focaldistance)`:
+/// points on the focal plane stay put, the others spread over a circle of confusion whose
+/// diameter, as an angle, is `(focallength / fstop)·|1/z − 1/focaldistance|`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dof {
+    /// 1 / focaldistance.
+    pub inv_focus: f32,
+    /// Raster shift per unit of lens position per unit of (1/focaldistance − 1/z), in x and y
+    /// (the aperture radius times raster pixels per unit of x/z).
+    pub raster_k: [f32; 2],
+    /// The same in screen units.
+    pub screen_k: [f32; 2],
+}
+
+impl Dof {
+    /// The circle-of-confusion radius factor |1/F − 1/z| for depths in [z0, z1] (infinite when
+    /// the range reaches the eye).
+    pub fn coc_factor(&self, z0: f32, z1: f32) -> f32 {
+        if !(z0 > 0.0) {
+            return f32::INFINITY;
+        }
+        let a = (self.inv_focus - 1.0 / z0).abs();
+        let b = if z1.is_finite() {
+            (self.inv_focus - 1.0 / z1).abs()
+        } else {
+            self.inv_focus
+        };
+        a.max(b)
+    }
 }
 
 impl Camera {
@@ -187,17 +222,47 @@ impl Camera {
             .map(|(k, world_from_named)| (k.clone(), camera_from_world * *world_from_named))
             .collect();
         named.insert("world".into(), camera_from_world);
+        let raster_from_screen = raster_from_ndc * ndc_from_screen;
+        let dof = match options.depth_of_field {
+            Some([fstop, focallength, focaldistance])
+                if perspective
+                    && fstop.is_finite()
+                    && fstop > 0.0
+                    && focallength > 0.0
+                    && focaldistance > 0.0 =>
+            {
+                let r = focallength / (2.0 * fstop);
+                let screen_k = [
+                    screen_from_camera.x_axis.x * r,
+                    screen_from_camera.y_axis.y * r,
+                ];
+                let raster_k = [
+                    raster_from_screen.x_axis.x * screen_k[0],
+                    raster_from_screen.y_axis.y * screen_k[1],
+                ];
+                // Below a thousandth of a pixel at a thousand times the focal distance's
+                // reciprocal the lens is a pinhole (`DepthOfField 1e38 …` in real scenes).
+                let big = raster_k[0].abs().max(raster_k[1].abs()) * 1e3 / focaldistance;
+                (big > 1e-3 && big.is_finite()).then_some(Dof {
+                    inv_focus: 1.0 / focaldistance,
+                    raster_k,
+                    screen_k,
+                })
+            }
+            _ => None,
+        };
         Camera {
             camera_from_world,
             screen_from_camera,
             ndc_from_screen,
-            raster_from_screen: raster_from_ndc * ndc_from_screen,
+            raster_from_screen,
             perspective,
             near,
             far,
             xres,
             yres,
             named,
+            dof,
         }
     }
 
@@ -229,10 +294,10 @@ pub fn check_options(options: &Options, diags: &Diagnostics) {
             format!("ScreenWindow {l} {r} {b} {t} is empty; using a width/height of 1"),
         ));
     }
-    if options.depth_of_field.is_some() {
+    if options.depth_of_field.is_some() && options.projection == Projection::Orthographic {
         diags.report(Diag::warning(
-            "render::unsupported",
-            "DepthOfField is not implemented: rendering with a pinhole camera",
+            "render::camera",
+            "DepthOfField needs a perspective projection: the orthographic camera stays a pinhole",
         ));
     }
     if options.near <= 0.0 {

@@ -11,7 +11,7 @@ use glam::{Mat4, Vec3, Vec4};
 
 use crate::geom::{Bound, Surface};
 
-use super::camera::{Camera, PixelRect};
+use super::camera::{Camera, Dof, PixelRect};
 
 /// Points per side of the trial grid used to measure a surface's size on screen.
 pub const TEST_DICE: usize = 5;
@@ -33,6 +33,8 @@ pub struct View {
     pub eye_epsilon: f32,
     /// Most micropolygons in one grid; larger surfaces split.
     pub max_grid: usize,
+    /// The thin lens, when DepthOfField is on: bounds widen by the circle of confusion.
+    pub dof: Option<Dof>,
 }
 
 /// What to do with a surface.
@@ -76,6 +78,7 @@ impl View {
                 f32::NEG_INFINITY
             },
             max_grid: max_grid.max(1),
+            dof: camera.dof,
         }
     }
 
@@ -96,7 +99,16 @@ impl View {
         if b.is_empty() || b.max.z < self.near || b.min.z > self.far {
             return true;
         }
-        let [x0, x1, y0, y1] = self.screen;
+        let [mut x0, mut x1, mut y0, mut y1] = self.screen;
+        if let Some(d) = &self.dof {
+            // Out of focus a bound reaches its circle of confusion further.
+            let c = d.coc_factor(b.min.z.max(self.near), b.max.z);
+            if !c.is_finite() {
+                return false;
+            }
+            let (cx, cy) = (d.screen_k[0].abs() * c, d.screen_k[1].abs() * c);
+            (x0, x1, y0, y1) = (x0 - cx, x1 + cx, y0 - cy, y1 + cy);
+        }
         let mut out = [true; 4];
         for p in b.corners() {
             let c: Vec4 = self.screen_from_camera * p.extend(1.0);
@@ -110,9 +122,22 @@ impl View {
         out.iter().any(|&o| o)
     }
 
-    /// The raster bound (x0, y0, x1, y1) of a camera-space bound in front of the eye plane;
+    /// The raster bound (x0, y0, x1, y1) of a camera-space bound in front of the eye plane,
+    /// widened by the largest circle of confusion over its depths when DepthOfField is on;
     /// None when it reaches behind `eye_epsilon`.
     pub fn raster_bound(&self, b: &Bound) -> Option<[f32; 4]> {
+        let r = self.raster_bound_sharp(b)?;
+        let Some(d) = &self.dof else {
+            return Some(r);
+        };
+        let c = d.coc_factor(b.min.z, b.max.z);
+        let (cx, cy) = (d.raster_k[0].abs() * c, d.raster_k[1].abs() * c);
+        let r = [r[0] - cx, r[1] - cy, r[2] + cx, r[3] + cy];
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+
+    /// The raster bound through the pinhole (no circle of confusion).
+    pub fn raster_bound_sharp(&self, b: &Bound) -> Option<[f32; 4]> {
         if b.min.z < self.eye_epsilon {
             return None;
         }
@@ -159,7 +184,10 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     // A surface far bigger than any grid can cover: split without trial dicing. Its own
     // bound, not the displacement-widened one: splitting never shrinks the widening, so a
     // displacement bound larger than a grid would split forever.
-    let own = view.raster_bound(&surface.bound()).unwrap_or(rb);
+    // Sharp and at shutter open: blur (lens or motion) does not shrink when split.
+    let own = view
+        .raster_bound_sharp(&surface.still_bound())
+        .unwrap_or(rb);
     let (bw, bh) = ((own[2] - own[0]) / edge, (own[3] - own[1]) / edge);
     if bw * bh > 64.0 * view.max_grid as f32 && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt() {
         return Decision::Split { eye: false };

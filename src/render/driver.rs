@@ -16,7 +16,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::diag::{Diag, Diagnostics};
@@ -74,19 +74,16 @@ pub fn render_frame(
     let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
     let mut surfaces = Vec::new();
     for (i, prim) in scene.primitives.iter().enumerate() {
-        surfaces.push(surfaces_for(i, prim, camera.camera_from_world, diags));
+        surfaces.push(super::motion::surfaces_over_shutter(
+            i,
+            prim,
+            camera.camera_from_world,
+            scene.camera_motion.as_deref(),
+            options.shutter,
+            diags,
+        ));
     }
     render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
-}
-
-/// The geometry entry point: a primitive's surfaces in camera space.
-fn surfaces_for(
-    index: usize,
-    prim: &Primitive,
-    camera_from_world: Mat4,
-    diags: &Diagnostics,
-) -> Vec<Box<dyn Surface>> {
-    crate::geom::surfaces_for(index, prim, camera_from_world, diags)
 }
 
 /// The scene's options with the command-line overrides applied.
@@ -498,8 +495,22 @@ impl Frame<'_> {
                 let orient = orientation(&grid);
                 self.stats.time(Stage::Dice, t0);
                 let t1 = Instant::now();
+                let undisplaced = grid.motion.as_ref().map(|_| grid.p.clone());
                 self.shader
                     .displace(self.scene, self.camera, prim, &mut grid);
+                if let (Some(before), Some(m)) = (undisplaced, grid.motion.as_mut()) {
+                    // Displaced at shutter open; every key carries the same offset.
+                    if before != grid.p {
+                        for key in m.p.iter_mut().skip(1) {
+                            for ((k, b), a) in key.iter_mut().zip(&before).zip(&grid.p) {
+                                *k += *a - *b;
+                            }
+                        }
+                    }
+                    if let Some(k0) = m.p.first_mut() {
+                        k0.clone_from(&grid.p);
+                    }
+                }
                 set_incident(&mut grid, self.camera.perspective);
                 self.stats.time(Stage::Displace, t1);
                 let t2 = Instant::now();
@@ -840,6 +851,7 @@ mod tests {
 
     use super::*;
     use crate::render::dice::tests::Quad;
+    use glam::Mat4;
     use crate::render::DefaultShader;
     use crate::scene::{Attributes, Geometry, PixelFilter, Projection};
     use crate::shade::Grid;
@@ -867,6 +879,7 @@ mod tests {
             attributes: Arc::new(attributes),
             world_from_object: Mat4::IDENTITY,
             span: Default::default(),
+            motion: None,
         }
     }
 

@@ -15,6 +15,7 @@ pub mod dispbound;
 pub mod driver;
 pub mod hider;
 pub mod limits;
+pub mod motion;
 pub mod sampler;
 pub mod stats;
 

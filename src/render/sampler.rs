@@ -87,9 +87,95 @@ pub fn pixel_positions(
     }
 }
 
+/// Shirley and Chiu's concentric map from the unit square to the unit disk (strata stay
+/// compact, so stratified lens samples stay stratified).
+#[inline]
+pub fn concentric_disk(u: f32, v: f32) -> [f32; 2] {
+    let (a, b) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return [0.0, 0.0];
+    }
+    let q = std::f32::consts::FRAC_PI_4;
+    let (r, phi) = if a.abs() > b.abs() {
+        (a, q * (b / a))
+    } else {
+        (b, 2.0 * q - q * (a / b))
+    };
+    [r * phi.cos(), r * phi.sin()]
+}
+
+/// A permutation of `0..n` for pixel (px, py), stream `k` (Fisher–Yates on hashes).
+fn permutation(px: i32, py: i32, n: usize, seed: u64, k: u64, out: &mut Vec<u32>) {
+    out.clear();
+    out.extend(0..n as u32);
+    for i in (1..n).rev() {
+        let j = (hash(px, py, i as u32, seed, k) % (i as u64 + 1)) as usize;
+        out.swap(i, j);
+    }
+}
+
+/// The shutter time (0…1) and lens position (unit disk) of each of the `xs × ys` samples of
+/// pixel (px, py), appended to `times` and `lens`. Both are stratified over the pixel's
+/// samples — sample s takes time stratum π(s) and lens stratum σ(s) for two hashed
+/// permutations π, σ — so time, lens and image position are decorrelated, and each depends
+/// only on (pixel, sample, seed).
+#[allow(clippy::too_many_arguments)]
+pub fn time_and_lens(
+    px: i32,
+    py: i32,
+    xs: usize,
+    ys: usize,
+    jitter: bool,
+    seed: u64,
+    perm: &mut Vec<u32>,
+    times: &mut Vec<f32>,
+    lens: &mut Vec<[f32; 2]>,
+) {
+    let n = xs * ys;
+    let j = |s: usize, k: u64| {
+        if jitter {
+            unit(hash(px, py, s as u32, seed, k))
+        } else {
+            0.5
+        }
+    };
+    permutation(px, py, n, seed, 7, perm);
+    for s in 0..n {
+        times.push((perm[s] as f32 + j(s, 3)) / n as f32);
+    }
+    permutation(px, py, n, seed, 8, perm);
+    for s in 0..n {
+        let c = perm[s] as usize;
+        let (cx, cy) = (c % xs, c / xs);
+        let u = (cx as f32 + j(s, 4)) / xs as f32;
+        let v = (cy as f32 + j(s, 5)) / ys as f32;
+        lens.push(concentric_disk(u, v));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn times_and_lens_are_stratified() {
+        let (mut perm, mut t, mut l) = (Vec::new(), Vec::new(), Vec::new());
+        time_and_lens(3, 4, 4, 4, true, 11, &mut perm, &mut t, &mut l);
+        let mut strata: Vec<usize> = t.iter().map(|&x| (x * 16.0) as usize).collect();
+        strata.sort();
+        assert_eq!(strata, (0..16).collect::<Vec<_>>());
+        assert!(l.iter().all(|p| p[0] * p[0] + p[1] * p[1] <= 1.0 + 1e-5));
+        // The concentric map keeps area: the mean of |p|² over the disk is 1/2.
+        let n = 64;
+        let mut m = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let p = concentric_disk((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                m += p[0] * p[0] + p[1] * p[1];
+            }
+        }
+        assert!((m / (n * n) as f32 - 0.5).abs() < 0.01);
+    }
 
     #[test]
     fn jittered_samples_stay_in_their_strata() {

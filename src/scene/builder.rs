@@ -100,6 +100,9 @@ pub(super) struct GState {
     pub trim: Option<Arc<TrimCurves>>,
     /// World_from_object inside the world; camera_from_current before it.
     pub ctm: Mat4,
+    /// The ctm at several times when a transform was given inside `MotionBegin` (its first
+    /// key equals `ctm`).
+    pub motion: Option<Arc<MotionTransform>>,
     /// ScopedCoordinateSystem entries made so far: (name, value it replaced).
     pub scoped: Vec<(String, Option<Mat4>)>,
 }
@@ -181,8 +184,10 @@ pub struct Builder<'a> {
     pub(super) light_handles: HashMap<String, usize>,
     pub(super) objects: HashMap<String, Arc<Vec<ObjPrim>>>,
     pub(super) defining: Option<ObjectDef>,
-    /// Inside MotionBegin: whether the block's first request was taken.
-    pub(super) motion_taken: Option<bool>,
+    /// Inside MotionBegin: the block's requests so far.
+    pub(super) motion_block: Option<super::motion::MotionBlock>,
+    /// While a deforming motion block runs its keys: the primitives they emit.
+    pub(super) capture: Option<Vec<(Span, Arc<Geometry>, Arc<ParamList>)>>,
     pub(super) archives: HashMap<String, Arc<Vec<Request>>>,
     /// Archives being read, outermost first, for cycle detection.
     pub(super) include: Vec<String>,
@@ -218,6 +223,7 @@ impl<'a> Builder<'a> {
                 attrs: Arc::new(Attributes::default()),
                 trim: None,
                 ctm: Mat4::IDENTITY,
+                motion: None,
                 scoped: Vec::new(),
             },
             blocks: Vec::new(),
@@ -231,7 +237,8 @@ impl<'a> Builder<'a> {
             light_handles: HashMap::new(),
             objects: HashMap::new(),
             defining: None,
-            motion_taken: None,
+            motion_block: None,
+            capture: None,
             archives: HashMap::new(),
             include: Vec::new(),
             conds: Vec::new(),
@@ -338,12 +345,10 @@ impl<'a> Builder<'a> {
                 i = self.record_archive(reqs, i - 1);
                 continue;
             }
-            if let Some(taken) = self.motion_taken {
-                if r.name != "MotionEnd" {
-                    if taken {
-                        continue;
-                    }
-                    self.motion_taken = Some(true);
+            if let Some(block) = self.motion_block.as_mut() {
+                if r.name != "MotionEnd" && r.name != "MotionBegin" {
+                    block.reqs.push(r.clone());
+                    continue;
                 }
             }
             self.dispatch(r);
@@ -574,9 +579,12 @@ impl<'a> Builder<'a> {
                 self.restore_attrs(b.saved);
             }
             BlockKind::Motion => {
-                self.motion_taken = None;
+                self.motion_block = None;
             }
-            BlockKind::Transform => self.gs.ctm = b.saved.ctm,
+            BlockKind::Transform => {
+                self.gs.ctm = b.saved.ctm;
+                self.gs.motion = b.saved.motion;
+            }
             BlockKind::Frame => self.restore_frame(b),
             _ => self.restore_attrs(b.saved),
         }
@@ -704,6 +712,7 @@ impl<'a> Builder<'a> {
             frame: self.frame,
             options,
             camera_from_world: cfw,
+            camera_motion: self.gs.motion.take(),
             lights: Vec::new(),
             primitives: Vec::new(),
             coordinate_systems: HashMap::new(),
@@ -776,6 +785,7 @@ impl<'a> Builder<'a> {
     pub(super) fn transform_end(&mut self, call: &Call<'_>) {
         if let Some(b) = self.pop_block(BlockKind::Transform, call) {
             self.gs.ctm = b.saved.ctm;
+            self.gs.motion = b.saved.motion;
         }
     }
 
@@ -804,33 +814,6 @@ impl<'a> Builder<'a> {
     pub(super) fn solid_end(&mut self, call: &Call<'_>) {
         if let Some(b) = self.pop_block(BlockKind::Solid, call) {
             self.restore_attrs(b.saved);
-        }
-    }
-
-    pub(super) fn motion_begin(&mut self, call: &Call<'_>) {
-        if self.motion_taken.is_some() {
-            self.error(
-                "scene::nesting",
-                "`MotionBegin` inside another motion block",
-                call.span(),
-                "motion blocks do not nest",
-            );
-            return;
-        }
-        self.report(
-            Diag::warning(
-                "scene::unimplemented",
-                "`MotionBegin` (motion blur) is not implemented yet; each motion block uses its first sample",
-            )
-            .label(call.span(), "motion ignored"),
-        );
-        self.push_block(BlockKind::Motion, call.span());
-        self.motion_taken = Some(false);
-    }
-
-    pub(super) fn motion_end(&mut self, call: &Call<'_>) {
-        if self.pop_block(BlockKind::Motion, call).is_some() {
-            self.motion_taken = None;
         }
     }
 

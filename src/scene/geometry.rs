@@ -56,6 +56,21 @@ impl Builder<'_> {
     }
 
     pub(super) fn emit(&mut self, span: Span, geometry: Arc<Geometry>, primvars: Arc<ParamList>) {
+        if let Some(c) = self.capture.as_mut() {
+            c.push((span, geometry, primvars));
+            return;
+        }
+        self.emit_moving(span, geometry, primvars, None);
+    }
+
+    /// Emits a primitive with its motion (the moving ctm's, merged with `deform`).
+    pub(super) fn emit_moving(
+        &mut self,
+        span: Span,
+        geometry: Arc<Geometry>,
+        primvars: Arc<ParamList>,
+        deform: Option<Motion>,
+    ) {
         if let Some(def) = self.defining.as_mut() {
             def.prims.push(ObjPrim {
                 geometry,
@@ -67,6 +82,7 @@ impl Builder<'_> {
         }
         let attributes = self.gs.attrs.clone();
         let world_from_object = self.gs.ctm;
+        let motion = self.primitive_motion(deform).map(Arc::new);
         if let Some(scene) = self.world.as_mut() {
             scene.primitives.push(Primitive {
                 geometry,
@@ -74,6 +90,7 @@ impl Builder<'_> {
                 attributes,
                 world_from_object,
                 span,
+                motion,
             });
         }
     }

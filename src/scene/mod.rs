@@ -14,6 +14,7 @@ pub mod builder;
 pub mod cond;
 mod geometry;
 pub mod known;
+mod motion;
 mod options;
 pub mod params;
 pub mod table;

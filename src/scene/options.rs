@@ -246,12 +246,6 @@ impl Builder<'_> {
             return;
         }
         self.options.depth_of_field = Some(v);
-        let d = Diag::warning(
-            "scene::unimplemented",
-            "`DepthOfField` is not implemented yet; the camera stays a pinhole",
-        )
-        .label(call.span(), "ignored by the renderer");
-        self.report(d);
     }
 
     pub(super) fn shutter(&mut self, call: &Call<'_>) {

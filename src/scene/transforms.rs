@@ -7,6 +7,8 @@
 //! ctm is world_from_object (Identity means world space), before it camera_from_current.
 //! Angles are degrees; camera space is left-handed, but the matrices are the standard ones.
 
+use std::sync::Arc;
+
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::diag::Diag;
@@ -46,10 +48,16 @@ pub fn skew_matrix(angle_deg: f32, d1: Vec3, d2: Vec3) -> Option<Mat4> {
 impl Builder<'_> {
     fn concat(&mut self, m: Mat4) {
         self.gs.ctm *= m;
+        if let Some(mo) = self.gs.motion.as_mut() {
+            for k in Arc::make_mut(mo).mats.iter_mut() {
+                *k *= m;
+            }
+        }
     }
 
     pub(super) fn identity(&mut self, _call: &Call<'_>) {
         self.gs.ctm = Mat4::IDENTITY;
+        self.gs.motion = None;
     }
 
     pub(super) fn transform(&mut self, call: &Call<'_>) {
@@ -58,6 +66,7 @@ impl Builder<'_> {
                 return;
             }
             self.gs.ctm = m;
+            self.gs.motion = None;
         }
     }
 
@@ -189,6 +198,7 @@ impl Builder<'_> {
             Some(s) => s.camera_from_world.inverse() * cfn,
             None => cfn,
         };
+        self.gs.motion = None;
     }
 }
 

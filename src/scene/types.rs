@@ -517,6 +517,189 @@ pub struct Primitive {
     pub attributes: Arc<Attributes>,
     pub world_from_object: Mat4,
     pub span: Span,
+    /// Motion blur: keys over time from `MotionBegin` blocks around the primitive's
+    /// transform and/or the primitive itself (None for a still primitive). The fields above
+    /// hold the first key.
+    pub motion: Option<Arc<Motion>>,
+}
+
+/// A primitive's motion: keys at increasing times (RISpec §5.8). Positions move linearly
+/// between keys.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Motion {
+    pub times: Vec<f32>,
+    /// world_from_object at each time.
+    pub world_from_object: Vec<Mat4>,
+    /// Deformation: the primitive (same kind and shape) at each time; empty when only its
+    /// transform moves.
+    pub shapes: Vec<(Arc<Geometry>, Arc<ParamList>)>,
+}
+
+/// A transform given inside `MotionBegin`…`MotionEnd`: matrices at increasing times.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionTransform {
+    pub times: Vec<f32>,
+    pub mats: Vec<Mat4>,
+}
+
+/// Where `t` falls among increasing `times`: (segment index, fraction), clamped to the ends.
+pub fn motion_segment(times: &[f32], t: f32) -> (usize, f32) {
+    let n = times.len();
+    if n < 2 || t <= times[0] {
+        return (0, 0.0);
+    }
+    if t >= times[n - 1] {
+        return (n - 2, 1.0);
+    }
+    let i = times.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
+    let d = times[i + 1] - times[i];
+    (i, if d > 0.0 { (t - times[i]) / d } else { 0.0 })
+}
+
+fn lerp_mat(a: &Mat4, b: &Mat4, f: f32) -> Mat4 {
+    if f == 0.0 {
+        *a
+    } else if f == 1.0 {
+        *b
+    } else {
+        *a * (1.0 - f) + *b * f
+    }
+}
+
+impl MotionTransform {
+    /// The matrix at time `t` (linear between keys, held outside them).
+    pub fn at(&self, t: f32) -> Mat4 {
+        if self.mats.len() == 1 {
+            return self.mats[0];
+        }
+        let (i, f) = motion_segment(&self.times, t);
+        lerp_mat(&self.mats[i], &self.mats[i + 1], f)
+    }
+}
+
+impl Motion {
+    /// world_from_object at time `t`.
+    pub fn world_from_object_at(&self, t: f32) -> Mat4 {
+        if self.world_from_object.len() == 1 {
+            return self.world_from_object[0];
+        }
+        let (i, f) = motion_segment(&self.times, t);
+        lerp_mat(&self.world_from_object[i], &self.world_from_object[i + 1], f)
+    }
+    /// The deformed primitive at time `t` (None when only the transform moves): keys
+    /// interpolated linearly (primitive variables and quadric parameters).
+    pub fn shape_at(&self, t: f32) -> Option<(Arc<Geometry>, Arc<ParamList>)> {
+        if self.shapes.is_empty() {
+            return None;
+        }
+        if self.shapes.len() == 1 {
+            return Some(self.shapes[0].clone());
+        }
+        let (i, f) = motion_segment(&self.times, t);
+        let (a, b) = (&self.shapes[i], &self.shapes[i + 1]);
+        if f == 0.0 {
+            return Some(a.clone());
+        }
+        if f == 1.0 {
+            return Some(b.clone());
+        }
+        Some((
+            Arc::new(lerp_geometry(&a.0, &b.0, f)),
+            Arc::new(lerp_params(&a.1, &b.1, f)),
+        ))
+    }
+}
+
+/// Float parameters interpolated (others, and mismatched lengths, taken from `a`).
+pub fn lerp_params(a: &ParamList, b: &ParamList, f: f32) -> ParamList {
+    ParamList(
+        a.0.iter()
+            .map(|p| {
+                let mut p = p.clone();
+                if let (ParamData::Floats(x), Some(ParamData::Floats(y))) =
+                    (&mut p.data, b.get(&p.name).map(|q| &q.data))
+                {
+                    if x.len() == y.len() && p.decl.ty != ParamType::Integer {
+                        for (u, v) in x.iter_mut().zip(y) {
+                            *u += (v - *u) * f;
+                        }
+                    }
+                }
+                p
+            })
+            .collect(),
+    )
+}
+
+/// Quadric parameters interpolated; other geometry (whose shape lives in its primitive
+/// variables) is taken from `a`.
+pub fn lerp_geometry(a: &Geometry, b: &Geometry, f: f32) -> Geometry {
+    let l = |x: f32, y: f32| x + (y - x) * f;
+    use Geometry as G;
+    match (a, b) {
+        (
+            G::Sphere { radius, zmin, zmax, thetamax },
+            G::Sphere { radius: r2, zmin: z0, zmax: z1, thetamax: t2 },
+        ) => G::Sphere {
+            radius: l(*radius, *r2),
+            zmin: l(*zmin, *z0),
+            zmax: l(*zmax, *z1),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Cone { height, radius, thetamax },
+            G::Cone { height: h2, radius: r2, thetamax: t2 },
+        ) => G::Cone {
+            height: l(*height, *h2),
+            radius: l(*radius, *r2),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Cylinder { radius, zmin, zmax, thetamax },
+            G::Cylinder { radius: r2, zmin: z0, zmax: z1, thetamax: t2 },
+        ) => G::Cylinder {
+            radius: l(*radius, *r2),
+            zmin: l(*zmin, *z0),
+            zmax: l(*zmax, *z1),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Hyperboloid { p1, p2, thetamax },
+            G::Hyperboloid { p1: q1, p2: q2, thetamax: t2 },
+        ) => G::Hyperboloid {
+            p1: p1.lerp(*q1, f),
+            p2: p2.lerp(*q2, f),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Paraboloid { rmax, zmin, zmax, thetamax },
+            G::Paraboloid { rmax: r2, zmin: z0, zmax: z1, thetamax: t2 },
+        ) => G::Paraboloid {
+            rmax: l(*rmax, *r2),
+            zmin: l(*zmin, *z0),
+            zmax: l(*zmax, *z1),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Disk { height, radius, thetamax },
+            G::Disk { height: h2, radius: r2, thetamax: t2 },
+        ) => G::Disk {
+            height: l(*height, *h2),
+            radius: l(*radius, *r2),
+            thetamax: l(*thetamax, *t2),
+        },
+        (
+            G::Torus { rmajor, rminor, phimin, phimax, thetamax },
+            G::Torus { rmajor: a2, rminor: b2, phimin: p0, phimax: p1, thetamax: t2 },
+        ) => G::Torus {
+            rmajor: l(*rmajor, *a2),
+            rminor: l(*rminor, *b2),
+            phimin: l(*phimin, *p0),
+            phimax: l(*phimax, *p1),
+            thetamax: l(*thetamax, *t2),
+        },
+        _ => a.clone(),
+    }
 }
 
 /// One frame's scene.
@@ -527,6 +710,9 @@ pub struct Scene {
     pub options: Options,
     /// The transform current at WorldBegin.
     pub camera_from_world: Mat4,
+    /// Camera motion: camera_from_world keys when the camera transform was given inside
+    /// `MotionBegin` (its first key is `camera_from_world`).
+    pub camera_motion: Option<Arc<MotionTransform>>,
     pub lights: Vec<Light>,
     pub primitives: Vec<Primitive>,
     /// CoordinateSystem names: world_from_named.

@@ -57,6 +57,16 @@ pub struct Grid {
     pub primvars: Vec<GridVar>,
     /// Shader output variables after shading (for arbitrary output variables in Display).
     pub outputs: Vec<GridVar>,
+    /// Motion blur: the grid's positions at each key over the shutter (None when still).
+    pub motion: Option<Box<GridMotion>>,
+}
+
+/// Where a moving grid's points are over the shutter: `p[k][i]` is point `i` at `times[k]`
+/// (times normalised to the shutter: first 0, last 1). Key 0 is where the grid is shaded.
+#[derive(Clone, Debug, Default)]
+pub struct GridMotion {
+    pub times: Vec<f32>,
+    pub p: Vec<Vec<Vec3>>,
 }
 
 impl Grid {
@@ -91,6 +101,7 @@ impl Grid {
             oi: vec![Vec3::ONE; n],
             primvars: Vec::new(),
             outputs: Vec::new(),
+            motion: None,
         }
     }
     pub fn primvar(&self, name: &str) -> Option<&GridVar> {

@@ -94,6 +94,19 @@ pub struct ShadedGrid {
     /// A lower bound of the camera depth of every point of the grid (0 when unknown): a
     /// bucket whose samples all see an opaque surface nearer than this skips the grid.
     pub zmin: f32,
+    /// Motion blur: raster positions and depths at every key (None when still). With
+    /// motion or depth of field, `mp_bounds`, `row_bounds` and `bound` cover every position
+    /// a micropolygon takes during the shutter and over the lens.
+    pub motion: Option<Box<MovingPoints>>,
+}
+
+/// A moving grid's points at each key over the shutter (key 0 equals `xy`/`depth`).
+#[derive(Clone, Debug, Default)]
+pub struct MovingPoints {
+    /// Key times normalised to the shutter (first 0, last 1).
+    pub times: Vec<f32>,
+    pub xy: Vec<Vec<[f32; 2]>>,
+    pub depth: Vec<Vec<f32>>,
 }
 
 /// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
@@ -163,6 +176,39 @@ impl ShadedGrid {
                 depth.push(0.0);
             }
         }
+        // Motion blur: every key projected; a point behind the eye at any key kills its
+        // micropolygons.
+        let motion = grid
+            .motion
+            .as_ref()
+            .filter(|m| m.p.len() >= 2 && m.times.len() == m.p.len() && m.p.iter().all(|k| k.len() == n))
+            .map(|m| {
+                let mut mp = MovingPoints {
+                    times: m.times.clone(),
+                    xy: vec![xy.clone()],
+                    depth: vec![depth.clone()],
+                };
+                for key in &m.p[1..] {
+                    let mut kx = Vec::with_capacity(n);
+                    let mut kd = Vec::with_capacity(n);
+                    for (i, p) in key.iter().enumerate() {
+                        let front = !view.perspective || p.z >= view.eye_epsilon;
+                        if front && p.is_finite() {
+                            kx.push(view.to_raster(*p));
+                            kd.push(if view.perspective { 1.0 / p.z } else { p.z });
+                        } else {
+                            ok[i] = false;
+                            kx.push([0.0, 0.0]);
+                            kd.push(0.0);
+                        }
+                    }
+                    mp.xy.push(kx);
+                    mp.depth.push(kd);
+                }
+                Box::new(mp)
+            });
+        let dof = view.dof.filter(|_| view.perspective);
+        let blurred = motion.is_some() || dof.is_some();
         let c3 = |v: &Vec3| [v.x, v.y, v.z];
         let ci: Vec<[f32; 3]> = grid.ci.iter().map(c3).collect();
         let oi: Vec<[f32; 3]> = grid.oi.iter().map(c3).collect();
@@ -197,7 +243,33 @@ impl ShadedGrid {
                     alive = m.dot(view_dir) < 0.0;
                 }
                 let mut mb = EMPTY;
-                if alive {
+                if alive && blurred {
+                    // Every key, each corner widened by its circle of confusion.
+                    let nkeys = motion.as_ref().map_or(1, |m| m.xy.len());
+                    for &c in &corners {
+                        for key in 0..nkeys {
+                            let (p, q) = match &motion {
+                                Some(m) => (m.xy[key][c], m.depth[key][c]),
+                                None => (xy[c], depth[c]),
+                            };
+                            let (rx, ry) = match &dof {
+                                Some(d) => {
+                                    let f = (d.inv_focus - q).abs();
+                                    (d.raster_k[0].abs() * f, d.raster_k[1].abs() * f)
+                                }
+                                None => (0.0, 0.0),
+                            };
+                            mb[0] = mb[0].min(p[0] - rx);
+                            mb[1] = mb[1].min(p[1] - ry);
+                            mb[2] = mb[2].max(p[0] + rx);
+                            mb[3] = mb[3].max(p[1] + ry);
+                        }
+                    }
+                    for q in 0..2 {
+                        rb[q] = rb[q].min(mb[q]);
+                        rb[q + 2] = rb[q + 2].max(mb[q + 2]);
+                    }
+                } else if alive {
                     for &c in &corners {
                         mb[0] = mb[0].min(xy[c][0]);
                         mb[1] = mb[1].min(xy[c][1]);
@@ -218,11 +290,16 @@ impl ShadedGrid {
             }
             row_bounds.push(rb);
         }
-        // Nearest depth over the points in front of the eye (perspective depth is 1/z).
+        // Nearest depth over the points in front of the eye (perspective depth is 1/z), over
+        // every key of a moving grid.
+        let all_depths: Vec<&[f32]> = match &motion {
+            Some(m) => m.depth.iter().map(Vec::as_slice).collect(),
+            None => vec![&depth],
+        };
         let zmin = if view.perspective {
-            let q = depth
+            let q = all_depths
                 .iter()
-                .zip(&ok)
+                .flat_map(|d| d.iter().zip(&ok))
                 .filter(|(_, &o)| o)
                 .fold(0f32, |m, (&d, _)| m.max(d));
             if q > 0.0 {
@@ -231,9 +308,9 @@ impl ShadedGrid {
                 0.0
             }
         } else {
-            depth
+            all_depths
                 .iter()
-                .zip(&ok)
+                .flat_map(|d| d.iter().zip(&ok))
                 .filter(|(_, &o)| o)
                 .fold(f32::INFINITY, |m, (&d, _)| m.min(d))
         };
@@ -266,6 +343,7 @@ impl ShadedGrid {
             mp_bounds,
             row_bounds,
             zmin,
+            motion,
         }
     }
 
@@ -308,7 +386,10 @@ impl ShadedGrid {
 
     /// Approximate heap size, for the peak-memory statistic.
     pub fn bytes(&self) -> usize {
-        self.xy.len() * (8 + 4 + 24) + self.aov.len() * 4 + self.live.len()
+        self.xy.len() * (8 + 4 + 24)
+            + self.aov.len() * 4
+            + self.live.len()
+            + self.motion.as_ref().map_or(0, |m| m.xy.len() * self.xy.len() * 12)
     }
 }
 
@@ -392,6 +473,8 @@ pub struct HiderConfig {
     /// ClippingPlanes in camera space as (n, d): points with n·p + d > 0 are clipped.
     pub clip_planes: Vec<Vec4>,
     pub camera_from_raster: Mat4,
+    /// The thin lens (DepthOfField), None for a pinhole.
+    pub dof: Option<super::camera::Dof>,
 }
 
 impl HiderConfig {
@@ -467,6 +550,7 @@ impl HiderConfig {
             far: camera.far,
             clip_planes,
             camera_from_raster: camera.raster_from_camera().inverse(),
+            dof: camera.dof,
         }
     }
 
@@ -518,7 +602,18 @@ pub fn make_hider(options: &Options, config: HiderConfig, diags: &Diagnostics) -
     match options.hider.name.as_str() {
         "hidden" | "" => Box::new(zbuffer::ZBuffer::new(config)),
         "null" => Box::new(NullHider(config)),
-        "abuffer" => Box::new(abuffer::ABuffer::new(config, &options.hider.params, diags)),
+        "abuffer" => {
+            if config.dof.is_some() || options.shutter[0] < options.shutter[1] {
+                diags.report(
+                    Diag::warning(
+                        "render::hider",
+                        "Hider \"abuffer\" does not blur: moving geometry is seen at shutter open, through a pinhole",
+                    )
+                    .help("motion blur and depth of field are sampled by Hider \"hidden\""),
+                );
+            }
+            Box::new(abuffer::ABuffer::new(config, &options.hider.params, diags))
+        }
         other => {
             diags.report(
                 Diag::warning(

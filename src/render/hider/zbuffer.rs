@@ -15,7 +15,7 @@ use crate::film::SampleBuffer;
 use crate::num::floor_i32;
 
 use super::super::camera::PixelRect;
-use super::super::sampler::pixel_positions;
+use super::super::sampler::{pixel_positions, time_and_lens};
 use super::super::stats::Stats;
 use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
 
@@ -282,6 +282,21 @@ impl Hider for ZBuffer {
         // (fronts only come nearer).
         let mut far = f32::INFINITY;
         let mut hits_at_refresh = 0u64;
+        // Motion blur and depth of field: each sample's time and lens position.
+        let (mut times, mut lens) = (Vec::new(), Vec::new());
+        if cfg.dof.is_some() || order.iter().any(|g| g.motion.is_some()) {
+            let [xs, ys] = cfg.spp;
+            times.reserve(n);
+            lens.reserve(n);
+            let mut perm = Vec::new();
+            for py in rect.y0..rect.y1 {
+                for px in rect.x0..rect.x1 {
+                    time_and_lens(
+                        px, py, xs, ys, cfg.jitter, cfg.seed, &mut perm, &mut times, &mut lens,
+                    );
+                }
+            }
+        }
         for g in order {
             if !b.keep_second
                 && b.uncovered == 0
@@ -294,7 +309,11 @@ impl Hider for ZBuffer {
                 Stats::add(&stats.grids_occluded, 1);
                 continue;
             }
-            sample_grid(&mut b, &buf, rect, g);
+            if g.motion.is_some() || cfg.dof.is_some() {
+                sample_grid_blurred(&mut b, &buf, rect, g, &times, &lens);
+            } else {
+                sample_grid(&mut b, &buf, rect, g);
+            }
         }
         resolve(&b, &mut buf);
         stats.alloc(b.points.len() * std::mem::size_of::<VisPoint>() + buf.values.len() * 4);
@@ -473,6 +492,215 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 });
             }
         }
+    }
+}
+
+/// Tests a moving or out-of-focus grid: each sample sees the micropolygon's corners where
+/// they are at its time (linear between keys), shifted by its lens position times their
+/// circle of confusion, then tests the two triangles as the still path does. Only the
+/// samples inside the micropolygon's bound over the whole shutter and lens are visited.
+fn sample_grid_blurred(
+    b: &mut Bucket,
+    buf: &SampleBuffer,
+    rect: PixelRect,
+    g: &ShadedGrid,
+    times: &[f32],
+    lens: &[[f32; 2]],
+) {
+    let cfg = b.cfg;
+    let nu = g.nu;
+    let aw = g.aov_width;
+    let Some(win) = g.window(&rect) else {
+        return;
+    };
+    let [wx0, wy0, wx1, wy1] = win;
+    let mut mean_aov = vec![0f32; aw];
+    let mut interp_aov = vec![0f32; aw];
+    let mut visible = Vec::new();
+    g.micropolygons_in(win, &mut visible);
+    let mo = g.motion.as_deref();
+    let dof = cfg.dof;
+    for &(m, k, mb) in &visible {
+        let corner = [k, k + 1, k + nu + 1, k + nu];
+        let bx = [
+            mb[0].max(wx0),
+            mb[1].max(wy0),
+            mb[2].min(wx1),
+            mb[3].min(wy1),
+        ];
+        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+            continue;
+        }
+        let mut cc = [0f32; 3];
+        let mut co = [0f32; 3];
+        for &c in &corner {
+            for q in 0..3 {
+                cc[q] += g.ci[c][q] * 0.25;
+                co[q] += g.oi[c][q] * 0.25;
+            }
+        }
+        if aw > 0 {
+            mean_aov.iter_mut().for_each(|v| *v = 0.0);
+            for &c in &corner {
+                for q in 0..aw {
+                    mean_aov[q] += g.aov[c * aw + q] * 0.25;
+                }
+            }
+        }
+        for_samples(b, buf, rect, bx, |b, s, pos| {
+            let mut p = [[0f32; 2]; 4];
+            let mut q = [0f32; 4];
+            match mo {
+                Some(mo) => {
+                    let (i, f) = crate::scene::motion_segment(&mo.times, times[s]);
+                    let (xa, xb) = (&mo.xy[i], &mo.xy[i + 1]);
+                    let (da, db) = (&mo.depth[i], &mo.depth[i + 1]);
+                    for c in 0..4 {
+                        let (a, e) = (xa[corner[c]], xb[corner[c]]);
+                        p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
+                        q[c] = da[corner[c]] + (db[corner[c]] - da[corner[c]]) * f;
+                    }
+                }
+                None => {
+                    for c in 0..4 {
+                        p[c] = g.xy[corner[c]];
+                        q[c] = g.depth[corner[c]];
+                    }
+                }
+            }
+            if let Some(d) = &dof {
+                let l = lens[s];
+                let (kx, ky) = (l[0] * d.raster_k[0], l[1] * d.raster_k[1]);
+                for c in 0..4 {
+                    let f = d.inv_focus - q[c];
+                    p[c][0] += kx * f;
+                    p[c][1] += ky * f;
+                }
+            }
+            for (t, tri) in [[0usize, 1, 2], [0, 2, 3]].into_iter().enumerate() {
+                let mut v = tri.map(|i| p[i]);
+                let mut idx = tri.map(|i| corner[i]);
+                let mut dq = tri.map(|i| q[i]);
+                let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
+                    - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+                if area == 0.0 || !area.is_finite() {
+                    continue;
+                }
+                if area < 0.0 {
+                    v.swap(1, 2);
+                    idx.swap(1, 2);
+                    dq.swap(1, 2);
+                }
+                if inside(edge(v[1], v[2], pos))
+                    && inside(edge(v[2], v[0], pos))
+                    && inside(edge(v[0], v[1], pos))
+                {
+                    let tri = BlurTri {
+                        v,
+                        idx,
+                        dq,
+                        inv_area: 1.0 / area.abs(),
+                    };
+                    let sub = (m as u32) << 1 | t as u32;
+                    hit_blurred(b, g, cfg, &tri, sub, s, pos, &cc, &co, &mean_aov, &mut interp_aov);
+                    break;
+                }
+            }
+        });
+    }
+}
+
+/// Canonical edge function for blurred micropolygons (whose corners move per sample, so
+/// edges cannot be set up once): the same bits for edge (a, b) and (b, a) up to sign, and
+/// whether this direction owns samples exactly on the edge (exactly one of the two does).
+#[inline]
+fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
+    if (a[0], a[1]) < (b[0], b[1]) {
+        (
+            (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]),
+            true,
+        )
+    } else {
+        (
+            -((a[0] - b[0]) * (p[1] - b[1]) - (a[1] - b[1]) * (p[0] - b[0])),
+            false,
+        )
+    }
+}
+
+#[inline]
+fn inside(e: (f32, bool)) -> bool {
+    e.0 > 0.0 || (e.0 == 0.0 && e.1)
+}
+
+/// A triangle of a blurred micropolygon as one sample sees it.
+struct BlurTri {
+    v: [[f32; 2]; 3],
+    idx: [usize; 3],
+    /// Depth (1/z or z) at the vertices.
+    dq: [f32; 3],
+    inv_area: f32,
+}
+
+/// [`hit`] for a blurred micropolygon (its vertices and depths given per sample).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn hit_blurred(
+    b: &mut Bucket,
+    g: &ShadedGrid,
+    cfg: &HiderConfig,
+    tri: &BlurTri,
+    sub: u32,
+    s: usize,
+    pos: [f32; 2],
+    cc: &[f32; 3],
+    co: &[f32; 3],
+    mean_aov: &[f32],
+    interp_aov: &mut [f32],
+) {
+    let (v, idx, dq) = (tri.v, tri.idx, tri.dq);
+    let aw = g.aov_width;
+    let e1 = edge(v[2], v[0], pos);
+    let e2 = edge(v[0], v[1], pos);
+    let (w1, w2) = (e1.0 * tri.inv_area, e2.0 * tri.inv_area);
+    let w0 = 1.0 - w1 - w2;
+    let qz = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
+    let z = if cfg.perspective { 1.0 / qz } else { qz };
+    if !(z >= cfg.near && z <= cfg.far) {
+        return;
+    }
+    if z > b.front[s].0 && !b.keep_second {
+        b.hits += 1;
+        return;
+    }
+    if !cfg.clip_planes.is_empty() {
+        let p = cfg.camera_point(pos[0], pos[1], z);
+        if cfg
+            .clip_planes
+            .iter()
+            .any(|pl| pl.truncate().dot(p) + pl.w > 0.0)
+        {
+            return;
+        }
+    }
+    if g.smooth {
+        let w = [w0, w1, w2];
+        let mut c = [0f32; 3];
+        let mut o = [0f32; 3];
+        for (vi, &gi) in idx.iter().enumerate() {
+            for q in 0..3 {
+                c[q] += w[vi] * g.ci[gi][q];
+                o[q] += w[vi] * g.oi[gi][q];
+            }
+        }
+        for q in 0..aw {
+            interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
+                + w1 * g.aov[idx[1] * aw + q]
+                + w2 * g.aov[idx[2] * aw + q];
+        }
+        b.insert(s, z, g.key, sub, c, o, g.matte, interp_aov);
+    } else {
+        b.insert(s, z, g.key, sub, *cc, *co, g.matte, mean_aov);
     }
 }
 

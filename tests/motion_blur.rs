@@ -1,0 +1,225 @@
+//! Motion blur and depth of field, checked against their analytic pictures: a moving bar
+//! spreads its energy evenly over the distance it travels, an out-of-focus point images to a
+//! disk of the thin-lens diameter, and blurred output stays the same bits for any bucket
+//! size and thread count. Bad motion blocks are diagnosed.
+
+use arbor::diag::{Diagnostics, SourceMap};
+use arbor::film::Film;
+use arbor::pipeline::{render_text, Settings};
+
+fn render_with(text: &str, settings: &Settings) -> (Film, Diagnostics) {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let films = render_text(text, settings, &sources, &diags);
+    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    (films.into_iter().next().expect("one film"), diags)
+}
+
+fn render(text: &str) -> Film {
+    render_with(text, &Settings::default()).0
+}
+
+/// Alpha summed over each column, averaged over the rows.
+fn column_profile(f: &Film, w: usize, h: usize) -> Vec<f32> {
+    (0..w)
+        .map(|x| (0..h).map(|y| f.pixel(x, y)[3]).sum::<f32>() / h as f32)
+        .collect()
+}
+
+/// A white bar 4 pixels wide (raster x 30…34), moved by `motion` (RIB text before it).
+fn bar(shutter: &str, motion: &str, prim: &str) -> String {
+    format!(
+        "Format 64 16 1\nPixelSamples 8 8\nPixelFilter \"box\" 1 1\n\
+         Projection \"orthographic\"\nScreenWindow -32 32 -8 8\n{shutter}\nWorldBegin\n\
+         Surface \"constant\"\n{motion}\n{prim}\nWorldEnd\n"
+    )
+}
+
+const BAR: &str = "Polygon \"P\" [-2 -9 5  2 -9 5  2 9 5  -2 9 5]";
+const SLIDE: &str = "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 10 0 0\nMotionEnd";
+
+fn check_spread(f: &Film, d: usize) {
+    let prof = column_profile(f, 64, 16);
+    let energy: f32 = prof.iter().sum();
+    assert!((energy - 4.0).abs() <= 0.04, "energy {energy}, profile {prof:?}");
+    // Covered from x = 30 to 34 + d, nothing outside.
+    for (x, &a) in prof.iter().enumerate() {
+        if x < 30 || x >= 34 + d {
+            assert_eq!(a, 0.0, "column {x} outside the swept band: {prof:?}");
+        }
+    }
+    assert!(prof[30] > 0.0 && prof[33 + d] > 0.0, "{prof:?}");
+    // Where the whole bar passes, each column is covered 4/d of the time.
+    for x in 34..30 + d {
+        assert!(
+            (prof[x] - 4.0 / d as f32).abs() < 0.05,
+            "column {x}: {} (want {}), {prof:?}",
+            prof[x],
+            4.0 / d as f32
+        );
+    }
+}
+
+#[test]
+fn a_moving_bar_spreads_over_its_path_keeping_its_energy() {
+    check_spread(&render(&bar("Shutter 0 1", SLIDE, BAR)), 10);
+    // Half the shutter: half the distance.
+    check_spread(&render(&bar("Shutter 0 0.5", SLIDE, BAR)), 5);
+    // Shutter closed (the default): the bar sits at its first key, sharp.
+    let f = render(&bar("", SLIDE, BAR));
+    let prof = column_profile(&f, 64, 16);
+    assert_eq!(&prof[29..35], &[0.0, 1.0, 1.0, 1.0, 1.0, 0.0]);
+}
+
+#[test]
+fn a_deforming_bar_blurs_like_a_moving_one() {
+    let keys = "MotionBegin [0 1]\n\
+        Polygon \"P\" [-2 -9 5  2 -9 5  2 9 5  -2 9 5]\n\
+        Polygon \"P\" [8 -9 5  12 -9 5  12 9 5  8 9 5]\nMotionEnd";
+    check_spread(&render(&bar("Shutter 0 1", "", keys)), 10);
+    // Three keys (two segments): still a straight slide.
+    let keys3 = "MotionBegin [0 0.5 1]\n\
+        Polygon \"P\" [-2 -9 5  2 -9 5  2 9 5  -2 9 5]\n\
+        Polygon \"P\" [3 -9 5  7 -9 5  7 9 5  3 9 5]\n\
+        Polygon \"P\" [8 -9 5  12 -9 5  12 9 5  8 9 5]\nMotionEnd";
+    check_spread(&render(&bar("Shutter 0 1", "", keys3)), 10);
+}
+
+fn busy(bucket: &str) -> String {
+    format!(
+        "Format 48 36 1\nPixelSamples 3 3\nProjection \"perspective\" \"fov\" [50]\n\
+         Option \"limits\" \"bucketsize\" [{bucket}]\nShutter 0 1\n\
+         DepthOfField 2.8 0.5 4\nTranslate 0 0 4\nWorldBegin\n\
+         LightSource \"distantlight\" 1\nSurface \"plastic\"\n\
+         AttributeBegin\nMotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n\
+         Translate 0.6 0 0\nSphere 0.7 -0.7 0.7 360\nAttributeEnd\n\
+         AttributeBegin\nColor [1 0.3 0.2]\nMotionBegin [0 0.5 1]\nTranslate -1 0 1\n\
+         Translate -0.5 0.4 1\nTranslate -0.7 0.9 0\nMotionEnd\n\
+         Polygon \"P\" [-0.5 -0.5 0  0.5 -0.5 0  0.5 0.5 0  -0.5 0.5 0]\nAttributeEnd\n\
+         Opacity [0.5 0.5 0.5]\nMotionBegin [0 1]\nSphere 0.3 -0.3 0.3 360\n\
+         Sphere 0.6 -0.6 0.6 360\nMotionEnd\nWorldEnd\n"
+    )
+}
+
+#[test]
+fn blurred_output_is_identical_for_any_bucket_size_and_thread_count() {
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    let one = Settings {
+        threads: 1,
+        ..Settings::default()
+    };
+    let two = Settings {
+        threads: 2,
+        ..Settings::default()
+    };
+    let (a, _) = render_with(&busy("16 16"), &one);
+    let covered = a.data.chunks(a.data.len() / (48 * 36)).filter(|p| p[3] > 0.0).count();
+    assert!(covered > 300, "{covered} pixels covered");
+    for (bucket, s) in [("7 5", &two), ("32 32", &two), ("5 9", &one)] {
+        let (b, _) = render_with(&busy(bucket), s);
+        assert!(bits(&a) == bits(&b), "bucket {bucket} differs");
+    }
+}
+
+/// A disk of raster radius 3 on the axis at depth 2.5 (fov 90 on 101², 50.5 pixels per unit
+/// of x/z), seen through `DepthOfField fstop 1 10`.
+fn point(fstop: &str) -> String {
+    format!(
+        "Format 101 101 1\nPixelSamples 16 16\nPixelFilter \"box\" 1 1\n\
+         Projection \"perspective\" \"fov\" [90]\nDepthOfField {fstop} 1 10\nWorldBegin\n\
+         Surface \"constant\"\nDisk 2.5 0.148515 360\nWorldEnd\n"
+    )
+}
+
+/// Total alpha and the alpha-weighted mean squared distance from the image centre.
+fn moments(f: &Film) -> (f64, f64) {
+    let (mut e, mut r2) = (0f64, 0f64);
+    for y in 0..101 {
+        for x in 0..101 {
+            let a = f.pixel(x, y)[3] as f64;
+            let (dx, dy) = (x as f64 + 0.5 - 50.5, y as f64 + 0.5 - 50.5);
+            e += a;
+            r2 += a * (dx * dx + dy * dy);
+        }
+    }
+    (e, r2 / e)
+}
+
+#[test]
+fn an_out_of_focus_point_images_to_the_thin_lens_disk() {
+    let p = 6.0f64; // the pinhole image's diameter in pixels
+    let area = std::f64::consts::PI * p * p / 4.0;
+    // Pinhole (an infinite f-stop, as real scenes write it): the sharp disk (diced into a
+    // polygon a little smaller than the circle).
+    let (e0, r0) = moments(&render(&point("1e38")));
+    assert!((e0 - area).abs() < 0.04 * area, "energy {e0}");
+    assert!((r0 - p * p / 8.0).abs() < 0.3, "{r0}");
+    // f/0.5: aperture 2, circle of confusion 2·|1/2.5 − 1/10| = 0.6 of x/z = 30.3 pixels.
+    let want = 0.6 * 50.5;
+    let f = render(&point("0.5"));
+    let (e, r2) = moments(&f);
+    assert!((e - e0).abs() < 0.01 * e0, "energy {e} (sharp {e0})");
+    // A uniform disk of diameter D has mean r² = D²/8; blurring adds the variances.
+    let d = (8.0 * (r2 - r0)).sqrt();
+    assert!((d - want).abs() < 1.0, "blur diameter {d}, want {want}");
+    // Nothing beyond the blurred disk's edge (plus a pixel).
+    for y in 0..101 {
+        for x in 0..101 {
+            let r = ((x as f64 + 0.5 - 50.5).powi(2) + (y as f64 + 0.5 - 50.5).powi(2)).sqrt();
+            if r > (want + p) / 2.0 + 1.5 {
+                assert_eq!(f.pixel(x, y)[3], 0.0, "pixel {x},{y} at r = {r}");
+            }
+        }
+    }
+}
+
+#[test]
+fn in_focus_stays_sharp() {
+    // The disk on the focal plane: the lens changes nothing visible.
+    let f = render(
+        "Format 101 101 1\nPixelSamples 8 8\nPixelFilter \"box\" 1 1\n\
+         Projection \"perspective\" \"fov\" [90]\nDepthOfField 0.5 1 2.5\nWorldBegin\n\
+         Surface \"constant\"\nDisk 2.5 0.148515 360\nWorldEnd\n",
+    );
+    let (e, r2) = moments(&f);
+    let area = std::f64::consts::PI * 9.0;
+    assert!((e - area).abs() < 0.03 * area, "{e}");
+    assert!((r2 - 36.0 / 8.0).abs() < 0.3, "{r2}");
+}
+
+fn diagnose(text: &str) -> Vec<(String, String)> {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let _ = render_text(text, &Settings::default(), &sources, &diags);
+    diags
+        .snapshot()
+        .into_iter()
+        .map(|(d, _)| (d.code.to_string(), d.message.clone()))
+        .collect()
+}
+
+#[test]
+fn bad_motion_blocks_are_diagnosed() {
+    let base = |motion: &str| {
+        format!("Format 8 8 1\nShutter 0 1\nWorldBegin\n{motion}\nSphere 1 -1 1 360\nWorldEnd\n")
+    };
+    let d = diagnose(&base(
+        "MotionBegin [0 0.5 1]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd",
+    ));
+    assert!(
+        d.iter().any(|(c, m)| c == "scene::motion" && m.contains("3 times") && m.contains("2 requests")),
+        "{d:?}"
+    );
+    let d = diagnose(&base("MotionBegin [0 1]\nTranslate 0 0 5\nRotate 1 0 0 1\nMotionEnd"));
+    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("mixes")), "{d:?}");
+    let d = diagnose(&base("MotionBegin [1 0]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd"));
+    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("increase")), "{d:?}");
+    let d = diagnose(
+        "Format 8 8 1\nShutter 0 1\nWorldBegin\nMotionBegin [0 1]\n\
+         Polygon \"P\" [0 0 5 1 0 5 1 1 5]\nPolygon \"P\" [0 0 5 1 0 5 1 1 5 0 1 5]\nMotionEnd\nWorldEnd\n",
+    );
+    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("same shape")), "{d:?}");
+    // A good block says nothing.
+    let d = diagnose(&base("MotionBegin [0 1]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd"));
+    assert!(d.iter().all(|(c, _)| c != "scene::motion" && c != "scene::unimplemented"), "{d:?}");
+}
