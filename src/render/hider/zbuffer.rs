@@ -183,28 +183,6 @@ impl<'c> Bucket<'c> {
     }
 }
 
-/// Canonical edge function (the reference [`Edge`] is tested against): the same bits for edge (a, b) and (b, a) up to sign, and whether
-/// this direction owns samples exactly on the edge (exactly one of the two directions does).
-#[cfg(test)]
-fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
-    if (a[0], a[1]) < (b[0], b[1]) {
-        (
-            (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]),
-            true,
-        )
-    } else {
-        (
-            -((a[0] - b[0]) * (p[1] - b[1]) - (a[1] - b[1]) * (p[0] - b[0])),
-            false,
-        )
-    }
-}
-
-#[cfg(test)]
-fn inside(e: (f32, bool)) -> bool {
-    e.0 > 0.0 || (e.0 == 0.0 && e.1)
-}
-
 /// [`edge`] with its per-edge part done once per micropolygon: the canonical origin and
 /// direction, and the sign. Evaluates to the same bits as `edge(a, b, p)` (negation and the
 /// products are the same operations in the same order).
@@ -610,8 +588,8 @@ fn sample_grid_blurred(
     }
 }
 
-/// Canonical edge function for blurred micropolygons (whose corners move per sample, so
-/// edges cannot be set up once): the same bits for edge (a, b) and (b, a) up to sign, and
+/// Canonical edge function, for blurred micropolygons (whose corners move per sample, so
+/// edges cannot be set up once) and as the reference [`Edge`] is tested against: the same bits for edge (a, b) and (b, a) up to sign, and
 /// whether this direction owns samples exactly on the edge (exactly one of the two does).
 #[inline]
 fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
