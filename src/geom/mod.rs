@@ -17,9 +17,11 @@
 //! Files: `quadric` (the seven quadrics), `polygon` (meshes), `triangulate` (ear clipping),
 //! `patch` (the parametric patch both dice through), `primvar` (primitive variables),
 //! `patches` (Patch/PatchMesh/NuPatch/teapot into `bezier` pieces), `spline` (basis and knot
-//! mathematics), `trim` (trim curves), `teapot` (Newell's data).
+//! mathematics), `trim` (trim curves), `teapot` (Newell's data), `blobby` (implicit surfaces
+//! polygonised into meshes).
 
 mod bezier;
+mod blobby;
 mod curves;
 mod patch;
 mod patches;
@@ -144,6 +146,18 @@ pub fn surfaces_for(
     index: usize,
     prim: &Primitive,
     camera_from_world: Mat4,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    surfaces_in_view(index, prim, camera_from_world, None, diags)
+}
+
+/// [`surfaces_for`] knowing the frame's `raster_from_camera`: surfaces whose tessellation is
+/// fixed before dicing (Blobby's polygonisation) size it from their extent on screen.
+pub fn surfaces_in_view(
+    index: usize,
+    prim: &Primitive,
+    camera_from_world: Mat4,
+    raster_from_camera: Option<Mat4>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
     let m = camera_from_world * prim.world_from_object;
@@ -299,6 +313,9 @@ pub fn surfaces_for(
                 basis: *v_basis,
             };
             return curves::curves(index, prim, m, flip, args, diags);
+        }
+        Geometry::Blobby(program) => {
+            return blobby::surfaces(index, prim, program, m, raster_from_camera, diags);
         }
         Geometry::Named { name } if name == "fractalterrain" => {
             return terrain::surfaces(index, prim, m, flip, diags);

@@ -16,7 +16,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::diag::{Diag, Diagnostics};
@@ -25,6 +25,7 @@ use crate::scene::{Options, Primitive, Scene};
 
 use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
+use super::hider::csg::{CsgPrim, CsgTree};
 use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
@@ -74,19 +75,15 @@ pub fn render_frame(
     let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
     let mut surfaces = Vec::new();
     for (i, prim) in scene.primitives.iter().enumerate() {
-        surfaces.push(surfaces_for(i, prim, camera.camera_from_world, diags));
+        surfaces.push(crate::geom::surfaces_in_view(
+            i,
+            prim,
+            camera.camera_from_world,
+            Some(camera.raster_from_camera()),
+            diags,
+        ));
     }
     render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
-}
-
-/// The geometry entry point: a primitive's surfaces in camera space.
-fn surfaces_for(
-    index: usize,
-    prim: &Primitive,
-    camera_from_world: Mat4,
-    diags: &Diagnostics,
-) -> Vec<Box<dyn Surface>> {
-    crate::geom::surfaces_for(index, prim, camera_from_world, diags)
 }
 
 /// The scene's options with the command-line overrides applied.
@@ -114,6 +111,8 @@ struct PrimInfo {
     /// Attribute "dice" "binary": grids are diced a power of two on each side (adjacent
     /// grids then share vertices more often, which hides cracks).
     binary: bool,
+    /// Its place in a CSG tree (None outside boolean solids).
+    csg: Option<CsgPrim>,
 }
 
 fn prim_info(
@@ -174,6 +173,7 @@ fn prim_info(
             .get("dice:binary")
             .and_then(|p| p.data.floats().first().copied())
             .is_some_and(|v| v != 0.0),
+        csg: None,
     }
 }
 
@@ -447,6 +447,11 @@ impl Frame<'_> {
                 }
                 set_incident(&mut grid, self.camera.perspective);
                 let orient = orientation(&grid);
+                if info.csg.is_some_and(|c| c.inverted) {
+                    // A subtracted solid's surface bounds the result from inside it.
+                    grid.n.iter_mut().for_each(|n| *n = -*n);
+                    grid.ng.iter_mut().for_each(|n| *n = -*n);
+                }
                 self.stats.time(Stage::Dice, t0);
                 let t1 = Instant::now();
                 self.shader
@@ -472,6 +477,7 @@ impl Frame<'_> {
                     one_sided: info.one_sided,
                     orientation: orient,
                     clip,
+                    csg: info.csg,
                 };
                 if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
                     self.diags.report(Diag::error(
@@ -597,7 +603,15 @@ fn render_inner(
         max_grid,
     );
     let seed = mix64(scene.frame.unwrap_or(0) as i64 as u64);
-    let config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let mut config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let (csg_tree, csg_places) = CsgTree::new(scene);
+    if !csg_tree.is_empty() && options.hider.name == "abuffer" {
+        diags.report(Diag::warning(
+            "render::csg",
+            "solid modelling (SolidBegin) needs Hider \"hidden\"; the A-buffer draws every surface of the solids",
+        ));
+    }
+    config.csg = std::sync::Arc::new(csg_tree);
     let depth_filter = match config.depth_filter {
         DepthFilter::Max => FilmDepthFilter::Max,
         DepthFilter::Average => FilmDepthFilter::Average,
@@ -609,7 +623,11 @@ fn render_inner(
     let prims: Vec<PrimInfo> = scene
         .primitives
         .iter()
-        .map(|p| prim_info(scene, camera, p, min_rate, diags))
+        .zip(&csg_places)
+        .map(|(p, c)| PrimInfo {
+            csg: *c,
+            ..prim_info(scene, camera, p, min_rate, diags)
+        })
         .collect();
     let frame = Frame {
         scene,

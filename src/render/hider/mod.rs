@@ -7,6 +7,7 @@
 //! grids covering it and on (pixel, sample, seed), never on the bucket or thread.
 
 pub mod abuffer;
+pub mod csg;
 pub mod zbuffer;
 
 use glam::{Mat4, Vec3, Vec4};
@@ -94,6 +95,18 @@ pub struct ShadedGrid {
     /// A lower bound of the camera depth of every point of the grid (0 when unknown): a
     /// bucket whose samples all see an opaque surface nearer than this skips the grid.
     pub zmin: f32,
+    /// Set on grids of CSG primitives: the hider keeps all their hits and resolves them per
+    /// sample (see [`csg`]).
+    pub csg: Option<Box<CsgGrid>>,
+}
+
+/// A CSG grid's place in its tree and, per micropolygon, whether a ray enters its primitive
+/// solid there (the micropolygon faces the eye against the leaf's outward normal).
+#[derive(Clone, Debug, Default)]
+pub struct CsgGrid {
+    pub leaf: u32,
+    pub root: u32,
+    pub entering: Vec<bool>,
 }
 
 /// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
@@ -115,6 +128,8 @@ pub struct GridInfo {
     pub orientation: f32,
     /// Raster bound of the surface (widened by the displacement bound).
     pub clip: [f32; 4],
+    /// The grid's CSG primitive solid (None outside CSG).
+    pub csg: Option<csg::CsgPrim>,
 }
 
 /// The sign relating a grid's parametric orientation to its Ng: +1 when Ng agrees with the
@@ -184,13 +199,22 @@ impl ShadedGrid {
             f32::NEG_INFINITY,
         ];
         let mut b = EMPTY;
+        let mut entering = Vec::new();
+        if info.csg.is_some() {
+            entering.reserve(nmp);
+        }
         for j in 0..nv.saturating_sub(1) {
             let mut rb = EMPTY;
             for i in 0..nu.saturating_sub(1) {
                 let k = j * nu + i;
                 let corners = [k, k + 1, k + nu, k + nu + 1];
                 let mut alive = corners.iter().all(|&c| ok[c]);
-                if alive && info.one_sided {
+                if info.csg.is_some() {
+                    // Against the leaf's own outward normal (measured before any flip).
+                    let m = micro_normal(&grid.p, k, nu) * info.orientation;
+                    let view_dir = if view.perspective { grid.p[k] } else { Vec3::Z };
+                    entering.push(m.dot(view_dir) < 0.0);
+                } else if alive && info.one_sided {
                     let m = micro_normal(&grid.p, k, nu) * info.orientation;
                     let view_dir = if view.perspective { grid.p[k] } else { Vec3::Z };
                     // Facing the eye when Ng points against the viewing direction.
@@ -266,6 +290,13 @@ impl ShadedGrid {
             mp_bounds,
             row_bounds,
             zmin,
+            csg: info.csg.map(|c| {
+                Box::new(CsgGrid {
+                    leaf: c.leaf,
+                    root: c.root,
+                    entering,
+                })
+            }),
         }
     }
 
@@ -392,6 +423,8 @@ pub struct HiderConfig {
     /// ClippingPlanes in camera space as (n, d): points with n·p + d > 0 are clipped.
     pub clip_planes: Vec<Vec4>,
     pub camera_from_raster: Mat4,
+    /// The scene's CSG trees (empty without boolean solids).
+    pub csg: std::sync::Arc<csg::CsgTree>,
 }
 
 impl HiderConfig {
@@ -467,6 +500,7 @@ impl HiderConfig {
             far: camera.far,
             clip_planes,
             camera_from_raster: camera.raster_from_camera().inverse(),
+            csg: Default::default(),
         }
     }
 
