@@ -16,7 +16,15 @@ fn render_report(world: &str) -> (Vec<Film>, String, bool) {
     );
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
-    let films = render_text(&text, &Settings { threads: 1, ..Default::default() }, &sources, &diags);
+    let films = render_text(
+        &text,
+        &Settings {
+            threads: 1,
+            ..Default::default()
+        },
+        &sources,
+        &diags,
+    );
     (films, diags.render_plain(&sources), diags.has_errors())
 }
 
@@ -46,10 +54,16 @@ fn check_silhouette(f: &Film, sdf: impl Fn(f32, f32) -> f32) {
             let d = sdf(x, y);
             let a = f.pixel(i, j)[3];
             if d < -PIX {
-                assert!(a > 0.99, "pixel ({i},{j}) at ({x:.3},{y:.3}) should be covered: {a}");
+                assert!(
+                    a > 0.99,
+                    "pixel ({i},{j}) at ({x:.3},{y:.3}) should be covered: {a}"
+                );
                 inside += 1;
             } else if d > PIX {
-                assert!(a < 0.01, "pixel ({i},{j}) at ({x:.3},{y:.3}) should be empty: {a}");
+                assert!(
+                    a < 0.01,
+                    "pixel ({i},{j}) at ({x:.3},{y:.3}) should be empty: {a}"
+                );
             }
         }
     }
@@ -58,8 +72,13 @@ fn check_silhouette(f: &Film, sdf: impl Fn(f32, f32) -> f32) {
 
 #[test]
 fn a_lone_blob_matches_a_sphere() {
-    let f = render(&format!("Blobby 1 [1001 0] [{}] [\"\"]\n", blob(2.0, 0.1, -0.2, 0.0)));
-    check_silhouette(&f, |x, y| ((x - 0.1).powi(2) + (y + 0.2).powi(2)).sqrt() - 1.0);
+    let f = render(&format!(
+        "Blobby 1 [1001 0] [{}] [\"\"]\n",
+        blob(2.0, 0.1, -0.2, 0.0)
+    ));
+    check_silhouette(&f, |x, y| {
+        ((x - 0.1).powi(2) + (y + 0.2).powi(2)).sqrt() - 1.0
+    });
     // The same as Sphere 1 there, pixel for pixel, up to the silhouette's pixels.
     let s = render("Translate 0.1 -0.2 0\nSphere 1 -1 1 360\n");
     let mut differ = 0;
@@ -71,7 +90,10 @@ fn a_lone_blob_matches_a_sphere() {
             }
         }
     }
-    assert!(differ <= 4, "{differ} pixels differ from the sphere's coverage");
+    assert!(
+        differ <= 4,
+        "{differ} pixels differ from the sphere's coverage"
+    );
     // Depth at the centre: the sphere's front, 5 − 1.
     let z = f.pixel(N / 2 + 2, N / 2 + 4)[4];
     assert!((z - 4.0).abs() < 0.03, "{z}");
@@ -99,19 +121,30 @@ fn two_blobs_merge_with_a_filled_neck() {
     // Signed distance approximated by the field's slope (about 1.0 per unit near the surface).
     let sdf = |x: f32, y: f32| {
         let (d, h) = (field(x, y) - t, 1e-3);
-        let g = ((field(x + h, y) - field(x - h, y)).powi(2) + (field(x, y + h) - field(x, y - h)).powi(2)).sqrt() / (2.0 * h);
+        let g = ((field(x + h, y) - field(x - h, y)).powi(2)
+            + (field(x, y + h) - field(x, y - h)).powi(2))
+        .sqrt()
+            / (2.0 * h);
         -d / g.max(1e-3)
     };
     check_silhouette(&f, sdf);
     let (i, j) = (N / 2, ((1.5 - 0.95 * neck) / PIX) as usize);
-    assert!(f.pixel(i, j)[3] > 0.99, "the neck is filled at y = {}", 0.95 * neck);
+    assert!(
+        f.pixel(i, j)[3] > 0.99,
+        "the neck is filled at y = {}",
+        0.95 * neck
+    );
 }
 
 #[test]
 fn a_subtract_operator_carves() {
     let floats = format!("{}{}", blob(2.0, 0.0, 0.0, 0.0), blob(1.4, 0.8, 0.0, 0.0));
-    let whole = render(&format!("Blobby 2 [1001 0 1001 16 0 1 0] [{floats}] [\"\"]\n"));
-    let carved = render(&format!("Blobby 2 [1001 0 1001 16 4 0 1] [{floats}] [\"\"]\n"));
+    let whole = render(&format!(
+        "Blobby 2 [1001 0 1001 16 0 1 0] [{floats}] [\"\"]\n"
+    ));
+    let carved = render(&format!(
+        "Blobby 2 [1001 0 1001 16 4 0 1] [{floats}] [\"\"]\n"
+    ));
     let px = |x: f32| (((x + 1.5) / PIX) as usize, N / 2);
     let (i, j) = px(0.8);
     assert!(whole.pixel(i, j)[3] > 0.99);
@@ -122,7 +155,10 @@ fn a_subtract_operator_carves() {
 
 #[test]
 fn bad_code_arrays_are_diagnosed() {
-    let (_, report, errors) = render_report(&format!("Blobby 1 [1001 0 0 2 0 3] [{}] [\"\"]\n", blob(1.0, 0.0, 0.0, 0.0)));
+    let (_, report, errors) = render_report(&format!(
+        "Blobby 1 [1001 0 0 2 0 3] [{}] [\"\"]\n",
+        blob(1.0, 0.0, 0.0, 0.0)
+    ));
     assert!(errors);
     assert!(report.contains("not an earlier instruction"), "{report}");
     let (_, report, errors) = render_report("Blobby 1 [1001 4] [1 2 3] [\"\"]\n");

@@ -67,11 +67,20 @@ fn check_coverage(f: &Film, sdf: impl Fn(f32, f32) -> f32) {
             let d = sdf(x, y);
             let p = f.pixel(i, j);
             if d < -PIX {
-                assert!(p[3] > 0.9, "pixel ({i},{j}) at ({x},{y}) should be covered: {p:?}");
-                assert!(p[0] < 0.1 && p[1] > 0.9, "pixel ({i},{j}) faces away: {p:?}");
+                assert!(
+                    p[3] > 0.9,
+                    "pixel ({i},{j}) at ({x},{y}) should be covered: {p:?}"
+                );
+                assert!(
+                    p[0] < 0.1 && p[1] > 0.9,
+                    "pixel ({i},{j}) faces away: {p:?}"
+                );
                 checked += 1;
             } else if d > PIX {
-                assert!(p[3] < 0.01, "pixel ({i},{j}) at ({x},{y}) should be empty: {p:?}");
+                assert!(
+                    p[3] < 0.01,
+                    "pixel ({i},{j}) at ({x},{y}) should be empty: {p:?}"
+                );
             }
         }
     }
@@ -87,7 +96,11 @@ fn depth(f: &Film, x: f32, y: f32) -> f32 {
 fn a_difference_of_spheres_shows_the_cut_face_facing_out() {
     let a = [0.0, 0.0, 0.0];
     let b = [0.6, 0.0, -0.5];
-    let f = render(&format!("SolidBegin \"difference\"\n{}{}SolidEnd\n", sphere(1.0, a), sphere(0.7, b)));
+    let f = render(&format!(
+        "SolidBegin \"difference\"\n{}{}SolidEnd\n",
+        sphere(1.0, a),
+        sphere(0.7, b)
+    ));
     // In A's disc, less where B's cap pokes out of A towards the eye… the silhouette is A's
     // disc (B's part outside A is removed); the cut face is B's far side, seen from inside B.
     check_coverage(&f, |x, y| disc(x, y, 1.0, a));
@@ -96,7 +109,10 @@ fn a_difference_of_spheres_shows_the_cut_face_facing_out() {
     let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
     let want = 5.0 + b[2] + (0.49 - (x - b[0]).powi(2) - y * y).sqrt();
     let z = depth(&f, x, y);
-    assert!((z - want).abs() < 0.05, "cut face at depth {z}, want {want}");
+    assert!(
+        (z - want).abs() < 0.05,
+        "cut face at depth {z}, want {want}"
+    );
     // Away from B: A's front.
     let (x, y) = centre(pixel_at(-0.6, 0.0).0, pixel_at(-0.6, 0.0).1);
     let want = 5.0 - (1.0 - x * x - y * y).sqrt();
@@ -107,15 +123,27 @@ fn a_difference_of_spheres_shows_the_cut_face_facing_out() {
 fn intersection_and_union_cover_their_analytic_outlines() {
     let a = [-0.45, 0.0, 0.0];
     let b = [0.45, 0.1, 0.2];
-    let f = render(&format!("SolidBegin \"intersection\"\n{}{}SolidEnd\n", sphere(1.0, a), sphere(0.9, b)));
+    let f = render(&format!(
+        "SolidBegin \"intersection\"\n{}{}SolidEnd\n",
+        sphere(1.0, a),
+        sphere(0.9, b)
+    ));
     check_coverage(&f, |x, y| disc(x, y, 1.0, a).max(disc(x, y, 0.9, b)));
     // The lens's front at x = −0.3 is B's surface (the nearer of the two fronts is A's).
     let (x, y) = centre(pixel_at(-0.3, 0.0).0, pixel_at(-0.3, 0.0).1);
     let za = -(1.0 - (x - a[0]).powi(2) - y * y).sqrt();
     let zb = b[2] - (0.81 - (x - b[0]).powi(2) - (y - b[1]).powi(2)).sqrt();
     let want = 5.0 + za.max(zb);
-    assert!((depth(&f, x, y) - want).abs() < 0.05, "{} vs {want}", depth(&f, x, y));
-    let f = render(&format!("SolidBegin \"union\"\n{}{}SolidEnd\n", sphere(1.0, a), sphere(0.9, b)));
+    assert!(
+        (depth(&f, x, y) - want).abs() < 0.05,
+        "{} vs {want}",
+        depth(&f, x, y)
+    );
+    let f = render(&format!(
+        "SolidBegin \"union\"\n{}{}SolidEnd\n",
+        sphere(1.0, a),
+        sphere(0.9, b)
+    ));
     check_coverage(&f, |x, y| disc(x, y, 1.0, a).min(disc(x, y, 0.9, b)));
 }
 
@@ -133,16 +161,28 @@ fn nested_solids_subtract_a_shell() {
     // At x = 0.6 (outside C's disc) the shell removes A up to B's back.
     let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
     let want = 5.0 + b[2] + (0.81 - x * x - y * y).sqrt();
-    assert!((depth(&f, x, y) - want).abs() < 0.05, "{} vs {want}", depth(&f, x, y));
+    assert!(
+        (depth(&f, x, y) - want).abs() < 0.05,
+        "{} vs {want}",
+        depth(&f, x, y)
+    );
     // At x = 0.3, C keeps A's front.
     let (x, y) = centre(pixel_at(0.3, 0.0).0, pixel_at(0.3, 0.0).1);
     let want = 5.0 - (1.0 - x * x - y * y).sqrt();
-    assert!((depth(&f, x, y) - want).abs() < 0.05, "{} vs {want}", depth(&f, x, y));
+    assert!(
+        (depth(&f, x, y) - want).abs() < 0.05,
+        "{} vs {want}",
+        depth(&f, x, y)
+    );
 }
 
 #[test]
 fn a_lone_primitive_solid_renders_as_its_surfaces() {
-    let plain = render(&sphere(1.0, [0.0; 3]).replace("SolidBegin \"primitive\"\n", "").replace("SolidEnd\n", ""));
+    let plain = render(
+        &sphere(1.0, [0.0; 3])
+            .replace("SolidBegin \"primitive\"\n", "")
+            .replace("SolidEnd\n", ""),
+    );
     let solid = render(&sphere(1.0, [0.0; 3]));
     assert_eq!(plain.data, solid.data);
 }

@@ -38,7 +38,10 @@ const CELL_PIXELS: f32 = 4.0;
 enum Leaf {
     Constant(f32),
     /// camera → unit-blob space.
-    Ellipsoid { a: Mat4, at: Mat3 },
+    Ellipsoid {
+        a: Mat4,
+        at: Mat3,
+    },
     Segment {
         a: Mat4,
         at: Mat3,
@@ -65,7 +68,11 @@ impl Leaf {
                     return (0.0, Vec3::ZERO);
                 }
                 let t = 1.0 - r2;
-                let g = if grad { *at * (q * (-6.0 * t * t)) } else { Vec3::ZERO };
+                let g = if grad {
+                    *at * (q * (-6.0 * t * t))
+                } else {
+                    Vec3::ZERO
+                };
                 (t * t * t, g)
             }
             Leaf::Segment {
@@ -112,7 +119,12 @@ struct Field {
 impl Field {
     /// Field value (and gradient) at `p`; `weights`, when given, receives every bounded
     /// leaf's value there.
-    fn eval(&self, p: Vec3, grad: bool, mut weights: Option<&mut Vec<(usize, f32)>>) -> (f32, Vec3) {
+    fn eval(
+        &self,
+        p: Vec3,
+        grad: bool,
+        mut weights: Option<&mut Vec<(usize, f32)>>,
+    ) -> (f32, Vec3) {
         let mut v: Vec<(f32, Vec3)> = Vec::with_capacity(self.ops.len());
         for (i, op) in self.ops.iter().enumerate() {
             let r = if let Some(l) = self.leaf_of[i] {
@@ -126,13 +138,32 @@ impl Field {
             } else {
                 let at = |k: &u32| v[*k as usize];
                 match op {
-                    BlobOp::Add(o) => o.iter().map(at).fold((0.0, Vec3::ZERO), |s, x| (s.0 + x.0, s.1 + x.1)),
+                    BlobOp::Add(o) => o
+                        .iter()
+                        .map(at)
+                        .fold((0.0, Vec3::ZERO), |s, x| (s.0 + x.0, s.1 + x.1)),
                     BlobOp::Multiply(o) => o
                         .iter()
                         .map(at)
                         .fold((1.0, Vec3::ZERO), |s, x| (s.0 * x.0, s.1 * x.0 + x.1 * s.0)),
-                    BlobOp::Max(o) => o.iter().map(at).fold((f32::NEG_INFINITY, Vec3::ZERO), |s, x| if x.0 > s.0 { x } else { s }),
-                    BlobOp::Min(o) => o.iter().map(at).fold((f32::INFINITY, Vec3::ZERO), |s, x| if x.0 < s.0 { x } else { s }),
+                    BlobOp::Max(o) => {
+                        o.iter()
+                            .map(at)
+                            .fold((f32::NEG_INFINITY, Vec3::ZERO), |s, x| {
+                                if x.0 > s.0 {
+                                    x
+                                } else {
+                                    s
+                                }
+                            })
+                    }
+                    BlobOp::Min(o) => o.iter().map(at).fold((f32::INFINITY, Vec3::ZERO), |s, x| {
+                        if x.0 < s.0 {
+                            x
+                        } else {
+                            s
+                        }
+                    }),
                     BlobOp::Subtract(a, b) => {
                         let (x, y) = (at(a), at(b));
                         (x.0 - y.0, x.1 - y.1)
@@ -225,7 +256,9 @@ fn build(
         min: Vec3::splat(-1.0),
         max: Vec3::splat(1.0),
     };
-    let carry = |b: Bound, cam_from: Mat4| Bound::from_points(b.corners().map(|p| cam_from.transform_point3(p)));
+    let carry = |b: Bound, cam_from: Mat4| {
+        Bound::from_points(b.corners().map(|p| cam_from.transform_point3(p)))
+    };
     for op in &program.ops {
         match op {
             BlobOp::Constant(c) => {
@@ -246,7 +279,12 @@ fn build(
                 });
                 support.push(Some(carry(unit, cam_from)));
             }
-            BlobOp::Segment { a: p0, b: p1, radius, m: sm } => {
+            BlobOp::Segment {
+                a: p0,
+                b: p1,
+                radius,
+                m: sm,
+            } => {
                 let cam_from = m * *sm;
                 let r = radius.abs();
                 if !cam_from.is_finite() || cam_from.determinant().abs() < 1e-30 || !(r > 0.0) {
@@ -342,7 +380,8 @@ fn build(
     let n = count(cell);
     let dims = [n.x as usize, n.y as usize, n.z as usize];
     // Centre the lattice on the bound: untouched points all round keep the mesh closed.
-    let origin = 0.5 * (b.min + b.max) - 0.5 * cell * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
+    let origin = 0.5 * (b.min + b.max)
+        - 0.5 * cell * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
     let nleaf = program.nleaf;
     let counts = primvar::ClassCounts {
         uniform: 1,
@@ -383,7 +422,9 @@ impl BlobbySurface {
         let [nx, ny, nz] = self.dims;
         let (px, py) = (nx + 1, ny + 1);
         let h = self.cell;
-        let at = |i: usize, j: usize, k: usize| self.origin + h * Vec3::new(i as f32, j as f32, k as f32);
+        let at = |i: usize, j: usize, k: usize| {
+            self.origin + h * Vec3::new(i as f32, j as f32, k as f32)
+        };
         let f = &*self.field;
         let far = f.far_value();
         let mut v = vec![far; px * py * (nz + 1)];
@@ -428,7 +469,9 @@ impl BlobbySurface {
         let field = self.lattice();
         let pidx = |i: usize, j: usize, k: usize| (k * py + j) * px + i;
         let cidx = |i: usize, j: usize, k: usize| (k * ny + j) * nx + i;
-        let at = |i: usize, j: usize, k: usize| self.origin + h * Vec3::new(i as f32, j as f32, k as f32);
+        let at = |i: usize, j: usize, k: usize| {
+            self.origin + h * Vec3::new(i as f32, j as f32, k as f32)
+        };
         let mut cell_vertex = vec![NONE; nx * ny * nz];
         let mut p: Vec<Vec3> = Vec::new();
         let mut normals: Vec<Vec3> = Vec::new();
@@ -522,7 +565,11 @@ impl BlobbySurface {
                             continue;
                         }
                         let (b, cc) = ((axis + 1) % 3, (axis + 2) % 3);
-                        if c[b] == 0 || c[cc] == 0 || c[b] > self.dims[b] - 1 || c[cc] > self.dims[cc] - 1 {
+                        if c[b] == 0
+                            || c[cc] == 0
+                            || c[b] > self.dims[b] - 1
+                            || c[cc] > self.dims[cc] - 1
+                        {
                             continue;
                         }
                         let cell = |db: usize, dc: usize| {
@@ -586,7 +633,11 @@ impl BlobbySurface {
                 Class::Uniform => out.push(SourceVar {
                     class: Class::Constant,
                     floats: v.floats.get(..w).unwrap_or(&[]).to_vec(),
-                    strings: v.strings.get(..w.min(v.strings.len())).unwrap_or(&[]).to_vec(),
+                    strings: v
+                        .strings
+                        .get(..w.min(v.strings.len()))
+                        .unwrap_or(&[])
+                        .to_vec(),
                     ..v.clone()
                 }),
                 _ => {
@@ -633,7 +684,11 @@ impl BlobbySurface {
 
     /// The lattice's box.
     fn lattice_bound(&self) -> Bound {
-        let d = Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32);
+        let d = Vec3::new(
+            self.dims[0] as f32,
+            self.dims[1] as f32,
+            self.dims[2] as f32,
+        );
         Bound {
             min: self.origin,
             max: self.origin + self.cell * d,
@@ -700,7 +755,10 @@ mod tests {
         let pr = prim(p.clone());
         let d = Diagnostics::default();
         let m = Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0));
-        build(0, &pr, &p, m, None, &d).unwrap().polygonise().unwrap()
+        build(0, &pr, &p, m, None, &d)
+            .unwrap()
+            .polygonise()
+            .unwrap()
     }
 
     #[test]
@@ -736,12 +794,11 @@ mod tests {
         }
         assert!(edges.values().all(|&n| n % 2 == 0));
         // The neck at x = 0 is filled: the surface crosses the y axis above 0.
-        let neck = m
-            .p
-            .iter()
-            .filter(|q| q.x.abs() < 0.05 && q.z > 4.9 && q.z < 5.1)
-            .map(|q| q.y.abs())
-            .fold(0f32, f32::max);
+        let neck =
+            m.p.iter()
+                .filter(|q| q.x.abs() < 0.05 && q.z > 4.9 && q.z < 5.1)
+                .map(|q| q.y.abs())
+                .fold(0f32, f32::max);
         assert!(neck > 0.3, "neck half-width {neck}");
     }
 }

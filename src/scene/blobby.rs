@@ -117,7 +117,11 @@ pub fn decode(
     let err = |arg: usize, message: String, help: &'static str| DecodeError { arg, message, help };
     const OPS_HELP: &str = "each instruction is an opcode and its operands: 1000 f, 1001 f, 1002 f, 1003 s f (leaves: float/string indices), 0–3 n i…, 4–5 i j, 6–7 i (operators: earlier instruction numbers)";
     if nleaf < 0 {
-        return Err(err(0, format!("nleaf is {nleaf}; it must be at least 0"), "nleaf is the number of primitive fields (opcodes 1000–1003) in the code"));
+        return Err(err(
+            0,
+            format!("nleaf is {nleaf}; it must be at least 0"),
+            "nleaf is the number of primitive fields (opcodes 1000–1003) in the code",
+        ));
     }
     let mut ops: Vec<BlobOp> = Vec::new();
     let mut c = 0usize;
@@ -125,13 +129,18 @@ pub fn decode(
         code.get(at).copied().ok_or_else(|| {
             err(
                 1,
-                format!("instruction {ninstr} needs {what}, but the code array ends after {} numbers", code.len()),
+                format!(
+                    "instruction {ninstr} needs {what}, but the code array ends after {} numbers",
+                    code.len()
+                ),
                 OPS_HELP,
             )
         })
     };
     let float_at = |idx: i64, n: usize, ninstr: usize| -> Result<&[f32], DecodeError> {
-        let i = usize::try_from(idx).ok().filter(|&i| i.checked_add(n).is_some_and(|e| e <= floats.len()));
+        let i = usize::try_from(idx)
+            .ok()
+            .filter(|&i| i.checked_add(n).is_some_and(|e| e <= floats.len()));
         match i {
             Some(i) => Ok(&floats[i..i + n]),
             None => Err(err(
@@ -242,7 +251,11 @@ pub fn decode(
         ops.push(op);
     }
     if ops.is_empty() {
-        return Err(err(1, "the code array holds no instruction".into(), OPS_HELP));
+        return Err(err(
+            1,
+            "the code array holds no instruction".into(),
+            OPS_HELP,
+        ));
     }
     let mut warnings = Vec::new();
     let leaves = ops.iter().filter(|o| o.is_leaf()).count();
@@ -336,7 +349,9 @@ mod tests {
         let mut f = I.to_vec();
         f.extend_from_slice(&I);
         f[16 + 12] = 1.0; // second blob moved along x
-        let (p, w) = decode(2, &[1001, 0, 1001, 16, 0, 2, 0, 1], &f, &[]).ok().unwrap();
+        let (p, w) = decode(2, &[1001, 0, 1001, 16, 0, 2, 0, 1], &f, &[])
+            .ok()
+            .unwrap();
         assert!(w.is_empty());
         assert_eq!(p.ops.len(), 3);
         assert_eq!(p.ops[2], BlobOp::Add(vec![0, 1]));
@@ -350,7 +365,11 @@ mod tests {
     #[test]
     fn rejects_forward_references_and_bad_indices() {
         let e = decode(1, &[0, 2, 0, 1, 1001, 0], &I, &[]).err().unwrap();
-        assert!(e.message.contains("not an earlier instruction"), "{}", e.message);
+        assert!(
+            e.message.contains("not an earlier instruction"),
+            "{}",
+            e.message
+        );
         let e = decode(1, &[1001, 3], &I, &[]).err().unwrap();
         assert_eq!(e.arg, 2);
         let e = decode(1, &[1003, 0, 0], &I, &[]).err().unwrap();

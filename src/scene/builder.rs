@@ -803,7 +803,9 @@ impl<'a> Builder<'a> {
         let Some(scene) = self.world.as_mut() else {
             return; // solids in object definitions take the instance's solid
         };
-        let parent_op = parent.and_then(|p| scene.solids.get(p as usize)).map(|n| n.op);
+        let parent_op = parent
+            .and_then(|p| scene.solids.get(p as usize))
+            .map(|n| n.op);
         match (op, parent_op) {
             // A lone primitive solid is just its surfaces: no CSG work at all.
             (Some(SolidOp::Primitive), None) => {}

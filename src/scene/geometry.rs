@@ -46,7 +46,13 @@ impl Builder<'_> {
     }
 
     /// Validates counts and emits.
-    pub(super) fn finish_prim(&mut self, call: &Call<'_>, geom: Geometry, mut pv: ParamList, counts: Counts) {
+    pub(super) fn finish_prim(
+        &mut self,
+        call: &Call<'_>,
+        geom: Geometry,
+        mut pv: ParamList,
+        counts: Counts,
+    ) {
         let mut ds = Vec::new();
         validate_counts(&mut pv, &counts, call.name(), &mut |d| ds.push(d));
         for d in ds {

@@ -176,7 +176,12 @@ pub fn resolve(tree: &CsgTree, hits: &mut [CsgHit], mut keep: impl FnMut(&CsgHit
         }
         let solid_at = |p: usize, root: u32, state: &mut Vec<(u32, bool)>| {
             state.clear();
-            state.extend(leaves.iter().enumerate().map(|(li, &l)| (l, inside[p * nl + li])));
+            state.extend(
+                leaves
+                    .iter()
+                    .enumerate()
+                    .map(|(li, &l)| (l, inside[p * nl + li])),
+            );
             tree.inside(root, state)
         };
         for (p, h) in run.iter().enumerate() {
@@ -242,20 +247,47 @@ mod tests {
     #[test]
     fn difference_shows_the_cut_face_of_the_subtracted_solid() {
         // A − B along one ray: enter B at 1, enter A at 2, leave B at 3, leave A at 4.
-        let s = scene(&[(Difference, None), (Primitive, Some(0)), (Primitive, Some(0))], &[1, 2]);
+        let s = scene(
+            &[
+                (Difference, None),
+                (Primitive, Some(0)),
+                (Primitive, Some(0)),
+            ],
+            &[1, 2],
+        );
         let (t, places) = CsgTree::new(&s);
         assert_eq!(places[0].unwrap().inverted, false);
         assert_eq!(places[1].unwrap().inverted, true);
-        let mut h = [hit(1.0, 2, true, 0), hit(2.0, 1, true, 1), hit(3.0, 2, false, 2), hit(4.0, 1, false, 3)];
+        let mut h = [
+            hit(1.0, 2, true, 0),
+            hit(2.0, 1, true, 1),
+            hit(3.0, 2, false, 2),
+            hit(4.0, 1, false, 3),
+        ];
         assert_eq!(visible(&t, &mut h), vec![2, 3]);
     }
 
     #[test]
     fn union_and_intersection_keep_the_outer_and_inner_boundaries() {
-        let mut h = [hit(1.0, 1, true, 0), hit(2.0, 2, true, 1), hit(3.0, 1, false, 2), hit(4.0, 2, false, 3)];
-        let (u, _) = CsgTree::new(&scene(&[(Union, None), (Primitive, Some(0)), (Primitive, Some(0))], &[]));
+        let mut h = [
+            hit(1.0, 1, true, 0),
+            hit(2.0, 2, true, 1),
+            hit(3.0, 1, false, 2),
+            hit(4.0, 2, false, 3),
+        ];
+        let (u, _) = CsgTree::new(&scene(
+            &[(Union, None), (Primitive, Some(0)), (Primitive, Some(0))],
+            &[],
+        ));
         assert_eq!(visible(&u, &mut h.clone()), vec![0, 3]);
-        let (i, _) = CsgTree::new(&scene(&[(Intersection, None), (Primitive, Some(0)), (Primitive, Some(0))], &[]));
+        let (i, _) = CsgTree::new(&scene(
+            &[
+                (Intersection, None),
+                (Primitive, Some(0)),
+                (Primitive, Some(0)),
+            ],
+            &[],
+        ));
         assert_eq!(visible(&i, &mut h), vec![1, 2]);
     }
 
@@ -263,7 +295,13 @@ mod tests {
     fn nested_difference_inverts_twice() {
         // A − (B − C): C's surfaces face out of the result as they are.
         let s = scene(
-            &[(Difference, None), (Primitive, Some(0)), (Difference, Some(0)), (Primitive, Some(2)), (Primitive, Some(2))],
+            &[
+                (Difference, None),
+                (Primitive, Some(0)),
+                (Difference, Some(0)),
+                (Primitive, Some(2)),
+                (Primitive, Some(2)),
+            ],
             &[1, 3, 4],
         );
         let (_, places) = CsgTree::new(&s);
@@ -278,7 +316,12 @@ mod tests {
         let (a, b) = (places[0].unwrap(), places[1].unwrap());
         assert_ne!(a.leaf, b.leaf);
         assert_eq!((a.root, b.root), (0, 0));
-        let mut h = [hit(1.0, a.leaf, true, 0), hit(2.0, b.leaf, true, 1), hit(3.0, a.leaf, false, 2), hit(4.0, b.leaf, false, 3)];
+        let mut h = [
+            hit(1.0, a.leaf, true, 0),
+            hit(2.0, b.leaf, true, 1),
+            hit(3.0, a.leaf, false, 2),
+            hit(4.0, b.leaf, false, 3),
+        ];
         assert_eq!(visible(&t, &mut h), vec![1, 2]);
     }
 }
