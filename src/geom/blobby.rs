@@ -772,7 +772,7 @@ mod tests {
         }
         // Every quad's Newell normal points outward.
         for f in m.verts.chunks(4) {
-            let v = f.map(|i| m.p[i as usize]);
+            let v: Vec<Vec3> = f.iter().map(|&i| m.p[i as usize]).collect();
             let nrm = (v[1] - v[0]).cross(v[2] - v[0]) + (v[2] - v[0]).cross(v[3] - v[0]);
             let mid = (v[0] + v[1] + v[2] + v[3]) * 0.25 - c;
             assert!(nrm.dot(mid) > 0.0);

@@ -833,7 +833,7 @@ mod tests {
             geometry: Arc::new(Geometry::Points { npoints: 0 }),
             primvars: Arc::default(),
             attributes: Arc::new(attributes),
-            world_from_object: Mat4::IDENTITY,
+            world_from_object: glam::Mat4::IDENTITY,
             span: Default::default(),
         }
     }
