@@ -617,7 +617,8 @@ fn unimplemented_requests_warn_once_with_a_count() {
         r#"WorldBegin
 MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd
 MotionBegin [0 1] Translate 0 0 0 Translate 1 0 0 MotionEnd
-Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [""]
+GeometricRepresentation "lines"
+GeometricRepresentation "points"
 Sphere 1 -1 1 360
 WorldEnd
 "#,
@@ -625,7 +626,7 @@ WorldEnd
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
     let w = b.warnings();
     assert_eq!(w.len(), 1, "{w:#?}");
-    assert!(w[0].0.contains("`Blobby` is not implemented"));
+    assert!(w[0].0.contains("`GeometricRepresentation` is not implemented"));
     // Motion blocks apply (and compose): the sphere moves from x = 0 to x = 2.
     let p = &b.one().primitives[0];
     assert_eq!(p.world_from_object, Mat4::IDENTITY);

@@ -55,7 +55,7 @@ fn unclosed_block() {
 #[test]
 fn unimplemented_request_warns_once() {
     insta::assert_snapshot!(render(
-        "WorldBegin\nBlobby 1 [1000 0] [1] [\"\"]\nBlobby 1 [1000 0] [1] [\"\"]\nWorldEnd\n"
+        "WorldBegin\nGeometricRepresentation \"lines\"\nGeometricRepresentation \"points\"\nWorldEnd\n"
     ));
 }
 

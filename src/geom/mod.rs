@@ -17,9 +17,11 @@
 //! Files: `quadric` (the seven quadrics), `polygon` (meshes), `triangulate` (ear clipping),
 //! `patch` (the parametric patch both dice through), `primvar` (primitive variables),
 //! `patches` (Patch/PatchMesh/NuPatch/teapot into `bezier` pieces), `spline` (basis and knot
-//! mathematics), `trim` (trim curves), `teapot` (Newell's data).
+//! mathematics), `trim` (trim curves), `teapot` (Newell's data), `blobby` (implicit surfaces
+//! polygonised into meshes).
 
 mod bezier;
+mod blobby;
 mod curves;
 pub mod motion;
 mod patch;
@@ -161,7 +163,7 @@ pub fn surfaces_for(
     camera_from_world: Mat4,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
-    surfaces_cut_as(index, prim, camera_from_world, None, diags)
+    surfaces_full(index, prim, camera_from_world, None, None, diags)
 }
 
 /// [`surfaces_for`], polygon faces cut into patches as camera-space positions `decomp`
@@ -170,6 +172,29 @@ pub(crate) fn surfaces_cut_as(
     index: usize,
     prim: &Primitive,
     camera_from_world: Mat4,
+    decomp: Option<Arc<Vec<Vec3>>>,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    surfaces_full(index, prim, camera_from_world, None, decomp, diags)
+}
+
+/// [`surfaces_for`] knowing the frame's `raster_from_camera`: surfaces whose tessellation is
+/// fixed before dicing (Blobby's polygonisation) size it from their extent on screen.
+pub fn surfaces_in_view(
+    index: usize,
+    prim: &Primitive,
+    camera_from_world: Mat4,
+    raster_from_camera: Option<Mat4>,
+    diags: &Diagnostics,
+) -> Vec<Box<dyn Surface>> {
+    surfaces_full(index, prim, camera_from_world, raster_from_camera, None, diags)
+}
+
+fn surfaces_full(
+    index: usize,
+    prim: &Primitive,
+    camera_from_world: Mat4,
+    raster_from_camera: Option<Mat4>,
     decomp: Option<Arc<Vec<Vec3>>>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
@@ -327,6 +352,9 @@ pub(crate) fn surfaces_cut_as(
                 basis: *v_basis,
             };
             return curves::curves(index, prim, m, flip, args, diags);
+        }
+        Geometry::Blobby(program) => {
+            return blobby::surfaces(index, prim, program, m, raster_from_camera, diags);
         }
         Geometry::Named { name } if name == "fractalterrain" => {
             return terrain::surfaces(index, prim, m, flip, diags);

@@ -25,6 +25,7 @@ use crate::scene::{Options, Primitive, Scene};
 
 use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
+use super::hider::csg::{CsgPrim, CsgTree};
 use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
@@ -80,6 +81,7 @@ pub fn render_frame(
             camera.camera_from_world,
             scene.camera_motion.as_deref(),
             options.shutter,
+            Some(camera.raster_from_camera()),
             diags,
         ));
     }
@@ -113,6 +115,8 @@ struct PrimInfo {
     /// Attribute "dice" "binary": grids are diced a power of two on each side (adjacent
     /// grids then share vertices more often, which hides cracks).
     binary: bool,
+    /// Its place in a CSG tree (None outside boolean solids).
+    csg: Option<CsgPrim>,
 }
 
 fn prim_info(
@@ -174,6 +178,7 @@ fn prim_info(
             .get("dice:binary")
             .and_then(|p| p.data.floats().first().copied())
             .is_some_and(|v| v != 0.0),
+        csg: None,
     }
 }
 
@@ -493,6 +498,11 @@ impl Frame<'_> {
                 }
                 set_incident(&mut grid, self.camera.perspective);
                 let orient = orientation(&grid);
+                if info.csg.is_some_and(|c| c.inverted) {
+                    // A subtracted solid's surface bounds the result from inside it.
+                    grid.n.iter_mut().for_each(|n| *n = -*n);
+                    grid.ng.iter_mut().for_each(|n| *n = -*n);
+                }
                 self.stats.time(Stage::Dice, t0);
                 let t1 = Instant::now();
                 let undisplaced = grid.motion.as_ref().map(|_| grid.p.clone());
@@ -532,6 +542,7 @@ impl Frame<'_> {
                     one_sided: info.one_sided,
                     orientation: orient,
                     clip,
+                    csg: info.csg,
                 };
                 if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
                     self.diags.report(Diag::error(
@@ -657,7 +668,15 @@ fn render_inner(
         max_grid,
     );
     let seed = mix64(scene.frame.unwrap_or(0) as i64 as u64);
-    let config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let mut config = HiderConfig::from_options(options, camera, &opts.aovs, seed, diags);
+    let (csg_tree, csg_places) = CsgTree::new(scene);
+    if !csg_tree.is_empty() && options.hider.name == "abuffer" {
+        diags.report(Diag::warning(
+            "render::csg",
+            "solid modelling (SolidBegin) needs Hider \"hidden\"; the A-buffer draws every surface of the solids",
+        ));
+    }
+    config.csg = std::sync::Arc::new(csg_tree);
     let depth_filter = match config.depth_filter {
         DepthFilter::Max => FilmDepthFilter::Max,
         DepthFilter::Average => FilmDepthFilter::Average,
@@ -669,7 +688,11 @@ fn render_inner(
     let mut prims: Vec<PrimInfo> = scene
         .primitives
         .iter()
-        .map(|p| prim_info(scene, camera, p, min_rate, diags))
+        .zip(&csg_places)
+        .map(|(p, c)| PrimInfo {
+            csg: *c,
+            ..prim_info(scene, camera, p, min_rate, diags)
+        })
         .collect();
     estimate_displacement_bounds(scene, camera, &view, &surfaces, &mut prims, shader);
     let frame = Frame {
@@ -877,7 +900,7 @@ mod tests {
             geometry: Arc::new(Geometry::Points { npoints: 0 }),
             primvars: Arc::default(),
             attributes: Arc::new(attributes),
-            world_from_object: Mat4::IDENTITY,
+            world_from_object: glam::Mat4::IDENTITY,
             span: Default::default(),
             motion: None,
         }

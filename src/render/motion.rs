@@ -44,16 +44,23 @@ pub fn surfaces_over_shutter(
     camera_from_world: Mat4,
     camera_motion: Option<&MotionTransform>,
     shutter: [f32; 2],
+    raster_from_camera: Option<Mat4>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
     if prim.motion.is_none() && camera_motion.is_none() {
-        return crate::geom::surfaces_for(index, prim, camera_from_world, diags);
+        return crate::geom::surfaces_in_view(
+            index,
+            prim,
+            camera_from_world,
+            raster_from_camera,
+            diags,
+        );
     }
     let [open, close] = shutter;
     let cam_at = |t: f32| camera_motion.map_or(camera_from_world, |m| m.at(t));
     if !(open < close) {
         let p = primitive_at(prim, open);
-        return crate::geom::surfaces_for(index, &p, cam_at(open), diags);
+        return crate::geom::surfaces_in_view(index, &p, cam_at(open), raster_from_camera, diags);
     }
     let mut times: Vec<f32> = Vec::new();
     if let Some(m) = &prim.motion {

@@ -715,6 +715,7 @@ impl<'a> Builder<'a> {
             camera_motion: self.gs.motion.take(),
             lights: Vec::new(),
             primitives: Vec::new(),
+            solids: Vec::new(),
             coordinate_systems: HashMap::new(),
             source_dir: self.ctx.base_dir.clone(),
             texture_jobs: std::mem::take(&mut self.pending_texture_jobs),
@@ -790,25 +791,55 @@ impl<'a> Builder<'a> {
     }
 
     pub(super) fn solid_begin(&mut self, call: &Call<'_>) {
-        let op = call.pos[0].str();
-        if !matches!(op, "primitive" | "union" | "intersection" | "difference") {
-            self.report(
-                Diag::error(
-                    "scene::arguments",
-                    format!("unknown solid operation \"{op}\""),
-                )
-                .label(call.pos_spans[0], "not a CSG operation")
-                .help("use \"primitive\", \"union\", \"intersection\" or \"difference\""),
-            );
-        }
-        self.report(
-            Diag::warning(
-                "scene::unimplemented",
-                "`SolidBegin` (constructive solid geometry) is not implemented yet; its primitives are rendered as a union",
-            )
-            .label(call.span(), "CSG ignored"),
-        );
+        let op = match call.pos[0].str() {
+            "primitive" => Some(SolidOp::Primitive),
+            "union" => Some(SolidOp::Union),
+            "intersection" => Some(SolidOp::Intersection),
+            "difference" => Some(SolidOp::Difference),
+            other => {
+                self.report(
+                    Diag::error(
+                        "scene::arguments",
+                        format!("unknown solid operation \"{other}\"; the block is a union"),
+                    )
+                    .label(call.pos_spans[0], "not a CSG operation")
+                    .help("use \"primitive\", \"union\", \"intersection\" or \"difference\""),
+                );
+                Some(SolidOp::Union)
+            }
+        };
         self.push_block(BlockKind::Solid, call.span());
+        let parent = self.gs.attrs.solid;
+        let Some(scene) = self.world.as_mut() else {
+            return; // solids in object definitions take the instance's solid
+        };
+        let parent_op = parent
+            .and_then(|p| scene.solids.get(p as usize))
+            .map(|n| n.op);
+        match (op, parent_op) {
+            // A lone primitive solid is just its surfaces: no CSG work at all.
+            (Some(SolidOp::Primitive), None) => {}
+            (_, Some(SolidOp::Primitive)) => {
+                self.report(
+                    Diag::warning(
+                        "scene::solid",
+                        "a solid inside a `SolidBegin \"primitive\"` block is part of that primitive",
+                    )
+                    .label(call.span(), "this block")
+                    .help("primitive solids hold surfaces; put the boolean operation around them"),
+                );
+            }
+            (Some(op), _) => {
+                let id = scene.solids.len() as u32;
+                scene.solids.push(SolidNode {
+                    op,
+                    parent,
+                    span: call.span(),
+                });
+                self.attrs().solid = Some(id);
+            }
+            (None, _) => {}
+        }
     }
 
     pub(super) fn solid_end(&mut self, call: &Call<'_>) {

@@ -17,7 +17,7 @@ use super::types::*;
 impl Builder<'_> {
     /// False when geometry would be thrown away (before WorldBegin with no object being
     /// defined: an error; in a frame outside the CLI's range: silently skipped).
-    fn geometry_wanted(&mut self, call: &Call<'_>) -> bool {
+    pub(super) fn geometry_wanted(&mut self, call: &Call<'_>) -> bool {
         if self.defining.is_some() {
             return true;
         }
@@ -46,7 +46,13 @@ impl Builder<'_> {
     }
 
     /// Validates counts and emits.
-    fn finish_prim(&mut self, call: &Call<'_>, geom: Geometry, mut pv: ParamList, counts: Counts) {
+    pub(super) fn finish_prim(
+        &mut self,
+        call: &Call<'_>,
+        geom: Geometry,
+        mut pv: ParamList,
+        counts: Counts,
+    ) {
         let mut ds = Vec::new();
         validate_counts(&mut pv, &counts, call.name(), &mut |d| ds.push(d));
         for d in ds {

@@ -10,6 +10,7 @@
 
 mod archive;
 mod attributes;
+pub mod blobby;
 pub mod builder;
 pub mod cond;
 mod geometry;

@@ -615,7 +615,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Torus", ["majorradius": Num, "minorradius": Num, "phimin": Num, "phimax": Num, "thetamax": Num], ALL, true, "5.4", B::torus),
     req!("Points", [], ALL, true, "5.5", B::points),
     req!("Curves", ["type": Str, "nvertices": Ints, "wrap": Str], ALL, true, "5.5", B::curves),
-    req!("Blobby", ["nleaf": Int, "code": Ints, "floats": Floats, "strings": Strs], ALL, true, "5.5", B::unimplemented),
+    req!("Blobby", ["nleaf": Int, "code": Ints, "floats": Floats, "strings": Strs], ALL, true, "5.7", B::blobby),
     req!("Procedural", ["procname": Str, "args": Strs, "bound": Floats], ALL, false, "5.6", B::procedural),
     req!("Geometry", ["type": Str], ALL, true, "5.5", B::geometry_named),
     // ---- texture-making utilities (§8) ----

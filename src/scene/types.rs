@@ -348,6 +348,9 @@ pub struct Attributes {
     pub user: HashMap<String, Param>,
     /// GeometricApproximation "flatness" etc.
     pub geometric_approximation: HashMap<String, f32>,
+    /// The innermost CSG solid (an index into `Scene::solids`) this primitive belongs to;
+    /// None outside boolean solids (a top-level `SolidBegin "primitive"` renders as is).
+    pub solid: Option<u32>,
 }
 
 impl Default for Attributes {
@@ -377,8 +380,28 @@ impl Default for Attributes {
             lights_on: Vec::new(),
             user: HashMap::new(),
             geometric_approximation: HashMap::new(),
+            solid: None,
         }
     }
+}
+
+/// A `SolidBegin` operation (RISpec §5.6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolidOp {
+    Primitive,
+    Union,
+    Intersection,
+    Difference,
+}
+
+/// One `SolidBegin … SolidEnd` block inside a boolean solid; children are the nodes naming it
+/// as parent, in the order they were opened (a difference keeps its first child and removes
+/// the others).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolidNode {
+    pub op: SolidOp,
+    pub parent: Option<u32>,
+    pub span: Span,
 }
 
 /// A light source (LightSource or AreaLightSource).
@@ -486,6 +509,8 @@ pub enum Geometry {
         periodic: bool,
         v_basis: Basis,
     },
+    /// `Blobby` (RISpec §5.7): the decoded field program.
+    Blobby(Arc<super::blobby::BlobbyProgram>),
     /// `Geometry "name"` (teapot, fractalterrain, …) with its parameters.
     Named {
         name: String,
@@ -715,6 +740,8 @@ pub struct Scene {
     pub camera_motion: Option<Arc<MotionTransform>>,
     pub lights: Vec<Light>,
     pub primitives: Vec<Primitive>,
+    /// CSG solids (`SolidBegin` blocks), referred to by `Attributes::solid`.
+    pub solids: Vec<SolidNode>,
     /// CoordinateSystem names: world_from_named.
     pub coordinate_systems: HashMap<String, Mat4>,
     /// The file the scene came from (for relative search paths).

@@ -7,6 +7,7 @@
 //! grids covering it and on (pixel, sample, seed), never on the bucket or thread.
 
 pub mod abuffer;
+pub mod csg;
 pub mod zbuffer;
 
 use glam::{Mat4, Vec3, Vec4};
@@ -98,6 +99,9 @@ pub struct ShadedGrid {
     /// motion or depth of field, `mp_bounds`, `row_bounds` and `bound` cover every position
     /// a micropolygon takes during the shutter and over the lens.
     pub motion: Option<Box<MovingPoints>>,
+    /// Set on grids of CSG primitives: the hider keeps all their hits and resolves them per
+    /// sample (see [`csg`]).
+    pub csg: Option<Box<CsgGrid>>,
 }
 
 /// A moving grid's points at each key over the shutter (key 0 equals `xy`/`depth`).
@@ -107,6 +111,15 @@ pub struct MovingPoints {
     pub times: Vec<f32>,
     pub xy: Vec<Vec<[f32; 2]>>,
     pub depth: Vec<Vec<f32>>,
+}
+
+/// A CSG grid's place in its tree and, per micropolygon, whether a ray enters its primitive
+/// solid there (the micropolygon faces the eye against the leaf's outward normal).
+#[derive(Clone, Debug, Default)]
+pub struct CsgGrid {
+    pub leaf: u32,
+    pub root: u32,
+    pub entering: Vec<bool>,
 }
 
 /// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
@@ -128,6 +141,8 @@ pub struct GridInfo {
     pub orientation: f32,
     /// Raster bound of the surface (widened by the displacement bound).
     pub clip: [f32; 4],
+    /// The grid's CSG primitive solid (None outside CSG).
+    pub csg: Option<csg::CsgPrim>,
 }
 
 /// The sign relating a grid's parametric orientation to its Ng: +1 when Ng agrees with the
@@ -230,13 +245,22 @@ impl ShadedGrid {
             f32::NEG_INFINITY,
         ];
         let mut b = EMPTY;
+        let mut entering = Vec::new();
+        if info.csg.is_some() {
+            entering.reserve(nmp);
+        }
         for j in 0..nv.saturating_sub(1) {
             let mut rb = EMPTY;
             for i in 0..nu.saturating_sub(1) {
                 let k = j * nu + i;
                 let corners = [k, k + 1, k + nu, k + nu + 1];
                 let mut alive = corners.iter().all(|&c| ok[c]);
-                if alive && info.one_sided {
+                if info.csg.is_some() {
+                    // Against the leaf's own outward normal (measured before any flip).
+                    let m = micro_normal(&grid.p, k, nu) * info.orientation;
+                    let view_dir = if view.perspective { grid.p[k] } else { Vec3::Z };
+                    entering.push(m.dot(view_dir) < 0.0);
+                } else if alive && info.one_sided {
                     let m = micro_normal(&grid.p, k, nu) * info.orientation;
                     let view_dir = if view.perspective { grid.p[k] } else { Vec3::Z };
                     // Facing the eye when Ng points against the viewing direction.
@@ -344,6 +368,13 @@ impl ShadedGrid {
             row_bounds,
             zmin,
             motion,
+            csg: info.csg.map(|c| {
+                Box::new(CsgGrid {
+                    leaf: c.leaf,
+                    root: c.root,
+                    entering,
+                })
+            }),
         }
     }
 
@@ -475,6 +506,8 @@ pub struct HiderConfig {
     pub camera_from_raster: Mat4,
     /// The thin lens (DepthOfField), None for a pinhole.
     pub dof: Option<super::camera::Dof>,
+    /// The scene's CSG trees (empty without boolean solids).
+    pub csg: std::sync::Arc<csg::CsgTree>,
 }
 
 impl HiderConfig {
@@ -551,6 +584,7 @@ impl HiderConfig {
             clip_planes,
             camera_from_raster: camera.raster_from_camera().inverse(),
             dof: camera.dof,
+            csg: Default::default(),
         }
     }
 

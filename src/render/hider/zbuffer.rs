@@ -17,6 +17,7 @@ use crate::num::floor_i32;
 use super::super::camera::PixelRect;
 use super::super::sampler::{pixel_positions, time_and_lens};
 use super::super::stats::Stats;
+use super::csg::{self, CsgHit};
 use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
 
 const NONE: u32 = u32::MAX;
@@ -109,6 +110,11 @@ struct Bucket<'c> {
     keep_second: bool,
     /// Samples without an opaque front yet.
     uncovered: usize,
+    /// Every hit of CSG geometry (front and back faces), resolved after all grids, with
+    /// their colour, opacity, matte flag and output variables.
+    csg: Vec<CsgHit>,
+    csg_data: Vec<([f32; 3], [f32; 3], bool)>,
+    csg_aovs: Vec<f32>,
 }
 
 impl<'c> Bucket<'c> {
@@ -250,6 +256,9 @@ impl Hider for ZBuffer {
             hits: 0,
             keep_second: cfg.depth_filter == DepthFilter::Midpoint,
             uncovered: n,
+            csg: Vec::new(),
+            csg_data: Vec::new(),
+            csg_aovs: Vec::new(),
         };
         // Front to back (ties by key), so opaque surfaces cull the grids behind them. The
         // order never changes the picture: visible points composite in a total order.
@@ -292,6 +301,9 @@ impl Hider for ZBuffer {
             } else {
                 sample_grid(&mut b, &buf, rect, g);
             }
+        }
+        if !b.csg.is_empty() {
+            resolve_csg(&mut b);
         }
         resolve(&b, &mut buf);
         stats.alloc(b.points.len() * std::mem::size_of::<VisPoint>() + buf.values.len() * 4);
@@ -786,9 +798,61 @@ fn hit(
                 + w1 * g.aov[idx[1] * aw + q]
                 + w2 * g.aov[idx[2] * aw + q];
         }
-        b.insert(s, z, g.key, sub, c, o, g.matte, interp_aov);
+        put(b, g, mp.m, s, z, sub, c, o, interp_aov);
     } else {
-        b.insert(s, z, g.key, sub, mp.cc, mp.co, g.matte, mp.mean_aov);
+        put(b, g, mp.m, s, z, sub, mp.cc, mp.co, mp.mean_aov);
+    }
+}
+
+/// Inserts a visible point, or keeps a CSG grid's hit for [`resolve_csg`].
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn put(
+    b: &mut Bucket,
+    g: &ShadedGrid,
+    m: usize,
+    s: usize,
+    z: f32,
+    sub: u32,
+    c: [f32; 3],
+    o: [f32; 3],
+    aov: &[f32],
+) {
+    match &g.csg {
+        None => b.insert(s, z, g.key, sub, c, o, g.matte, aov),
+        Some(cg) => {
+            b.hits += 1;
+            b.csg.push(CsgHit {
+                sample: s as u32,
+                z,
+                key: g.key,
+                sub,
+                leaf: cg.leaf,
+                root: cg.root,
+                entering: cg.entering.get(m).copied().unwrap_or(true),
+                payload: b.csg_data.len() as u32,
+            });
+            b.csg_data.push((c, o, g.matte));
+            b.csg_aovs.extend_from_slice(aov);
+        }
+    }
+}
+
+/// Keeps the CSG hits on their solids' boundaries as visible points.
+fn resolve_csg(b: &mut Bucket) {
+    let mut hits = std::mem::take(&mut b.csg);
+    let data = std::mem::take(&mut b.csg_data);
+    let aovs = std::mem::take(&mut b.csg_aovs);
+    let aw = b.cfg.channels() - 5;
+    let mut keep = Vec::new();
+    csg::resolve(&b.cfg.csg, &mut hits, |h| keep.push(*h));
+    for h in keep {
+        let (c, o, matte) = data[h.payload as usize];
+        let p = h.payload as usize;
+        let aov = &aovs[p * aw..(p + 1) * aw];
+        b.insert(h.sample as usize, h.z, h.key, h.sub, c, o, matte, aov);
+        // Counted when found: this is the same hit.
+        b.hits -= 1;
     }
 }
 
