@@ -741,6 +741,7 @@ mod tests {
             attributes: Arc::new(Attributes::default()),
             world_from_object: Mat4::IDENTITY,
             span: crate::diag::Span::new(0, 0, 0),
+            motion: None,
         }
     }
 

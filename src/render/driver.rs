@@ -874,7 +874,6 @@ mod tests {
 
     use super::*;
     use crate::render::dice::tests::Quad;
-    use glam::Mat4;
     use crate::render::DefaultShader;
     use crate::scene::{Attributes, Geometry, PixelFilter, Projection};
     use crate::shade::Grid;

@@ -218,6 +218,7 @@ mod tests {
                 }),
                 world_from_object: glam::Mat4::IDENTITY,
                 span: crate::diag::Span::new(0, 0, 0),
+                motion: None,
             });
         }
         s
