@@ -93,10 +93,7 @@ fn known_renderer_settings_are_typed_and_quiet() {
     // The ignored ones are notes (shown at -v), naming the setting.
     let notes = b.of(Severity::Note);
     // (render:casts_shadows, light:shadows and visibility:trace are used by ray tracing.)
-    for key in [
-        "\"radiosity\" \"steps\"",
-        "\"identifier\" \"shadinggroup\"",
-    ] {
+    for key in ["\"radiosity\" \"steps\"", "\"identifier\" \"shadinggroup\""] {
         assert!(notes.iter().any(|n| n.contains(key)), "{key}: {notes:#?}");
     }
     // What arbor uses is not noted, and is applied.

@@ -41,7 +41,10 @@ const SLIDE: &str = "MotionBegin [0 1]\nTranslate 0 0 0\nTranslate 10 0 0\nMotio
 fn check_spread(f: &Film, d: usize) {
     let prof = column_profile(f, 64, 16);
     let energy: f32 = prof.iter().sum();
-    assert!((energy - 4.0).abs() <= 0.04, "energy {energy}, profile {prof:?}");
+    assert!(
+        (energy - 4.0).abs() <= 0.04,
+        "energy {energy}, profile {prof:?}"
+    );
     // Covered from x = 30 to 34 + d, nothing outside.
     for (x, &a) in prof.iter().enumerate() {
         if x < 30 || x >= 34 + d {
@@ -113,7 +116,11 @@ fn blurred_output_is_identical_for_any_bucket_size_and_thread_count() {
         ..Settings::default()
     };
     let (a, _) = render_with(&busy("16 16"), &one);
-    let covered = a.data.chunks(a.data.len() / (48 * 36)).filter(|p| p[3] > 0.0).count();
+    let covered = a
+        .data
+        .chunks(a.data.len() / (48 * 36))
+        .filter(|p| p[3] > 0.0)
+        .count();
     assert!(covered > 300, "{covered} pixels covered");
     for (bucket, s) in [("7 5", &two), ("32 32", &two), ("5 9", &one)] {
         let (b, _) = render_with(&busy(bucket), s);
@@ -207,19 +214,43 @@ fn bad_motion_blocks_are_diagnosed() {
         "MotionBegin [0 0.5 1]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd",
     ));
     assert!(
-        d.iter().any(|(c, m)| c == "scene::motion" && m.contains("3 times") && m.contains("2 requests")),
+        d.iter().any(|(c, m)| c == "scene::motion"
+            && m.contains("3 times")
+            && m.contains("2 requests")),
         "{d:?}"
     );
-    let d = diagnose(&base("MotionBegin [0 1]\nTranslate 0 0 5\nRotate 1 0 0 1\nMotionEnd"));
-    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("mixes")), "{d:?}");
-    let d = diagnose(&base("MotionBegin [1 0]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd"));
-    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("increase")), "{d:?}");
+    let d = diagnose(&base(
+        "MotionBegin [0 1]\nTranslate 0 0 5\nRotate 1 0 0 1\nMotionEnd",
+    ));
+    assert!(
+        d.iter()
+            .any(|(c, m)| c == "scene::motion" && m.contains("mixes")),
+        "{d:?}"
+    );
+    let d = diagnose(&base(
+        "MotionBegin [1 0]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd",
+    ));
+    assert!(
+        d.iter()
+            .any(|(c, m)| c == "scene::motion" && m.contains("increase")),
+        "{d:?}"
+    );
     let d = diagnose(
         "Format 8 8 1\nShutter 0 1\nWorldBegin\nMotionBegin [0 1]\n\
          Polygon \"P\" [0 0 5 1 0 5 1 1 5]\nPolygon \"P\" [0 0 5 1 0 5 1 1 5 0 1 5]\nMotionEnd\nWorldEnd\n",
     );
-    assert!(d.iter().any(|(c, m)| c == "scene::motion" && m.contains("same shape")), "{d:?}");
+    assert!(
+        d.iter()
+            .any(|(c, m)| c == "scene::motion" && m.contains("same shape")),
+        "{d:?}"
+    );
     // A good block says nothing.
-    let d = diagnose(&base("MotionBegin [0 1]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd"));
-    assert!(d.iter().all(|(c, _)| c != "scene::motion" && c != "scene::unimplemented"), "{d:?}");
+    let d = diagnose(&base(
+        "MotionBegin [0 1]\nTranslate 0 0 5\nTranslate 1 0 5\nMotionEnd",
+    ));
+    assert!(
+        d.iter()
+            .all(|(c, _)| c != "scene::motion" && c != "scene::unimplemented"),
+        "{d:?}"
+    );
 }

@@ -19,7 +19,10 @@ fn shaders() -> PathBuf {
 
 /// A square polygon of half-size `h` in the plane z = `z`.
 fn square(h: f32, z: f32) -> String {
-    format!("Polygon \"P\" [{a} {a} {z}  {h} {a} {z}  {h} {h} {z}  {a} {h} {z}]", a = -h)
+    format!(
+        "Polygon \"P\" [{a} {a} {z}  {h} {a} {z}  {h} {h} {z}  {a} {h} {z}]",
+        a = -h
+    )
 }
 
 #[test]
@@ -128,10 +131,7 @@ fn a_ray_traced_shadow_covers_the_analytic_disk() {
     let (mut dark_ok, mut lit_ok) = (0, 0);
     for y in 0..res {
         for x in 0..res {
-            let (cx, cy) = (
-                -3.0 + (x as f32 + 0.5) * px,
-                3.0 - (y as f32 + 0.5) * px,
-            );
+            let (cx, cy) = (-3.0 + (x as f32 + 0.5) * px, 3.0 - (y as f32 + 0.5) * px);
             let r = (cx * cx + cy * cy).sqrt();
             let k = (y * res + x) * 3;
             let (red, blue) = (rgb[k], rgb[k + 2]);
@@ -142,7 +142,10 @@ fn a_ray_traced_shadow_covers_the_analytic_disk() {
                 assert!(red < 1e-3, "({x},{y}) r={r} should be in shadow: {red}");
                 dark_ok += 1;
             } else if r > radius + px && r < 2.9 {
-                assert!(red > 0.2 && blue > 0.2, "({x},{y}) r={r} should be lit: {red}");
+                assert!(
+                    red > 0.2 && blue > 0.2,
+                    "({x},{y}) r={r} should be lit: {red}"
+                );
                 lit_ok += 1;
             }
         }
@@ -172,7 +175,11 @@ WorldEnd
         plane = square(1000.0, 5.0)
     );
     let rgb = film_rgb(&render_rib(&open, &[shaders()]));
-    assert!(rgb.iter().all(|&v| v == 0.0), "open plane occluded: {:?}", &rgb[..6]);
+    assert!(
+        rgb.iter().all(|&v| v == 0.0),
+        "open plane occluded: {:?}",
+        &rgb[..6]
+    );
     // The camera inside a closed box [−5, 5]³ (six walls), looking at the wall z = 5.
     let walls = [
         "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",

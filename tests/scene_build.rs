@@ -626,7 +626,9 @@ WorldEnd
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
     let w = b.warnings();
     assert_eq!(w.len(), 1, "{w:#?}");
-    assert!(w[0].0.contains("`GeometricRepresentation` is not implemented"));
+    assert!(w[0]
+        .0
+        .contains("`GeometricRepresentation` is not implemented"));
     // Motion blocks apply (and compose): the sphere moves from x = 0 to x = 2.
     let p = &b.one().primitives[0];
     assert_eq!(p.world_from_object, Mat4::IDENTITY);

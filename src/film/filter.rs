@@ -512,7 +512,14 @@ mod tests {
     fn tables_match_the_analytic_filters() {
         // Worst interpolation error over a dense sweep of the support, relative to f(0).
         for &k in &ALL {
-            for &(xw, yw) in &[(1.0f32, 1.0f32), (2.0, 2.0), (3.0, 2.5), (4.0, 4.0), (8.0, 6.0), (16.0, 16.0)] {
+            for &(xw, yw) in &[
+                (1.0f32, 1.0f32),
+                (2.0, 2.0),
+                (3.0, 2.5),
+                (4.0, 4.0),
+                (8.0, 6.0),
+                (16.0, 16.0),
+            ] {
                 let f = Filter::new(k, xw, yw);
                 let Some(t) = f.tables() else {
                     assert!(!f.is_separable(), "{k:?}");
@@ -552,7 +559,9 @@ mod tests {
         // box and triangle are linear between nodes: exact.
         let b = Filter::new(FilterKind::Box, 1.0, 1.0).tables().unwrap();
         assert_eq!(b.x.at(0.37), 1.0);
-        let tr = Filter::new(FilterKind::Triangle, 2.0, 2.0).tables().unwrap();
+        let tr = Filter::new(FilterKind::Triangle, 2.0, 2.0)
+            .tables()
+            .unwrap();
         assert!((tr.x.at(0.25) - 0.75).abs() < 1e-7);
         assert!(tr.x.at(1.0).abs() < 1e-7);
     }

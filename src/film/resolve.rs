@@ -291,7 +291,9 @@ pub fn filter_tile(
         // The common buffer (r g b a z, no output variables) with a separable filter: the
         // fast scatter below. Depth is never filtered, so its slot carries the weight.
         let fast = match tables {
-            Some(t) if nch == 5 && zc == Some(4) && buf.channels == 5 && hx.max(hy) <= 3.0 => Some(t),
+            Some(t) if nch == 5 && zc == Some(4) && buf.channels == 5 && hx.max(hy) <= 3.0 => {
+                Some(t)
+            }
             _ => None,
         };
         if let Some(t) = fast {
@@ -732,7 +734,14 @@ mod tests {
         let (w, h) = (11usize, 9usize);
         let val = |x: f32, y: f32, c: usize| (x * 1.37 + y * 0.71 + c as f32).sin() * 0.5 + 0.5;
         for name in ["box", "triangle", "gaussian", "sinc", "mitchell"] {
-            for &(xw, yw) in &[(1.0f32, 1.0f32), (2.0, 2.0), (2.5, 1.5), (3.0, 3.0), (4.0, 4.0), (6.0, 5.0)] {
+            for &(xw, yw) in &[
+                (1.0f32, 1.0f32),
+                (2.0, 2.0),
+                (2.5, 1.5),
+                (3.0, 3.0),
+                (4.0, 4.0),
+                (6.0, 5.0),
+            ] {
                 let f = Filter::from_scene(&PixelFilter {
                     name: name.into(),
                     xwidth: xw,

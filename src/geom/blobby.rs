@@ -797,12 +797,11 @@ mod tests {
         assert!(edges.values().all(|&n| n % 2 == 0));
         // The neck at x = 0 is filled: there the surface is at |y| ≈ 1.12, where two spheres
         // of radius 1 that did not blend would reach only 0.8.
-        let neck = m
-            .p
-            .iter()
-            .filter(|q| q.x.abs() < 0.15 && (q.z - 5.0).abs() < 0.3)
-            .map(|q| q.y.abs())
-            .fold(0f32, f32::max);
+        let neck =
+            m.p.iter()
+                .filter(|q| q.x.abs() < 0.15 && (q.z - 5.0).abs() < 0.3)
+                .map(|q| q.y.abs())
+                .fold(0f32, f32::max);
         assert!(neck > 1.0, "neck half-width {neck}");
     }
 }

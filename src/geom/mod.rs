@@ -187,7 +187,14 @@ pub fn surfaces_in_view(
     raster_from_camera: Option<Mat4>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
-    surfaces_full(index, prim, camera_from_world, raster_from_camera, None, diags)
+    surfaces_full(
+        index,
+        prim,
+        camera_from_world,
+        raster_from_camera,
+        None,
+        diags,
+    )
 }
 
 fn surfaces_full(
@@ -427,7 +434,15 @@ fn polygons(
     (nloops, nverts, verts, nvertices): PolyTopology,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
-    polygons_cut_as(index, prim, m, flip, (nloops, nverts, verts, nvertices), None, diags)
+    polygons_cut_as(
+        index,
+        prim,
+        m,
+        flip,
+        (nloops, nverts, verts, nvertices),
+        None,
+        diags,
+    )
 }
 
 /// [`polygons`], with faces cut into patches as positions `decomp` would cut them (motion

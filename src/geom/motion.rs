@@ -66,9 +66,7 @@ impl Surface for MovingSurface {
                 }
                 super::pad(out)
             }
-            Keys::Deforming(k) => k
-                .iter()
-                .fold(Bound::EMPTY, |b, s| b.union(s.bound())),
+            Keys::Deforming(k) => k.iter().fold(Bound::EMPTY, |b, s| b.union(s.bound())),
         }
     }
 
@@ -106,7 +104,10 @@ impl Surface for MovingSurface {
                         columns[c].push(s);
                     }
                 }
-                columns.into_iter().map(|c| wrap(Keys::Deforming(c))).collect()
+                columns
+                    .into_iter()
+                    .map(|c| wrap(Keys::Deforming(c)))
+                    .collect()
             }
         }
     }

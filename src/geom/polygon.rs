@@ -125,7 +125,11 @@ impl Mesh {
             Some(_) => {
                 let mut nd = Vec3::ZERO;
                 for k in outline.clone() {
-                    let next = if k + 1 == outline.end { outline.start } else { k + 1 };
+                    let next = if k + 1 == outline.end {
+                        outline.start
+                    } else {
+                        k + 1
+                    };
                     let (a, b) = (dpos(k), dpos(next));
                     nd += Vec3::new(
                         (a.y - b.y) * (a.z + b.z),

@@ -137,7 +137,8 @@ impl Bvh {
             let mut split_ok = false;
             if span > 0.0 && span.is_finite() {
                 let scale = BINS as f32 / span;
-                let bin_of = |k: u32| (((cent[k as usize][axis] - lo) * scale) as usize).min(BINS - 1);
+                let bin_of =
+                    |k: u32| (((cent[k as usize][axis] - lo) * scale) as usize).min(BINS - 1);
                 let mut bins = [(Aabb::EMPTY, 0usize); BINS];
                 for &k in &order[s..e] {
                     let b = &mut bins[bin_of(k)];
@@ -164,7 +165,8 @@ impl Bvh {
                     if cnt == 0 || right_count[i + 1] == 0 {
                         continue;
                     }
-                    let cost = acc.area() * cnt as f32 + right_area[i + 1] * right_count[i + 1] as f32;
+                    let cost =
+                        acc.area() * cnt as f32 + right_area[i + 1] * right_count[i + 1] as f32;
                     if cost < best.0 {
                         best = (cost, i);
                     }
@@ -359,7 +361,15 @@ fn intersect_quad(q: &Quad, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f
 }
 
 #[inline]
-fn tri(p0: Vec3, p1: Vec3, p2: Vec3, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+fn tri(
+    p0: Vec3,
+    p1: Vec3,
+    p2: Vec3,
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    tmax: f32,
+) -> Option<(f32, f32, f32)> {
     let e1 = p1 - p0;
     let e2 = p2 - p0;
     let pv = d.cross(e2);

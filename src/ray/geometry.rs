@@ -235,7 +235,11 @@ impl RateModel {
         let b = m.project_point3(Vec3::new(1.0, 0.0, 1.0));
         let ppu = (b.x - a.x).abs();
         RateModel {
-            ppu: if ppu.is_finite() && ppu > 0.0 { ppu } else { 100.0 },
+            ppu: if ppu.is_finite() && ppu > 0.0 {
+                ppu
+            } else {
+                100.0
+            },
             perspective: camera.perspective,
         }
     }

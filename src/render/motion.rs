@@ -102,7 +102,10 @@ mod tests {
     #[test]
     fn keys_span_the_shutter() {
         assert_eq!(shutter_times(&[0.0, 1.0], 0.0, 1.0), vec![0.0, 1.0]);
-        assert_eq!(shutter_times(&[0.0, 0.5, 1.0], 0.25, 0.75), vec![0.25, 0.5, 0.75]);
+        assert_eq!(
+            shutter_times(&[0.0, 0.5, 1.0], 0.25, 0.75),
+            vec![0.25, 0.5, 0.75]
+        );
         assert_eq!(shutter_times(&[0.0, 1.0], 0.2, 0.4), vec![0.2, 0.4]);
     }
 }

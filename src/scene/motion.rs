@@ -95,23 +95,81 @@ fn same_shape(a: &Geometry, b: &Geometry) -> bool {
         | (G::Paraboloid { .. }, G::Paraboloid { .. })
         | (G::Disk { .. }, G::Disk { .. })
         | (G::Torus { .. }, G::Torus { .. }) => true,
-        (G::Polygons { nloops, nverts, verts, .. }, G::Polygons { nloops: l2, nverts: n2, verts: v2, .. }) => {
-            nloops == l2 && nverts == n2 && verts == v2
-        }
         (
-            G::PatchMesh { bicubic, nu, nv, uperiodic, vperiodic, .. },
-            G::PatchMesh { bicubic: b2, nu: u2, nv: v2, uperiodic: up2, vperiodic: vp2, .. },
+            G::Polygons {
+                nloops,
+                nverts,
+                verts,
+                ..
+            },
+            G::Polygons {
+                nloops: l2,
+                nverts: n2,
+                verts: v2,
+                ..
+            },
+        ) => nloops == l2 && nverts == n2 && verts == v2,
+        (
+            G::PatchMesh {
+                bicubic,
+                nu,
+                nv,
+                uperiodic,
+                vperiodic,
+                ..
+            },
+            G::PatchMesh {
+                bicubic: b2,
+                nu: u2,
+                nv: v2,
+                uperiodic: up2,
+                vperiodic: vp2,
+                ..
+            },
         ) => bicubic == b2 && nu == u2 && nv == v2 && uperiodic == up2 && vperiodic == vp2,
-        (G::NuPatch { nu, nv, uorder, vorder, uknot, vknot, .. }, G::NuPatch { nu: u2, nv: v2, uorder: uo2, vorder: vo2, uknot: uk2, vknot: vk2, .. }) => {
-            nu == u2 && nv == v2 && uorder == uo2 && vorder == vo2 && uknot == uk2 && vknot == vk2
-        }
-        (G::SubdivisionMesh { nverts, verts, .. }, G::SubdivisionMesh { nverts: n2, verts: v2, .. }) => {
-            nverts == n2 && verts == v2
-        }
+        (
+            G::NuPatch {
+                nu,
+                nv,
+                uorder,
+                vorder,
+                uknot,
+                vknot,
+                ..
+            },
+            G::NuPatch {
+                nu: u2,
+                nv: v2,
+                uorder: uo2,
+                vorder: vo2,
+                uknot: uk2,
+                vknot: vk2,
+                ..
+            },
+        ) => nu == u2 && nv == v2 && uorder == uo2 && vorder == vo2 && uknot == uk2 && vknot == vk2,
+        (
+            G::SubdivisionMesh { nverts, verts, .. },
+            G::SubdivisionMesh {
+                nverts: n2,
+                verts: v2,
+                ..
+            },
+        ) => nverts == n2 && verts == v2,
         (G::Points { npoints }, G::Points { npoints: n2 }) => npoints == n2,
-        (G::Curves { cubic, nverts, periodic, .. }, G::Curves { cubic: c2, nverts: n2, periodic: p2, .. }) => {
-            cubic == c2 && nverts == n2 && periodic == p2
-        }
+        (
+            G::Curves {
+                cubic,
+                nverts,
+                periodic,
+                ..
+            },
+            G::Curves {
+                cubic: c2,
+                nverts: n2,
+                periodic: p2,
+                ..
+            },
+        ) => cubic == c2 && nverts == n2 && periodic == p2,
         (G::Named { name }, G::Named { name: n2 }) => name == n2,
         _ => false,
     }
@@ -267,9 +325,10 @@ impl Builder<'_> {
                 let a0 = reqs[i].args.first().and_then(|a| a.value.as_f32());
                 let a1 = reqs[i + 1].args.first().and_then(|a| a.value.as_f32());
                 match (a0, a1) {
-                    (Some(a), Some(b)) if (b - a).is_finite() => {
-                        ((b - a).abs() / MAX_KEY_DEGREES).ceil().clamp(1.0, MAX_KEYS as f32) as usize
-                    }
+                    (Some(a), Some(b)) if (b - a).is_finite() => ((b - a).abs() / MAX_KEY_DEGREES)
+                        .ceil()
+                        .clamp(1.0, MAX_KEYS as f32)
+                        as usize,
                     _ => 1,
                 }
             } else {
@@ -366,8 +425,10 @@ impl Builder<'_> {
             .label(caps[0].0, "first key used");
             return emit_first(self, Some(d));
         }
-        let shapes: Vec<(Arc<Geometry>, Arc<ParamList>)> =
-            caps.iter().map(|(_, g, p)| (g.clone(), p.clone())).collect();
+        let shapes: Vec<(Arc<Geometry>, Arc<ParamList>)> = caps
+            .iter()
+            .map(|(_, g, p)| (g.clone(), p.clone()))
+            .collect();
         let shape_motion = Motion {
             times: times.to_vec(),
             world_from_object: vec![self.gs.ctm],

@@ -576,7 +576,10 @@ pub fn motion_segment(times: &[f32], t: f32) -> (usize, f32) {
     if t >= times[n - 1] {
         return (n - 2, 1.0);
     }
-    let i = times.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
+    let i = times
+        .partition_point(|&x| x <= t)
+        .saturating_sub(1)
+        .min(n - 2);
     let d = times[i + 1] - times[i];
     (i, if d > 0.0 { (t - times[i]) / d } else { 0.0 })
 }
@@ -609,7 +612,11 @@ impl Motion {
             return self.world_from_object[0];
         }
         let (i, f) = motion_segment(&self.times, t);
-        lerp_mat(&self.world_from_object[i], &self.world_from_object[i + 1], f)
+        lerp_mat(
+            &self.world_from_object[i],
+            &self.world_from_object[i + 1],
+            f,
+        )
     }
     /// The deformed primitive at time `t` (None when only the transform moves): keys
     /// interpolated linearly (primitive variables and quadric parameters).
@@ -663,8 +670,18 @@ pub fn lerp_geometry(a: &Geometry, b: &Geometry, f: f32) -> Geometry {
     use Geometry as G;
     match (a, b) {
         (
-            G::Sphere { radius, zmin, zmax, thetamax },
-            G::Sphere { radius: r2, zmin: z0, zmax: z1, thetamax: t2 },
+            G::Sphere {
+                radius,
+                zmin,
+                zmax,
+                thetamax,
+            },
+            G::Sphere {
+                radius: r2,
+                zmin: z0,
+                zmax: z1,
+                thetamax: t2,
+            },
         ) => G::Sphere {
             radius: l(*radius, *r2),
             zmin: l(*zmin, *z0),
@@ -672,16 +689,34 @@ pub fn lerp_geometry(a: &Geometry, b: &Geometry, f: f32) -> Geometry {
             thetamax: l(*thetamax, *t2),
         },
         (
-            G::Cone { height, radius, thetamax },
-            G::Cone { height: h2, radius: r2, thetamax: t2 },
+            G::Cone {
+                height,
+                radius,
+                thetamax,
+            },
+            G::Cone {
+                height: h2,
+                radius: r2,
+                thetamax: t2,
+            },
         ) => G::Cone {
             height: l(*height, *h2),
             radius: l(*radius, *r2),
             thetamax: l(*thetamax, *t2),
         },
         (
-            G::Cylinder { radius, zmin, zmax, thetamax },
-            G::Cylinder { radius: r2, zmin: z0, zmax: z1, thetamax: t2 },
+            G::Cylinder {
+                radius,
+                zmin,
+                zmax,
+                thetamax,
+            },
+            G::Cylinder {
+                radius: r2,
+                zmin: z0,
+                zmax: z1,
+                thetamax: t2,
+            },
         ) => G::Cylinder {
             radius: l(*radius, *r2),
             zmin: l(*zmin, *z0),
@@ -690,15 +725,29 @@ pub fn lerp_geometry(a: &Geometry, b: &Geometry, f: f32) -> Geometry {
         },
         (
             G::Hyperboloid { p1, p2, thetamax },
-            G::Hyperboloid { p1: q1, p2: q2, thetamax: t2 },
+            G::Hyperboloid {
+                p1: q1,
+                p2: q2,
+                thetamax: t2,
+            },
         ) => G::Hyperboloid {
             p1: p1.lerp(*q1, f),
             p2: p2.lerp(*q2, f),
             thetamax: l(*thetamax, *t2),
         },
         (
-            G::Paraboloid { rmax, zmin, zmax, thetamax },
-            G::Paraboloid { rmax: r2, zmin: z0, zmax: z1, thetamax: t2 },
+            G::Paraboloid {
+                rmax,
+                zmin,
+                zmax,
+                thetamax,
+            },
+            G::Paraboloid {
+                rmax: r2,
+                zmin: z0,
+                zmax: z1,
+                thetamax: t2,
+            },
         ) => G::Paraboloid {
             rmax: l(*rmax, *r2),
             zmin: l(*zmin, *z0),
@@ -706,16 +755,36 @@ pub fn lerp_geometry(a: &Geometry, b: &Geometry, f: f32) -> Geometry {
             thetamax: l(*thetamax, *t2),
         },
         (
-            G::Disk { height, radius, thetamax },
-            G::Disk { height: h2, radius: r2, thetamax: t2 },
+            G::Disk {
+                height,
+                radius,
+                thetamax,
+            },
+            G::Disk {
+                height: h2,
+                radius: r2,
+                thetamax: t2,
+            },
         ) => G::Disk {
             height: l(*height, *h2),
             radius: l(*radius, *r2),
             thetamax: l(*thetamax, *t2),
         },
         (
-            G::Torus { rmajor, rminor, phimin, phimax, thetamax },
-            G::Torus { rmajor: a2, rminor: b2, phimin: p0, phimax: p1, thetamax: t2 },
+            G::Torus {
+                rmajor,
+                rminor,
+                phimin,
+                phimax,
+                thetamax,
+            },
+            G::Torus {
+                rmajor: a2,
+                rminor: b2,
+                phimin: p0,
+                phimax: p1,
+                thetamax: t2,
+            },
         ) => G::Torus {
             rmajor: l(*rmajor, *a2),
             rminor: l(*rminor, *b2),

@@ -994,7 +994,11 @@ impl<'a> Exec<'a> {
             (0..n).map(|i| t.at(i).normalize_or_zero()).collect()
         };
         let cone = self.regs[angle as usize].f().first();
-        let count = self.regs[samples as usize].f().first().round().clamp(1.0, 4096.0) as u32;
+        let count = self.regs[samples as usize]
+            .f()
+            .first()
+            .round()
+            .clamp(1.0, 4096.0) as u32;
         let salt = crate::pattern::hash::hash_u32(pos ^ (dir << 16) ^ 0x6a7);
         let start = mask.clone();
         let mut ci = vec![Vec3::ZERO; n];
@@ -1003,7 +1007,8 @@ impl<'a> Exec<'a> {
         for k in 0..count {
             let dirs: Vec<Vec3> = (0..n)
                 .map(|i| {
-                    let (u1, u2) = crate::ray::stratified(crate::ray::point_seed(p[i], salt), k, count);
+                    let (u1, u2) =
+                        crate::ray::stratified(crate::ray::point_seed(p[i], salt), k, count);
                     crate::ray::cosine_dir(d[i], u1, u2, cone)
                 })
                 .collect();

@@ -27,10 +27,19 @@ fn lum(c: Vec3) -> f32 {
 }
 
 /// Handles a ray built-in; false when `f` is not one (the caller then runs it as usual).
-pub(super) fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: Span, mask: &Mask) -> bool {
+pub(super) fn call(
+    ex: &mut Exec,
+    f: Builtin,
+    dst: Reg,
+    args: &[Reg],
+    span: Span,
+    mask: &Mask,
+) -> bool {
     use Builtin::*;
     let raytrace_map = matches!(f, Shadow | EnvironmentC | EnvironmentF)
-        && args.first().is_some_and(|&r| &*ex.regs[r as usize].s() == "raytrace");
+        && args
+            .first()
+            .is_some_and(|&r| &*ex.regs[r as usize].s() == "raytrace");
     if !(matches!(
         f,
         Trace | Occlusion | IndirectDiffuse | Transmission | Visibility | RayLevel | IsShadowRay
@@ -62,7 +71,10 @@ pub(super) fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: Span
                     "samples" => samples = v.f().first(),
                     "samplecone" => cone = v.f().first(),
                     "bias" | "hitmode" | "hitsides" | "label" | "subset" => {}
-                    other => ex.warn(span, format!("{f:?} parameter \"{other}\" is not supported; ignored")),
+                    other => ex.warn(
+                        span,
+                        format!("{f:?} parameter \"{other}\" is not supported; ignored"),
+                    ),
                 }
             }
             Slot::VT(transmit(ex, &a, &b, &mask.bits, samples, cone, span))
@@ -83,11 +95,25 @@ pub(super) fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: Span
                     "bias" | "hitmode" | "hitsides" | "label" | "subset" | "adaptive"
                     | "minsamples" | "falloff" | "falloffmode" | "maxerror" | "maxpixeldist"
                     | "distribution" | "pointbased" => {}
-                    other => ex.warn(span, format!("{f:?} parameter \"{other}\" is not supported; ignored")),
+                    other => ex.warn(
+                        span,
+                        format!("{f:?} parameter \"{other}\" is not supported; ignored"),
+                    ),
                 }
             }
             let count = samples.round().clamp(1.0, 4096.0) as u32;
-            hemisphere(ex, f == Occlusion, &p, &nn, &mask.bits, count, maxdist, cone, env_color, span)
+            hemisphere(
+                ex,
+                f == Occlusion,
+                &p,
+                &nn,
+                &mask.bits,
+                count,
+                maxdist,
+                cone,
+                env_color,
+                span,
+            )
         }
         Shadow => {
             // shadow("raytrace", P [, "samples", n, "blur", angle, "bias", b]) in a light shader:
@@ -96,7 +122,9 @@ pub(super) fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: Span
             let first_param = 3 + ncoord.max(1);
             let p: Vec<Vec3> = if ncoord == 4 {
                 let c: Vec<Vec<Vec3>> = (0..4).map(|k| vec_t(arg(ex, args, 3 + k), n)).collect();
-                (0..n).map(|i| 0.25 * (c[0][i] + c[1][i] + c[2][i] + c[3][i])).collect()
+                (0..n)
+                    .map(|i| 0.25 * (c[0][i] + c[1][i] + c[2][i] + c[3][i]))
+                    .collect()
             } else {
                 vec_t(arg(ex, args, 3), n)
             };
@@ -194,7 +222,10 @@ fn map_params(ex: &Exec, args: &[Reg], first: usize, span: Span) -> (f32, f32) {
             "samples" => samples = v.f().first(),
             "blur" => blur = v.f().first(),
             "bias" | "width" | "swidth" | "twidth" | "filter" | "fill" | "label" | "subset" => {}
-            other => ex.warn(span, format!("raytrace parameter \"{other}\" is not supported; ignored")),
+            other => ex.warn(
+                span,
+                format!("raytrace parameter \"{other}\" is not supported; ignored"),
+            ),
         }
     }
     (samples, blur.max(0.0))
@@ -213,7 +244,15 @@ fn trace_rays(ex: &Exec, p: &[Vec3], r: &[Vec3], active: &[bool]) -> Vec<Vec3> {
 
 /// Transmission from `a` to `b`, averaged over `samples` targets jittered in a cone of
 /// half-angle `cone` around the segment.
-fn transmit(ex: &Exec, a: &[Vec3], b: &[Vec3], active: &[bool], samples: f32, cone: f32, span: Span) -> Vec<Vec3> {
+fn transmit(
+    ex: &Exec,
+    a: &[Vec3],
+    b: &[Vec3],
+    active: &[bool],
+    samples: f32,
+    cone: f32,
+    span: Span,
+) -> Vec<Vec3> {
     let n = a.len();
     let mut acc = vec![Vec3::ZERO; n];
     let Some(rt) = ex.env.rays else {
@@ -290,7 +329,11 @@ fn hemisphere(
         } else {
             rt.trace(p, &dirs, active, &mut buf, &mut dist);
             for i in 0..n {
-                acc[i] += if dist[i] <= maxdist { buf[i] } else { env_color };
+                acc[i] += if dist[i] <= maxdist {
+                    buf[i]
+                } else {
+                    env_color
+                };
             }
         }
     }

@@ -183,7 +183,14 @@ impl RayTracer for Tracer<'_, '_> {
         self.depth
     }
 
-    fn trace(&self, org: &[Vec3], dir: &[Vec3], active: &[bool], ci: &mut [Vec3], dist: &mut [f32]) {
+    fn trace(
+        &self,
+        org: &[Vec3],
+        dir: &[Vec3],
+        active: &[bool],
+        ci: &mut [Vec3],
+        dist: &mut [f32],
+    ) {
         let n = org.len();
         for c in ci.iter_mut() {
             *c = Vec3::ZERO;

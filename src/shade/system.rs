@@ -648,9 +648,7 @@ impl<'a> ShadeSystem<'a> {
                         }
                     })
                     .collect();
-                let active: Vec<bool> = (0..n)
-                    .map(|i| lit[i] && cl[i] != Vec3::ZERO)
-                    .collect();
+                let active: Vec<bool> = (0..n).map(|i| lit[i] && cl[i] != Vec3::ZERO).collect();
                 let mut t = vec![Vec3::ONE; n];
                 crate::shade::exec::RayTracer::transmission(&tracer, &ps[..], &to, &active, &mut t);
                 for (c, t) in cl.iter_mut().zip(&t) {

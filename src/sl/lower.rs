@@ -950,8 +950,11 @@ impl<'a> Lowerer<'a> {
                         _ => {
                             self.expr(&args[k], None);
                             self.diags.push(
-                                Diag::error("sl::call", "`gather` output names are string literals")
-                                    .label(args[k].span, "not a literal name"),
+                                Diag::error(
+                                    "sl::call",
+                                    "`gather` output names are string literals",
+                                )
+                                .label(args[k].span, "not a literal name"),
                             );
                             k += 2;
                             continue;
@@ -959,8 +962,11 @@ impl<'a> Lowerer<'a> {
                     };
                     let Some(target) = args.get(k + 1) else {
                         self.diags.push(
-                            Diag::error("sl::call", format!("`gather` output \"{name}\" without a variable"))
-                                .label(args[k].span, "no variable"),
+                            Diag::error(
+                                "sl::call",
+                                format!("`gather` output \"{name}\" without a variable"),
+                            )
+                            .label(args[k].span, "no variable"),
                         );
                         break;
                     };
@@ -970,16 +976,24 @@ impl<'a> Lowerer<'a> {
                     };
                     let Some(var) = var else {
                         self.diags.push(
-                            Diag::error("sl::call", format!("`gather` stores \"{name}\" into a writable variable"))
-                                .label(target.span, "not a writable variable"),
+                            Diag::error(
+                                "sl::call",
+                                format!("`gather` stores \"{name}\" into a writable variable"),
+                            )
+                            .label(target.span, "not a writable variable"),
                         );
                         k += 2;
                         continue;
                     };
                     let known = matches!(
                         name.as_str(),
-                        "surface:Ci" | "surface:Oi" | "ray:length" | "ray:direction" | "ray:origin"
-                            | "primitive:P" | "surface:P"
+                        "surface:Ci"
+                            | "surface:Oi"
+                            | "ray:length"
+                            | "ray:direction"
+                            | "ray:origin"
+                            | "primitive:P"
+                            | "surface:P"
                     );
                     if !known {
                         self.diags.push(
@@ -988,12 +1002,30 @@ impl<'a> Lowerer<'a> {
                                 .help("arbor gives surface:Ci, surface:Oi, ray:length, ray:direction, ray:origin, primitive:P"),
                         );
                     }
-                    let want = if name == "ray:length" { BaseType::Float } else { BaseType::Color };
-                    let ty_ok = if want == BaseType::Float { var.ty == BaseType::Float } else { var.ty.is_triple() };
+                    let want = if name == "ray:length" {
+                        BaseType::Float
+                    } else {
+                        BaseType::Color
+                    };
+                    let ty_ok = if want == BaseType::Float {
+                        var.ty == BaseType::Float
+                    } else {
+                        var.ty.is_triple()
+                    };
                     if !ty_ok {
                         self.diags.push(
-                            Diag::error("sl::type", format!("`gather` output \"{name}\" needs a {} variable", if want == BaseType::Float { "float" } else { "triple" }))
-                                .label(target.span, "wrong type"),
+                            Diag::error(
+                                "sl::type",
+                                format!(
+                                    "`gather` output \"{name}\" needs a {} variable",
+                                    if want == BaseType::Float {
+                                        "float"
+                                    } else {
+                                        "triple"
+                                    }
+                                ),
+                            )
+                            .label(target.span, "wrong type"),
                         );
                         k += 2;
                         continue;
@@ -2975,7 +3007,11 @@ impl<'a> Lowerer<'a> {
             return self.error(
                 Diag::error(
                     "sl::call",
-                    format!("`{name}` takes {} positional arguments, found {}", pos.len(), k),
+                    format!(
+                        "`{name}` takes {} positional arguments, found {}",
+                        pos.len(),
+                        k
+                    ),
                 )
                 .label(span, "call")
                 .help(match name {

@@ -196,7 +196,9 @@ impl ShadedGrid {
         let motion = grid
             .motion
             .as_ref()
-            .filter(|m| m.p.len() >= 2 && m.times.len() == m.p.len() && m.p.iter().all(|k| k.len() == n))
+            .filter(|m| {
+                m.p.len() >= 2 && m.times.len() == m.p.len() && m.p.iter().all(|k| k.len() == n)
+            })
             .map(|m| {
                 let mut mp = MovingPoints {
                     times: m.times.clone(),
@@ -420,7 +422,10 @@ impl ShadedGrid {
         self.xy.len() * (8 + 4 + 24)
             + self.aov.len() * 4
             + self.live.len()
-            + self.motion.as_ref().map_or(0, |m| m.xy.len() * self.xy.len() * 12)
+            + self
+                .motion
+                .as_ref()
+                .map_or(0, |m| m.xy.len() * self.xy.len() * 12)
     }
 }
 

@@ -465,7 +465,11 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
                 let Some(Tri { v, .. }) = mp.tris[t] else {
                     continue;
                 };
-                let te = [Edge::new(v[1], v[2]), Edge::new(v[2], v[0]), Edge::new(v[0], v[1])];
+                let te = [
+                    Edge::new(v[1], v[2]),
+                    Edge::new(v[2], v[0]),
+                    Edge::new(v[0], v[1]),
+                ];
                 let tb = [
                     v[0][0].min(v[1][0]).min(v[2][0]).max(bx[0]),
                     v[0][1].min(v[1][1]).min(v[2][1]).max(bx[1]),
@@ -592,7 +596,19 @@ fn sample_grid_blurred(
                         inv_area: 1.0 / area.abs(),
                     };
                     let sub = (m as u32) << 1 | t as u32;
-                    hit_blurred(b, g, cfg, &tri, sub, s, pos, &cc, &co, &mean_aov, &mut interp_aov);
+                    hit_blurred(
+                        b,
+                        g,
+                        cfg,
+                        &tri,
+                        sub,
+                        s,
+                        pos,
+                        &cc,
+                        &co,
+                        &mean_aov,
+                        &mut interp_aov,
+                    );
                     break;
                 }
             }
@@ -890,7 +906,9 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
             let p = &b.points[pi as usize];
             (p.matte, p.c, p.o, p.aov)
         });
-        let last = front.set.then_some((front.matte, front.c, front.o, front.aov));
+        let last = front
+            .set
+            .then_some((front.matte, front.c, front.o, front.aov));
         for (matte, c, o, aov) in points.chain(last) {
             if !matte {
                 let w = (tr[0] * o[0] + tr[1] * o[1] + tr[2] * o[2]) * (1.0 / 3.0);
