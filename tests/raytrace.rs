@@ -6,12 +6,8 @@ mod common;
 
 use std::path::PathBuf;
 
-use arbor::diag::{Diagnostics, SourceMap};
-use arbor::render::driver::{render_frame, RenderOptions};
-use arbor::scene::{build_scenes, BuildContext};
-use arbor::shade::system::ShadeSystem;
-use arbor::sl::ShaderLibrary;
-use common::{film_rgb, render_rib, stdlib_options};
+use arbor::render::driver::RenderOptions;
+use common::{film_rgb, render_rib};
 
 fn shaders() -> PathBuf {
     common::manifest_dir().join("tests").join("raytrace")
@@ -60,36 +56,12 @@ WorldEnd
 
 /// Renders with explicit thread/bucket settings; returns the RGB floats.
 fn render_with(rib: &str, threads: usize, bucket: u32) -> Vec<f32> {
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let reqs = arbor::rib::parse_bytes("<test>", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: Vec::new(),
-        texture_paths: Vec::new(),
-        archive_paths: Vec::new(),
-        base_dir: None,
-        frames: None,
-    };
-    let scenes = build_scenes(reqs, &ctx);
-    let library = ShaderLibrary::new(stdlib_options(&[shaders()]));
-    let system = ShadeSystem {
-        library: &library,
-        sources: &sources,
-        diags: &diags,
-        textures: None,
-        aovs: Vec::new(),
-        rays: Default::default(),
-    };
     let opts = RenderOptions {
         threads,
         bucket_size: Some([bucket, bucket]),
         ..Default::default()
     };
-    let film = render_frame(&scenes[0], &system, &opts, &diags);
-    assert!(!diags.has_errors());
-    film_rgb(&film)
+    film_rgb(&common::render_rib_with(rib, &[shaders()], &opts).0)
 }
 
 /// A plane at z = 10 lit by a point light at the eye with ray-traced shadows, a sphere of

@@ -4,11 +4,7 @@
 
 mod common;
 
-use arbor::diag::{Diagnostics, SourceMap};
-use arbor::render::driver::{render_frame, RenderOptions};
-use arbor::scene::{build_scenes, BuildContext};
-use arbor::shade::system::ShadeSystem;
-use arbor::sl::ShaderLibrary;
+use arbor::render::driver::RenderOptions;
 
 /// Renders `rib` with the shaders in `files`; returns the centre pixel's rgb.
 fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
@@ -16,34 +12,11 @@ fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32
     for (f, text) in files {
         std::fs::write(dir.join(f), text).unwrap();
     }
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: Vec::new(),
-        texture_paths: Vec::new(),
-        archive_paths: Vec::new(),
-        base_dir: None,
-        frames: None,
-    };
-    let scenes = build_scenes(reqs, &ctx);
-    let library = ShaderLibrary::new(common::stdlib_options(&[dir]));
-    let system = ShadeSystem {
-        library: &library,
-        sources: &sources,
-        diags: &diags,
-        textures: None,
-        aovs: Vec::new(),
-        rays: Default::default(),
-    };
     let opts = RenderOptions {
         threads,
         ..Default::default()
     };
-    let film = render_frame(&scenes[0], &system, &opts, &diags);
-    assert!(!diags.has_errors(), "{}", diags.render_plain(&sources));
+    let (film, _, _) = common::render_rib_with(rib, &[dir], &opts);
     let rgb = common::film_rgb(&film);
     let k = (film.height / 2 * film.width + film.width / 2) * 3;
     [rgb[k], rgb[k + 1], rgb[k + 2]]

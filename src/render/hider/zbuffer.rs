@@ -377,22 +377,7 @@ fn sample_grid(b: &mut Bucket, buf: &SampleBuffer, rect: PixelRect, g: &ShadedGr
             continue;
         }
         // Constant shading: one colour per micropolygon, the mean of its corners.
-        let mut cc = [0f32; 3];
-        let mut co = [0f32; 3];
-        for &c in &corner {
-            for q in 0..3 {
-                cc[q] += g.ci[c][q] * 0.25;
-                co[q] += g.oi[c][q] * 0.25;
-            }
-        }
-        if aw > 0 {
-            mean_aov.iter_mut().for_each(|v| *v = 0.0);
-            for &c in &corner {
-                for q in 0..aw {
-                    mean_aov[q] += g.aov[c * aw + q] * 0.25;
-                }
-            }
-        }
+        let (cc, co) = corner_means(g, &corner, &mut mean_aov);
         let p = corner.map(|c| g.xy[c]);
         let mut tris = [None, None];
         for (t, tri) in [[0, 1, 2], [0, 2, 3]].into_iter().enumerate() {
@@ -525,22 +510,7 @@ fn sample_grid_blurred(
         if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
             continue;
         }
-        let mut cc = [0f32; 3];
-        let mut co = [0f32; 3];
-        for &c in &corner {
-            for q in 0..3 {
-                cc[q] += g.ci[c][q] * 0.25;
-                co[q] += g.oi[c][q] * 0.25;
-            }
-        }
-        if aw > 0 {
-            mean_aov.iter_mut().for_each(|v| *v = 0.0);
-            for &c in &corner {
-                for q in 0..aw {
-                    mean_aov[q] += g.aov[c * aw + q] * 0.25;
-                }
-            }
-        }
+        let (cc, co) = corner_means(g, &corner, &mut mean_aov);
         for_samples(b, buf, rect, bx, |b, s, pos| {
             let mut p = [[0f32; 2]; 4];
             let mut q = [0f32; 4];
@@ -665,7 +635,6 @@ fn hit_blurred(
     interp_aov: &mut [f32],
 ) {
     let (v, idx, dq) = (tri.v, tri.idx, tri.dq);
-    let aw = g.aov_width;
     let e1 = edge(v[2], v[0], pos);
     let e2 = edge(v[0], v[1], pos);
     let (w1, w2) = (e1.0 * tri.inv_area, e2.0 * tri.inv_area);
@@ -690,20 +659,7 @@ fn hit_blurred(
         }
     }
     if g.smooth {
-        let w = [w0, w1, w2];
-        let mut c = [0f32; 3];
-        let mut o = [0f32; 3];
-        for (vi, &gi) in idx.iter().enumerate() {
-            for q in 0..3 {
-                c[q] += w[vi] * g.ci[gi][q];
-                o[q] += w[vi] * g.oi[gi][q];
-            }
-        }
-        for q in 0..aw {
-            interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
-                + w1 * g.aov[idx[1] * aw + q]
-                + w2 * g.aov[idx[2] * aw + q];
-        }
+        let (c, o) = interpolate(g, idx, [w0, w1, w2], interp_aov);
         b.insert(s, z, g.key, sub, c, o, g.matte, interp_aov);
     } else {
         b.insert(s, z, g.key, sub, *cc, *co, g.matte, mean_aov);
@@ -773,7 +729,6 @@ fn hit(
     else {
         return;
     };
-    let aw = g.aov_width;
     let (w1, w2) = (e1.eval(pos) * inv_area, e2.eval(pos) * inv_area);
     let w0 = 1.0 - w1 - w2;
     // Relative to vertex 0, so a constant depth stays exact.
@@ -800,20 +755,7 @@ fn hit(
     }
     let sub = (mp.m as u32) << 1 | t as u32;
     if g.smooth {
-        let w = [w0, w1, w2];
-        let mut c = [0f32; 3];
-        let mut o = [0f32; 3];
-        for (vi, &gi) in idx.iter().enumerate() {
-            for q in 0..3 {
-                c[q] += w[vi] * g.ci[gi][q];
-                o[q] += w[vi] * g.oi[gi][q];
-            }
-        }
-        for q in 0..aw {
-            interp_aov[q] = w0 * g.aov[idx[0] * aw + q]
-                + w1 * g.aov[idx[1] * aw + q]
-                + w2 * g.aov[idx[2] * aw + q];
-        }
+        let (c, o) = interpolate(g, idx, [w0, w1, w2], interp_aov);
         put(b, g, mp.m, s, z, sub, c, o, interp_aov);
     } else {
         put(b, g, mp.m, s, z, sub, mp.cc, mp.co, mp.mean_aov);
@@ -870,6 +812,56 @@ fn resolve_csg(b: &mut Bucket) {
         // Counted when found: this is the same hit.
         b.hits -= 1;
     }
+}
+
+/// A micropolygon's constant shading: the mean colour and opacity of its four corners (and
+/// of their output variables, into `mean_aov`).
+#[inline]
+fn corner_means(g: &ShadedGrid, corner: &[usize; 4], mean_aov: &mut [f32]) -> ([f32; 3], [f32; 3]) {
+    let aw = g.aov_width;
+    let mut cc = [0f32; 3];
+    let mut co = [0f32; 3];
+    for &c in corner {
+        for q in 0..3 {
+            cc[q] += g.ci[c][q] * 0.25;
+            co[q] += g.oi[c][q] * 0.25;
+        }
+    }
+    if aw > 0 {
+        mean_aov.iter_mut().for_each(|v| *v = 0.0);
+        for &c in corner {
+            for q in 0..aw {
+                mean_aov[q] += g.aov[c * aw + q] * 0.25;
+            }
+        }
+    }
+    (cc, co)
+}
+
+/// Smooth shading at a sample: colour, opacity and output variables (into `interp_aov`)
+/// interpolated from a triangle's grid points `idx` with barycentric weights `w`.
+#[inline]
+fn interpolate(
+    g: &ShadedGrid,
+    idx: [usize; 3],
+    w: [f32; 3],
+    interp_aov: &mut [f32],
+) -> ([f32; 3], [f32; 3]) {
+    let aw = g.aov_width;
+    let mut c = [0f32; 3];
+    let mut o = [0f32; 3];
+    for (vi, &gi) in idx.iter().enumerate() {
+        for q in 0..3 {
+            c[q] += w[vi] * g.ci[gi][q];
+            o[q] += w[vi] * g.oi[gi][q];
+        }
+    }
+    for q in 0..aw {
+        interp_aov[q] = w[0] * g.aov[idx[0] * aw + q]
+            + w[1] * g.aov[idx[1] * aw + q]
+            + w[2] * g.aov[idx[2] * aw + q];
+    }
+    (c, o)
 }
 
 /// Composites each sample's visible points front to back into the buffer.
