@@ -2838,31 +2838,7 @@ impl<'a> Lowerer<'a> {
             coords.push((v, args[k].span));
             k += 1;
         }
-        let mut params = Vec::new();
-        while k < args.len() {
-            let pn = self.expr(&args[k], Some(BaseType::String));
-            if pn.ty != BaseType::String {
-                self.diags.push(
-                    Diag::error(
-                        "sl::call",
-                        format!("`{name}` parameters come in \"name\", value pairs"),
-                    )
-                    .label(args[k].span, "expected a parameter name"),
-                );
-                break;
-            }
-            let Some(val) = args.get(k + 1) else {
-                self.diags.push(
-                    Diag::error("sl::call", "texture parameter without a value")
-                        .label(args[k].span, "no value"),
-                );
-                break;
-            };
-            let pv = self.expr(val, None);
-            params.push(pn.reg);
-            params.push(pv.reg);
-            k += 2;
-        }
+        let params = self.param_pairs(name, args, k);
         // bump(name, N, dPds, dPdt, [coordinates], …) (RISpec 3.0/3.1 §15.7; 3.2 dropped
         // it): the frame comes first, then the coordinates as for texture().
         let mut frame = Vec::new();
@@ -3021,6 +2997,21 @@ impl<'a> Lowerer<'a> {
                 }),
             );
         }
+        regs.extend(self.param_pairs(name, args, k));
+        let t = self.temp(ret, true);
+        self.emit(Instr::Call {
+            f,
+            dst: t.reg,
+            args: regs,
+            span,
+        });
+        t
+    }
+
+    /// The `"name", value` pairs of a call from argument `k` on: their registers in order.
+    /// A pair that is not one is reported and ends the list.
+    fn param_pairs(&mut self, name: &str, args: &[Expr], mut k: usize) -> Vec<Reg> {
+        let mut regs = Vec::new();
         while k < args.len() {
             let pn = self.expr(&args[k], Some(BaseType::String));
             if pn.ty != BaseType::String {
@@ -3045,14 +3036,7 @@ impl<'a> Lowerer<'a> {
             regs.push(pv.reg);
             k += 2;
         }
-        let t = self.temp(ret, true);
-        self.emit(Instr::Call {
-            f,
-            dst: t.reg,
-            args: regs,
-            span,
-        });
-        t
+        regs
     }
 
     fn filterstep(&mut self, args: &[Expr], span: Span) -> Val {
