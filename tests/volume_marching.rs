@@ -93,3 +93,66 @@ LightSource "foglamp" 2 "from" [0 0 3] "intensity" [5] "__foglight" [0]"#,
     // The same picture with every core.
     assert_eq!(centre("vol_foglight", &rib, &files, 0), c);
 }
+
+// A march whose length differs across the grid: points left of the axis take one step to the
+// midpoint, points right of it take three (the last at the midpoint), so the lights run on
+// fewer points than the grid holds from the second step on. Each step's light is what a light
+// at that position gives, whichever points are still marching.
+const UNEVEN: &str = "volume uneven()
+{
+    color c = 0;
+    float steps = xcomp(P) < 0 ? 1 : 3;
+    float k;
+    for (k = 1; k <= steps; k += 1) {
+        point at = P - (0.5 * k / steps) * I;
+        color here = 0;
+        illuminance(at) {
+            float fog = 1;
+            lightsource(\"__foglight\", fog);
+            if (fog > 0)
+                here += Cl;
+        }
+        c = here;
+    }
+    Ci = c;
+    Oi = 1;
+}
+";
+
+/// The picture as rgb rows (21×21).
+fn picture(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> Vec<f32> {
+    let dir = common::scratch_dir(name);
+    for (f, text) in files {
+        std::fs::write(dir.join(f), text).unwrap();
+    }
+    let opts = RenderOptions {
+        threads,
+        ..Default::default()
+    };
+    let (film, _, _) = common::render_rib_with(rib, &[dir], &opts);
+    common::film_rgb(&film)
+}
+
+#[test]
+fn lights_run_for_the_points_still_marching_see_each_points_position() {
+    let rib = scene(r#"LightSource "foglamp" 1 "from" [0 0 1]"#).replace("midway", "uneven");
+    let files = [("uneven.sl", UNEVEN), ("foglamp.sl", FOGLAMP)];
+    let rgb = picture("vol_uneven", &rib, &files, 1);
+    // Every point ends at its midpoint P/2, whatever its step count: on the axis row the
+    // colour is 1 / |P/2 - (0,0,1)|², the same on both sides of the centre.
+    let row = 10;
+    for col in [6usize, 8, 12, 14] {
+        let k = (row * 21 + col) * 3;
+        // The pixel's ray through the wall at z = 4 (fov 30 over 21 pixels).
+        let x = ((col as f32 + 0.5) / 21.0 * 2.0 - 1.0) * (15f32.to_radians()).tan() * 4.0;
+        let mid = glam::Vec3::new(x / 2.0, 0.0, 2.0);
+        let want = 1.0 / (mid - glam::Vec3::Z).length_squared();
+        // The shading point is up to a pixel from the sample: a tolerance of a few percent.
+        assert!(
+            (rgb[k] - want).abs() < 0.04 * want,
+            "column {col}: {} against {want}",
+            rgb[k]
+        );
+    }
+    assert_eq!(picture("vol_uneven", &rib, &files, 0), rgb);
+}

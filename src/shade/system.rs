@@ -437,8 +437,8 @@ impl<'a> ShadeSystem<'a> {
         // illuminance() away from the grid's P runs the same lights again there.
         let surface_regs = {
             let g: &Grid = grid;
-            let relight = |ps: &[Vec3], want: &[bool]| {
-                self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+            let relight = |ps: &[Vec3], want: &[bool], idx: Option<&[usize]>| {
+                self.relight(g, &ctx, &grid_lights, ps, want, idx)
             };
             self.run(&prog, &sref, g, &ctx, &lights, None, None, Some(&relight))
         };
@@ -502,8 +502,8 @@ impl<'a> ShadeSystem<'a> {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
                 let g: &Grid = grid;
-                let relight = |ps: &[Vec3], want: &[bool]| {
-                    self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+                let relight = |ps: &[Vec3], want: &[bool], idx: Option<&[usize]>| {
+                    self.relight(g, &ctx, &grid_lights, ps, want, idx)
                 };
                 if let Some(mut regs) = self.run(
                     &aprog,
@@ -573,6 +573,37 @@ impl<'a> ShadeSystem<'a> {
     /// Runs `lights` over the grid: with the lit points at the grid's P, or at `ps`
     /// (illuminance at other positions). With `want`, only the lights flagged there run; the
     /// others are None.
+    /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
+    /// those grid points only, as a grid of just them.
+    fn relight(
+        &self,
+        grid: &Grid,
+        ctx: &RunCtx,
+        lights: &[GridLight],
+        ps: &[Vec3],
+        want: &[bool],
+        idx: Option<&[usize]>,
+    ) -> Vec<Option<LightResult>> {
+        match idx {
+            None => self.eval_lights(grid, ctx, lights, Some(ps), Some(want)),
+            Some(idx) => {
+                let sub = grid.subset(idx);
+                let sub_ctx = RunCtx {
+                    scene: ctx.scene,
+                    camera: ctx.camera,
+                    attrs: ctx.attrs,
+                    camera_from_object: ctx.camera_from_object,
+                    seed: ctx.seed,
+                    alpha: None,
+                    depth: ctx.depth,
+                    // Its neighbours are unrelated points: derivatives read zero.
+                    hits: true,
+                };
+                self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want))
+            }
+        }
+    }
+
     fn eval_lights(
         &self,
         grid: &Grid,
