@@ -156,3 +156,46 @@ fn lights_run_for_the_points_still_marching_see_each_points_position() {
     }
     assert_eq!(picture("vol_uneven", &rib, &files, 0), rgb);
 }
+
+// The standard library's `smoke` (BMRT's interface): with neither light nor noise, a uniform
+// medium of density σ in front of a white wall 4 units away transmits exp(-4σ).
+#[test]
+fn smoke_attenuates_the_background_by_its_optical_depth() {
+    let rib = scene("")
+        .replace(
+            "Atmosphere \"midway\"",
+            "Atmosphere \"smoke\" \"density\" [0.5] \"stepsize\" [0.01] \"use_lighting\" [0] \
+             \"use_noise\" [0] \"lightscale\" [0]",
+        )
+        .replace("Surface \"constant\"", "Surface \"constant\" Color [1 1 1]");
+    let c = centre("vol_smoke_depth", &rib, &[], 1);
+    let want = (-0.5f32 * 4.0).exp();
+    for v in c {
+        assert!((v - want).abs() < 0.01, "{c:?} against {want}");
+    }
+}
+
+// A scene written for BMRT's `smoke` finds another shader of that name first on its path
+// (Advanced RenderMan's, whose parameters are different): the one whose parameters the scene
+// gives is used, with a warning, instead of a medium the scene never asked for.
+#[test]
+fn a_same_named_shader_with_the_scenes_parameters_is_preferred() {
+    let other = "volume smoke(float opacdensity = 1, lightdensity = 1) { Ci = 0; Oi = 1; }";
+    let rib = scene("")
+        .replace(
+            "Atmosphere \"midway\"",
+            "Atmosphere \"smoke\" \"density\" [0.5] \"stepsize\" [0.01] \"use_lighting\" [0] \
+             \"use_noise\" [0] \"lightscale\" [0]",
+        )
+        .replace("Surface \"constant\"", "Surface \"constant\" Color [1 1 1]");
+    let dir = common::scratch_dir("vol_smoke_version");
+    std::fs::write(dir.join("smoke.sl"), other).unwrap();
+    let (film, diags, _) = common::render_rib_with(&rib, &[dir], &RenderOptions::default());
+    assert!(
+        diags.iter().any(|(d, _)| d.code == "shade::version"),
+        "no version warning"
+    );
+    let rgb = common::film_rgb(&film);
+    let k = (film.height / 2 * film.width + film.width / 2) * 3;
+    assert!((rgb[k] - (-2f32).exp()).abs() < 0.01, "{}", rgb[k]);
+}

@@ -140,7 +140,10 @@ impl<'a> ShadeSystem<'a> {
     }
 
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
-        let p = self.library.get(&sref.name, self.sources, self.diags)?;
+        let given: Vec<&str> = sref.params.0.iter().map(|g| g.name.as_str()).collect();
+        let p = self
+            .library
+            .get_for(&sref.name, &given, self.sources, self.diags)?;
         let ok = match kind {
             ShaderKind::Volume => p.kind == ShaderKind::Volume,
             k => p.kind == k || (sref.name == "null"),
