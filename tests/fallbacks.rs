@@ -58,6 +58,7 @@ fn a_map_never_made_is_read_from_the_picture_beside_it_or_the_packages_texture_f
     grey_picture(&dir.join("beside.tiff"), 64);
     grey_picture(&root.join("texture").join("above.tx.png"), 0);
     grey_picture(&root.join("tifftexture").join("above.tif"), 128);
+    grey_picture(&root.join("shared.tiff"), 32);
     let out = dir.join("out.png").display().to_string();
     let rib = format!(
         "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
@@ -65,12 +66,14 @@ fn a_map_never_made_is_read_from_the_picture_beside_it_or_the_packages_texture_f
          Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
     );
     let shader = "surface twomaps() { Oi = 1; \
-                  Ci = float texture(\"beside.tx\") + float texture(\"above.tx\"); }";
+                  Ci = float texture(\"beside.tx\") + float texture(\"above.tx\") \
+                  + float texture(\"shared.tx\"); }";
     let (log, px, _) = render(&dir, &rib, Some(("twomaps", shader)));
     assert!(log.contains("texture::stand-in"), "{log}");
     assert!(log.contains("beside.tiff") && log.contains("above.tif"), "{log}");
-    // 64 + 128 (the first picture of the stem that exists in the package's folders).
-    assert!(px.iter().all(|&v| (191..=193).contains(&v)), "{:?}", &px[..8]);
+    // 64 + 128 (the first picture of the stem that exists in the package's folders) + 32 (the
+    // package folder above the scene's).
+    assert!(px.iter().all(|&v| (223..=225).contains(&v)), "{:?}", &px[..8]);
 }
 
 #[test]

@@ -115,11 +115,12 @@ impl<'a> TextureSystem<'a> {
 
     /// A map for a texture name that cannot be opened as given: published scenes refer to
     /// `name.tx` made by a texture tool that was never run (the source picture `name.tiff`
-    /// lies beside the RIB), or keep their maps in a `texture`/`textures`/`tifftexture` folder
-    /// that an options file (`prman.opt`, `bmrt.opt`) puts on the path. Tries, in the scene's
-    /// search directories and those folders beside and above them: the name itself, then the
-    /// pictures of the same stem; the first that loads is used (a renderer's own binary
-    /// format that arbor cannot read is passed over).
+    /// lies beside the RIB, or in the package folder above a scene's subfolder), or keep their
+    /// maps in a `texture`/`textures`/`tifftexture` folder that an options file (`prman.opt`,
+    /// `bmrt.opt`) puts on the path. Tries, in the scene's search directories, those folders
+    /// beside and above them, then the folders above: the name itself, then the pictures of
+    /// the same stem; the first that loads is used (a renderer's own binary format that arbor
+    /// cannot read is passed over).
     fn stand_in(&self, name: &str) -> Option<(PathBuf, Texture)> {
         let given = std::path::Path::new(name);
         let file = given.file_name()?.to_str()?.to_string();
@@ -139,6 +140,10 @@ impl<'a> TextureSystem<'a> {
                     push(up.join(sub));
                 }
             }
+        }
+        // A scene in a subfolder of its package shares the package's maps.
+        for d in &self.search {
+            push(d.join(".."));
         }
         let mut names = vec![file.clone()];
         for ext in PICTURE_EXTENSIONS {
