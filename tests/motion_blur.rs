@@ -254,3 +254,56 @@ fn bad_motion_blocks_are_diagnosed() {
         "{d:?}"
     );
 }
+
+/// `Hider "abuffer"`: each mask cell is a sample with its own time and lens position, so the
+/// same analytic pictures come out.
+#[test]
+fn the_abuffer_blurs_and_focuses_like_the_zbuffer() {
+    let ab = |text: String| text.replacen("WorldBegin", "Hider \"abuffer\"\nWorldBegin", 1);
+    let (f, diags) = render_with(&ab(bar("Shutter 0 1", SLIDE, BAR)), &Settings::default());
+    assert!(
+        !diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.message.contains("blur")),
+        "the A-buffer still warns"
+    );
+    check_spread(&f, 10);
+    let keys = "MotionBegin [0 1]\n\
+        Polygon \"P\" [-2 -9 5  2 -9 5  2 9 5  -2 9 5]\n\
+        Polygon \"P\" [8 -9 5  12 -9 5  12 9 5  8 9 5]\nMotionEnd";
+    check_spread(&render(&ab(bar("Shutter 0 0.5", "", keys))), 5);
+
+    // Depth of field with 16×16 masks (256 cells a pixel, like PixelSamples 16 16).
+    let lens = |fstop: &str| {
+        point(fstop).replacen(
+            "WorldBegin",
+            "Hider \"abuffer\" \"masksize\" 16\nWorldBegin",
+            1,
+        )
+    };
+    let p = 6.0f64;
+    let (e0, r0) = moments(&render(&lens("1e38")));
+    let area = std::f64::consts::PI * p * p / 4.0;
+    assert!((e0 - area).abs() < 0.04 * area, "energy {e0}");
+    let f = render(&lens("0.5"));
+    let (e, r2) = moments(&f);
+    assert!((e - e0).abs() < 0.01 * e0, "energy {e} (sharp {e0})");
+    let want = 0.6 * 50.5;
+    let d = (8.0 * (r2 - r0)).sqrt();
+    assert!((d - want).abs() < 1.0, "blur diameter {d}, want {want}");
+
+    // Same bits for any bucket size and thread count.
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    let one = Settings {
+        threads: 1,
+        ..Settings::default()
+    };
+    let two = Settings {
+        threads: 2,
+        ..Settings::default()
+    };
+    let (a, _) = render_with(&ab(busy("16 16")), &one);
+    let (b, _) = render_with(&ab(busy("7 5")), &two);
+    assert!(bits(&a) == bits(&b), "A-buffer blur depends on the buckets");
+}

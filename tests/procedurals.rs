@@ -402,3 +402,30 @@ fn dynamic_load_failures_are_diagnostics() {
     let cov = coverage(r.film.as_ref().unwrap());
     assert!((cov - UNIT_DISC).abs() < 0.01 * UNIT_DISC, "coverage {cov}");
 }
+
+#[test]
+fn the_sphereflake_example_renders_from_another_folder() {
+    let have_python = Command::new("python3")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have_python {
+        eprintln!("skipped: no python3 for examples/runprogram/sphereflake.py");
+        return;
+    }
+    let dir = scratch("sphereflake");
+    let rib = common::manifest_dir().join("examples/runprogram/sphereflake.rib");
+    let out = Command::new(env!("CARGO_BIN_EXE_arbor"))
+        .current_dir(&dir)
+        .args(["render", "--allow-programs", "--res", "80", "60", "-o", "flake.png"])
+        .arg(&rib)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("warning"), "{err}");
+    // The flake fills the middle of the picture.
+    let img = image::open(dir.join("flake.png")).unwrap().to_luma8();
+    let lit = img.pixels().filter(|p| p[0] > 20).count();
+    assert!(lit > 80 * 60 / 8, "only {lit} lit pixels");
+}
