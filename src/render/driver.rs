@@ -117,6 +117,9 @@ struct PrimInfo {
     binary: bool,
     /// Its place in a CSG tree (None outside boolean solids).
     csg: Option<CsgPrim>,
+    /// `GeometricApproximation "motionfactor"` / `"focusfactor"` (0: off).
+    motion_factor: f32,
+    focus_factor: f32,
 }
 
 fn prim_info(
@@ -161,6 +164,13 @@ fn prim_info(
         }
     }
     let _ = scene;
+    let factor = |k: &str| {
+        a.geometric_approximation
+            .get(k)
+            .copied()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .unwrap_or(0.0)
+    };
     let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
         super::limits::shading_rate(a.shading_rate, min_rate, prim.span, diags)
     } else {
@@ -179,7 +189,47 @@ fn prim_info(
             .and_then(|p| p.data.floats().first().copied())
             .is_some_and(|v| v != 0.0),
         csg: None,
+        motion_factor: factor("motionfactor"),
+        focus_factor: factor("focusfactor"),
     }
+}
+
+/// The shading rate of a blurred surface: `GeometricApproximation "motionfactor" f` multiplies
+/// a moving surface's rate by 1 + f·B/16, B the distance in pixels its bound travels during
+/// the shutter (so with f = 1 a surface blurred over 16 pixels gets micropolygons twice the
+/// area), and `"focusfactor"` likewise with B the smallest diameter of its circle of
+/// confusion. Blur hides detail smaller than itself, so fewer points need shading.
+fn blurred_rate(surface: &dyn Surface, bound: &Bound, info: &PrimInfo, view: &View) -> f32 {
+    let mut scale = 1.0f32;
+    if info.motion_factor > 0.0 {
+        let (all, still) = (
+            view.raster_bound_sharp(&surface.bound()),
+            view.raster_bound_sharp(&surface.still_bound()),
+        );
+        if let (Some(a), Some(s)) = (all, still) {
+            let travel = ((a[2] - a[0]) - (s[2] - s[0])).max((a[3] - a[1]) - (s[3] - s[1]));
+            if travel.is_finite() && travel > 0.0 {
+                scale += info.motion_factor * travel / 16.0;
+            }
+        }
+    }
+    if let (true, Some(d)) = (info.focus_factor > 0.0, &view.dof) {
+        let (z0, z1) = (bound.min.z, bound.max.z);
+        if z0 > 0.0 && z1.is_finite() {
+            let (a, b) = (d.inv_focus - 1.0 / z0, d.inv_focus - 1.0 / z1);
+            // Zero when the focal plane passes through the bound.
+            let coc = if a.signum() != b.signum() {
+                0.0
+            } else {
+                a.abs().min(b.abs())
+            };
+            let diameter = 2.0 * coc * d.raster_k[0].abs().min(d.raster_k[1].abs());
+            if diameter.is_finite() {
+                scale += info.focus_factor * diameter / 16.0;
+            }
+        }
+    }
+    info.rate * scale
 }
 
 /// Displaced primitives that declare no displacement bound get an estimated one (see
@@ -415,7 +465,12 @@ impl Frame<'_> {
         let Some(bound) = self.widened_bound(&w) else {
             return (Outcome::Nothing, Vec::new());
         };
-        let mut decision = decide(w.surface.as_ref(), &bound, info.rate, &self.view);
+        let rate = if info.motion_factor > 0.0 || info.focus_factor > 0.0 {
+            blurred_rate(w.surface.as_ref(), &bound, &info, &self.view)
+        } else {
+            info.rate
+        };
+        let mut decision = decide(w.surface.as_ref(), &bound, rate, &self.view);
         if info.binary {
             decision = crate::render::dice::binary(decision, self.view.max_grid);
         }

@@ -641,18 +641,7 @@ pub fn make_hider(options: &Options, config: HiderConfig, diags: &Diagnostics) -
     match options.hider.name.as_str() {
         "hidden" | "" => Box::new(zbuffer::ZBuffer::new(config)),
         "null" => Box::new(NullHider(config)),
-        "abuffer" => {
-            if config.dof.is_some() || options.shutter[0] < options.shutter[1] {
-                diags.report(
-                    Diag::warning(
-                        "render::hider",
-                        "Hider \"abuffer\" does not blur: moving geometry is seen at shutter open, through a pinhole",
-                    )
-                    .help("motion blur and depth of field are sampled by Hider \"hidden\""),
-                );
-            }
-            Box::new(abuffer::ABuffer::new(config, &options.hider.params, diags))
-        }
+        "abuffer" => Box::new(abuffer::ABuffer::new(config, &options.hider.params, diags)),
         other => {
             diags.report(
                 Diag::warning(

@@ -590,7 +590,7 @@ fn sample_grid_blurred(
 /// edges cannot be set up once) and as the reference [`Edge`] is tested against: the same bits for edge (a, b) and (b, a) up to sign, and
 /// whether this direction owns samples exactly on the edge (exactly one of the two does).
 #[inline]
-fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
+pub(super) fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
     if (a[0], a[1]) < (b[0], b[1]) {
         (
             (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]),
@@ -605,7 +605,7 @@ fn edge(a: [f32; 2], b: [f32; 2], p: [f32; 2]) -> (f32, bool) {
 }
 
 #[inline]
-fn inside(e: (f32, bool)) -> bool {
+pub(super) fn inside(e: (f32, bool)) -> bool {
     e.0 > 0.0 || (e.0 == 0.0 && e.1)
 }
 
