@@ -45,7 +45,9 @@ pub(crate) fn scan_number(b: &[u8], start: usize) -> Option<(Num, usize)> {
         let end = i + word.len();
         if end <= n
             && b[i..end].eq_ignore_ascii_case(word)
-            && !b.get(end).is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+            && !b
+                .get(end)
+                .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
         {
             return Some((Num::Float(if neg { -v } else { v }), end));
         }

@@ -421,7 +421,10 @@ impl<'a> Builder<'a> {
             self.report(
                 Diag::warning(
                     "scene::not-finite",
-                    format!("`{}` has a value that is not a finite number; the request is ignored", r.name),
+                    format!(
+                        "`{}` has a value that is not a finite number; the request is ignored",
+                        r.name
+                    ),
                 )
                 .label(a.span, "not a finite number")
                 .help("the program that wrote this RIB printed a NaN or an infinity here"),

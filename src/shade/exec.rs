@@ -268,8 +268,7 @@ pub struct Exec<'a> {
 ///
 /// With `Some(idx)` only the grid points `idx` are lit (the live points of a loop): `ps` holds
 /// their positions in that order and the results have `idx.len()` entries.
-pub type Relight<'a> =
-    dyn Fn(&[Vec3], &[bool], Option<&[usize]>) -> Vec<Option<LightResult>> + 'a;
+pub type Relight<'a> = dyn Fn(&[Vec3], &[bool], Option<&[usize]>) -> Vec<Option<LightResult>> + 'a;
 
 /// Lights evaluated at positions other than the grid's.
 pub struct RelitLights {
