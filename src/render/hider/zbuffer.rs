@@ -25,10 +25,11 @@
 
 use std::cell::RefCell;
 
+use crate::film::gather::{PrepareCtx, Prepared, MAX_SPP};
 use crate::film::SampleBuffer;
 
 use super::super::camera::PixelRect;
-use super::super::sampler::{pixel_positions, time_and_lens};
+use super::super::sampler::{pixel_positions, pixel_positions_xy, time_and_lens};
 use super::super::stats::Stats;
 use super::csg::{self, CsgHit};
 use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
@@ -186,7 +187,6 @@ struct Scratch {
     aovs: Vec<f32>,
     times: Vec<f32>,
     lens: Vec<[f32; 2]>,
-    pixel: Vec<[f32; 2]>,
     visible: Vec<(usize, usize, [f32; 4])>,
 }
 
@@ -390,9 +390,37 @@ impl Hider for ZBuffer {
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
         SCRATCH.with(|cell| {
             let mut scratch = cell.borrow_mut();
-            self.hide_with(&mut scratch, rect, grids, stats)
+            match self.hide_with(&mut scratch, rect, grids, stats, None) {
+                Output::Samples(buf) => buf,
+                Output::Prepared(_) => unreachable!("asked for samples"),
+            }
         })
     }
+
+    fn hide_prepared(
+        &self,
+        rect: PixelRect,
+        grids: &[&ShadedGrid],
+        stats: &Stats,
+        ctx: &PrepareCtx,
+    ) -> Option<Prepared> {
+        if self.config.channels() != 5 || self.config.spp[0] * self.config.spp[1] > MAX_SPP {
+            return None;
+        }
+        SCRATCH.with(|cell| {
+            let mut scratch = cell.borrow_mut();
+            match self.hide_with(&mut scratch, rect, grids, stats, Some(ctx)) {
+                Output::Prepared(p) => Some(p),
+                Output::Samples(_) => None,
+            }
+        })
+    }
+}
+
+/// What [`ZBuffer::hide_with`] makes.
+enum Output {
+    Samples(SampleBuffer),
+    Prepared(Prepared),
 }
 
 impl ZBuffer {
@@ -402,24 +430,15 @@ impl ZBuffer {
         rect: PixelRect,
         grids: &[&ShadedGrid],
         stats: &Stats,
-    ) -> SampleBuffer {
+        prepare: Option<&PrepareCtx>,
+    ) -> Output {
         let cfg = &self.config;
         let lay = Layout::new(rect, cfg.spp);
         let n = lay.len();
         let [xs, ys] = cfg.spp;
         let spp = xs * ys;
         let channels = cfg.channels();
-        let mut buf = SampleBuffer {
-            x0: rect.x0,
-            y0: rect.y0,
-            width: lay.width,
-            height: lay.height,
-            spp_x: xs,
-            spp_y: ys,
-            positions: Vec::with_capacity(n),
-            channels,
-            values: vec![0f32; n * channels],
-        };
+        let samples = prepare.is_none();
         // Positions: pixel by pixel into the buffer, scattered into stratum rows.
         let keep_second = cfg.depth_filter == DepthFilter::Midpoint;
         let mut b = Bucket {
@@ -442,9 +461,8 @@ impl ZBuffer {
             csg_data: Vec::new(),
             csg_aovs: Vec::new(),
         };
-        b.x.clear();
+        // Every position is written below; the padding lanes are never used.
         b.x.resize(n + LANES, f32::NAN);
-        b.y.clear();
         b.y.resize(n + LANES, f32::NAN);
         b.fz.clear();
         b.fz.resize(n + LANES, f32::INFINITY);
@@ -458,20 +476,15 @@ impl ZBuffer {
             b.second.resize(n, f32::INFINITY);
         }
         b.aovs.clear();
-        let pixel = &mut scratch.pixel;
+        let (mut px_x, mut px_y) = (vec![0f32; spp], vec![0f32; spp]);
         for j in 0..lay.height {
             for i in 0..lay.width {
-                pixel.clear();
                 let (px, py) = (rect.x0 + i as i32, rect.y0 + j as i32);
-                pixel_positions(px, py, cfg.spp, cfg.jitter, cfg.seed, pixel);
-                buf.positions.extend_from_slice(pixel);
+                pixel_positions_xy(px, py, cfg.spp, cfg.jitter, cfg.seed, &mut px_x, &mut px_y);
                 for sy in 0..ys {
                     let row = (j * ys + sy) * lay.cols + i * xs;
-                    for sx in 0..xs {
-                        let p = pixel[sy * xs + sx];
-                        b.x[row + sx] = p[0];
-                        b.y[row + sx] = p[1];
-                    }
+                    copy_short(&mut b.x[row..row + xs], &px_x[sy * xs..(sy + 1) * xs]);
+                    copy_short(&mut b.y[row..row + xs], &px_y[sy * xs..(sy + 1) * xs]);
                 }
             }
         }
@@ -534,11 +547,43 @@ impl ZBuffer {
         if !b.csg.is_empty() {
             resolve_csg(&mut b);
         }
-        resolve(&b, &mut buf);
+        let out = match prepare {
+            None => {
+                let mut positions = Vec::with_capacity(n);
+                for j in 0..lay.height {
+                    for i in 0..lay.width {
+                        for sy in 0..ys {
+                            let row = (j * ys + sy) * lay.cols + i * xs;
+                            for sx in 0..xs {
+                                positions.push([b.x[row + sx], b.y[row + sx]]);
+                            }
+                        }
+                    }
+                }
+                let mut buf = SampleBuffer {
+                    x0: rect.x0,
+                    y0: rect.y0,
+                    width: lay.width,
+                    height: lay.height,
+                    spp_x: xs,
+                    spp_y: ys,
+                    positions,
+                    channels,
+                    values: vec![0f32; n * channels],
+                };
+                resolve(&b, &mut buf);
+                Output::Samples(buf)
+            }
+            Some(ctx) => Output::Prepared(resolve_prepared(&b, ctx)),
+        };
         let bytes = b.points.len() * std::mem::size_of::<VisPoint>()
             + b.recs.len() * std::mem::size_of::<Rec>()
             + n * 16
-            + buf.values.len() * 4;
+            + if samples {
+                n * (channels + 2) * 4
+            } else {
+                n * 40
+            };
         stats.alloc(bytes);
         stats.free(bytes);
         Stats::add(&stats.samples_tested, b.tested);
@@ -555,7 +600,7 @@ impl ZBuffer {
         scratch.times = times;
         scratch.lens = lens;
         scratch.visible = visible;
-        buf
+        out
     }
 }
 
@@ -1565,14 +1610,9 @@ fn interpolate(
 /// Composites each sample's visible points front to back into the buffer (pixel-major, as
 /// [`SampleBuffer`] orders its samples).
 fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
-    let cfg = b.cfg;
     let lay = b.lay;
     let ch = buf.channels;
-    let naov = ch - 5;
     let mut list: Vec<u32> = Vec::new();
-    let stop = 1.0 - cfg.othreshold;
-    let midpoint = cfg.depth_filter == DepthFilter::Midpoint;
-    let lists = !b.heads.is_empty();
     for j in 0..lay.height {
         for sy in 0..lay.ys {
             let srow = (j * lay.ys + sy) * lay.cols;
@@ -1580,84 +1620,169 @@ fn resolve(b: &Bucket, buf: &mut SampleBuffer) {
                 let pm = ((j * lay.width + i) * lay.ys + sy) * lay.xs;
                 for sx in 0..lay.xs {
                     let s = srow + i * lay.xs + sx;
-                    let out = &mut buf.values[(pm + sx) * ch..(pm + sx + 1) * ch];
-                    let fz = b.fz[s];
-                    out[4] = if midpoint && b.second[s].is_finite() {
-                        0.5 * (fz + b.second[s])
-                    } else {
-                        fz
-                    };
-                    let fref = b.fref[s];
-                    let mut cur = if lists { b.heads[s] } else { NONE };
-                    if cur == NONE {
-                        // Only the opaque front (the common case).
-                        if fref != NONE {
-                            let r = &b.recs[fref as usize];
-                            if !r.matte {
-                                // The general loop below with one point: the same operations.
-                                let o = r.o;
-                                let w = (o[0] + o[1] + o[2]) * (1.0 / 3.0);
-                                for q in 0..3 {
-                                    out[q] = 0.0 + r.c[q];
-                                }
-                                out[3] = 0.0 + w;
-                                for q in 0..naov {
-                                    out[5 + q] = 0.0 + w * b.aovs[r.aov as usize + q];
-                                }
-                            }
-                        }
-                        continue;
-                    }
-                    list.clear();
-                    while cur != NONE {
-                        list.push(cur);
-                        cur = b.points[cur as usize].next;
-                    }
-                    if list.len() > 1 {
-                        list.sort_unstable_by(|&x, &y| {
-                            let (p, q) = (&b.points[x as usize], &b.points[y as usize]);
-                            p.z.total_cmp(&q.z)
-                                .then(p.key.cmp(&q.key))
-                                .then(p.sub.cmp(&q.sub))
-                        });
-                    }
-                    let mut tr = [1f32; 3];
-                    let mut alpha = 0f32;
-                    let mut rgb = [0f32; 3];
-                    // The transparent points before the opaque front, in order, then the
-                    // front itself.
-                    let points = list.iter().map(|&pi| {
-                        let p = &b.points[pi as usize];
-                        (p.matte, p.c, p.o, p.aov)
-                    });
-                    let last = (fref != NONE).then(|| {
-                        let r = &b.recs[fref as usize];
-                        (r.matte, r.c, r.o, r.aov)
-                    });
-                    for (matte, c, o, aov) in points.chain(last) {
-                        if !matte {
-                            let w = (tr[0] * o[0] + tr[1] * o[1] + tr[2] * o[2]) * (1.0 / 3.0);
-                            for q in 0..3 {
-                                rgb[q] += tr[q] * c[q];
-                            }
-                            alpha += w;
-                            for q in 0..naov {
-                                out[5 + q] += w * b.aovs[aov as usize + q];
-                            }
-                        }
-                        for q in 0..3 {
-                            tr[q] *= 1.0 - o[q];
-                        }
-                        if tr[0] <= stop && tr[1] <= stop && tr[2] <= stop {
-                            break;
-                        }
-                    }
-                    out[..3].copy_from_slice(&rgb);
-                    out[3] = alpha;
+                    composite(
+                        b,
+                        s,
+                        &mut list,
+                        &mut buf.values[(pm + sx) * ch..(pm + sx + 1) * ch],
+                    );
                 }
             }
         }
     }
+}
+
+/// [`resolve`] straight into the gather filter's form (r g b a z buffers only).
+fn resolve_prepared(b: &Bucket, ctx: &PrepareCtx) -> Prepared {
+    let lay = b.lay;
+    let spp = lay.xs * lay.ys;
+    let mut p = Prepared::new(ctx, lay.x0, lay.y0, lay.width, lay.height, spp);
+    let lanes = p.lanes();
+    let mut list: Vec<u32> = Vec::new();
+    let (mut xs, mut ys, mut zs) = (
+        vec![f32::NAN; lanes],
+        vec![f32::NAN; lanes],
+        vec![0f32; spp],
+    );
+    // No transparent points and no second depth: each sample is its front (or nothing).
+    let fronts_only = b.heads.is_empty() && b.cfg.depth_filter != DepthFilter::Midpoint;
+    for j in 0..lay.height {
+        for i in 0..lay.width {
+            let pix = j * lay.width + i;
+            let rgba = p.rgba_mut(pix);
+            for sy in 0..lay.ys {
+                let srow = (j * lay.ys + sy) * lay.cols + i * lay.xs;
+                let k0 = sy * lay.xs;
+                copy_short(&mut xs[k0..k0 + lay.xs], &b.x[srow..srow + lay.xs]);
+                copy_short(&mut ys[k0..k0 + lay.xs], &b.y[srow..srow + lay.xs]);
+                for sx in 0..lay.xs {
+                    let (s, k) = (srow + sx, k0 + sx);
+                    if fronts_only {
+                        // `composite` for a sample seeing at most its opaque front.
+                        zs[k] = b.fz[s];
+                        let r = b.fref[s];
+                        let (c, a) = match b.recs.get(r as usize) {
+                            Some(r) if !r.matte => {
+                                let o = r.o;
+                                let w = (o[0] + o[1] + o[2]) * (1.0 / 3.0);
+                                ([0.0 + r.c[0], 0.0 + r.c[1], 0.0 + r.c[2]], 0.0 + w)
+                            }
+                            _ => ([0.0; 3], 0.0),
+                        };
+                        rgba[k] = c[0];
+                        rgba[lanes + k] = c[1];
+                        rgba[2 * lanes + k] = c[2];
+                        rgba[3 * lanes + k] = a;
+                        continue;
+                    }
+                    let mut out = [0f32; 5];
+                    composite(b, s, &mut list, &mut out);
+                    for c in 0..4 {
+                        rgba[c * lanes + k] = out[c];
+                    }
+                    zs[k] = out[4];
+                }
+            }
+            let q = (lay.x0 + i as i32, lay.y0 + j as i32);
+            p.finish_pixel(ctx, pix, q, &xs, &ys, &zs);
+        }
+    }
+    p
+}
+
+/// `dst.copy_from_slice(src)` for the few floats of a pixel's stratum row, without a call to
+/// `memcpy` for the usual four.
+#[inline(always)]
+fn copy_short(dst: &mut [f32], src: &[f32]) {
+    if let (Ok(d), Ok(s)) = (
+        <&mut [f32; 4]>::try_from(&mut *dst),
+        <&[f32; 4]>::try_from(src),
+    ) {
+        *d = *s;
+    } else {
+        dst.copy_from_slice(src);
+    }
+}
+
+/// Composites sample `s`'s visible points front to back into `out` (r g b a z and the
+/// output variables, all zero on entry).
+#[inline]
+fn composite(b: &Bucket, s: usize, list: &mut Vec<u32>, out: &mut [f32]) {
+    let cfg = b.cfg;
+    let naov = out.len() - 5;
+    let fz = b.fz[s];
+    out[4] = if cfg.depth_filter == DepthFilter::Midpoint && b.second[s].is_finite() {
+        0.5 * (fz + b.second[s])
+    } else {
+        fz
+    };
+    let fref = b.fref[s];
+    let mut cur = if b.heads.is_empty() { NONE } else { b.heads[s] };
+    if cur == NONE {
+        // Only the opaque front (the common case).
+        if fref != NONE {
+            let r = &b.recs[fref as usize];
+            if !r.matte {
+                // The general loop below with one point: the same operations.
+                let o = r.o;
+                let w = (o[0] + o[1] + o[2]) * (1.0 / 3.0);
+                for q in 0..3 {
+                    out[q] = 0.0 + r.c[q];
+                }
+                out[3] = 0.0 + w;
+                for q in 0..naov {
+                    out[5 + q] = 0.0 + w * b.aovs[r.aov as usize + q];
+                }
+            }
+        }
+        return;
+    }
+    list.clear();
+    while cur != NONE {
+        list.push(cur);
+        cur = b.points[cur as usize].next;
+    }
+    if list.len() > 1 {
+        list.sort_unstable_by(|&x, &y| {
+            let (p, q) = (&b.points[x as usize], &b.points[y as usize]);
+            p.z.total_cmp(&q.z)
+                .then(p.key.cmp(&q.key))
+                .then(p.sub.cmp(&q.sub))
+        });
+    }
+    let stop = 1.0 - cfg.othreshold;
+    let mut tr = [1f32; 3];
+    let mut alpha = 0f32;
+    let mut rgb = [0f32; 3];
+    // The transparent points before the opaque front, in order, then the front itself.
+    let points = list.iter().map(|&pi| {
+        let p = &b.points[pi as usize];
+        (p.matte, p.c, p.o, p.aov)
+    });
+    let last = (fref != NONE).then(|| {
+        let r = &b.recs[fref as usize];
+        (r.matte, r.c, r.o, r.aov)
+    });
+    for (matte, c, o, aov) in points.chain(last) {
+        if !matte {
+            let w = (tr[0] * o[0] + tr[1] * o[1] + tr[2] * o[2]) * (1.0 / 3.0);
+            for q in 0..3 {
+                rgb[q] += tr[q] * c[q];
+            }
+            alpha += w;
+            for q in 0..naov {
+                out[5 + q] += w * b.aovs[aov as usize + q];
+            }
+        }
+        for q in 0..3 {
+            tr[q] *= 1.0 - o[q];
+        }
+        if tr[0] <= stop && tr[1] <= stop && tr[2] <= stop {
+            break;
+        }
+    }
+    out[..3].copy_from_slice(&rgb);
+    out[3] = alpha;
 }
 
 #[cfg(test)]
