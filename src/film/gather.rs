@@ -83,6 +83,8 @@ const FINITE: u64 = 1 << 63;
 pub struct PrepareCtx<'a> {
     h: (f32, f32),
     t: &'a FilterTables,
+    /// Each table as pairs (t[i], t[i + 1]): one 64-bit gather per lookup.
+    pairs: [Vec<[f32; 2]>; 2],
     df: DepthFilter,
     kernel: Kernel,
     pool: std::sync::Mutex<Vec<Vec<f32>>>,
@@ -90,9 +92,14 @@ pub struct PrepareCtx<'a> {
 
 impl<'a> PrepareCtx<'a> {
     pub fn new(filter: &Filter, t: &'a FilterTables, df: DepthFilter) -> PrepareCtx<'a> {
+        let pairs = |t: &Table1d| {
+            let (tab, _, _) = t.parts();
+            tab.windows(2).map(|w| [w[0], w[1]]).collect()
+        };
         PrepareCtx {
             h: filter.radius(),
             t,
+            pairs: [pairs(&t.x), pairs(&t.y)],
             df,
             kernel: pick_kernel(),
             pool: Default::default(),
@@ -186,8 +193,12 @@ impl Prepared {
         let blk = &mut self.data[pix * n..(pix + 1) * n];
         let (w, rgba) = blk.split_at_mut(2 * TAPS * lanes);
         let (wx, wy) = w.split_at_mut(TAPS * lanes);
-        let fx = ctx.kernel.weights(&xs[..lanes], qx, ctx.h.0, &ctx.t.x, wx);
-        let fy = ctx.kernel.weights(&ys[..lanes], qy, ctx.h.1, &ctx.t.y, wy);
+        let fx = ctx
+            .kernel
+            .weights(&xs[..lanes], qx, ctx.h.0, &ctx.t.x, &ctx.pairs[0], wx);
+        let fy = ctx
+            .kernel
+            .weights(&ys[..lanes], qy, ctx.h.1, &ctx.t.y, &ctx.pairs[1], wy);
         let mut flags = fx as u64 | (fy as u64) << (8 * TAPS);
         // Padding lanes hold no sample.
         for c in 0..4 {
@@ -296,12 +307,20 @@ impl Kernel {
     /// towards the pixels q − 1, q, q + 1, into `out` (three blocks of `lanes`): the
     /// scatter's reach test `sx − h − 0.5 ≤ c ≤ sx + h − 0.5` and its lookup at c + 0.5 − sx.
     /// Returns bit `8·o + chunk` set where block o has a non-zero weight in that chunk.
-    fn weights(self, pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) -> u32 {
+    fn weights(
+        self,
+        pos: &[f32],
+        q: i32,
+        h: f32,
+        t: &Table1d,
+        pairs: &[[f32; 2]],
+        out: &mut [f32],
+    ) -> u32 {
         match self {
             Kernel::Portable => weights_portable(pos, q, h, t, out),
             // SAFETY: chosen only where the CPU has AVX2.
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => unsafe { avx2::weights(pos, q, h, t, out) },
+            Kernel::Avx2 => unsafe { avx2::weights(pos, q, h, t, pairs, out) },
         }
     }
 
@@ -632,12 +651,19 @@ mod avx2 {
 
     /// [`super::weights_portable`], eight samples at a time.
     #[target_feature(enable = "avx2")]
-    pub(super) fn weights(pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) -> u32 {
+    pub(super) fn weights(
+        pos: &[f32],
+        q: i32,
+        h: f32,
+        t: &Table1d,
+        pairs: &[[f32; 2]],
+        out: &mut [f32],
+    ) -> u32 {
         let mut flags = 0u32;
         let lanes = pos.len();
         assert!(lanes % LANES == 0 && out.len() >= TAPS * lanes);
-        let (tab, scale, steps) = t.parts();
-        assert!(steps >= 0 && tab.len() >= steps as usize + 2);
+        let (_, scale, steps) = t.parts();
+        assert!(steps >= 0 && pairs.len() > steps as usize);
         let sign = _mm256_set1_ps(-0.0);
         let (hv, half) = (_mm256_set1_ps(h), _mm256_set1_ps(0.5));
         let (sc, st, zi) = (
@@ -653,13 +679,23 @@ mod avx2 {
             // gathers in bounds (they are not reached, so they weigh 0).
             let i = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(u), st), zi);
             let f = _mm256_sub_ps(u, _mm256_cvtepi32_ps(i));
-            // SAFETY: 0 ≤ i ≤ steps and the table holds steps + 2 floats.
-            let (ta, tb) = unsafe {
+            // SAFETY: 0 ≤ i ≤ steps < pairs.len().
+            let (g0, g1) = unsafe {
+                let p = pairs.as_ptr() as *const i64;
                 (
-                    _mm256_i32gather_ps::<4>(tab.as_ptr(), i),
-                    _mm256_i32gather_ps::<4>(tab.as_ptr().add(1), i),
+                    _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_castsi256_si128(i))),
+                    _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(
+                        p,
+                        _mm256_extracti128_si256::<1>(i),
+                    )),
                 )
             };
+            // g0 = a0 b0 a1 b1 | a2 b2 a3 b3, g1 = a4 b4 a5 b5 | a6 b6 a7 b7.
+            let order = |v: __m256| {
+                _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)))
+            };
+            let ta = order(_mm256_shuffle_ps::<0b10_00_10_00>(g0, g1));
+            let tb = order(_mm256_shuffle_ps::<0b11_01_11_01>(g0, g1));
             _mm256_add_ps(ta, _mm256_mul_ps(f, _mm256_sub_ps(tb, ta)))
         };
         for chunk in 0..lanes / LANES {

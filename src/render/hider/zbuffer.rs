@@ -617,7 +617,10 @@ enum QuadKernel {
 impl QuadKernel {
     fn pick() -> QuadKernel {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("bmi1")
+        {
             return QuadKernel::Avx2;
         }
         QuadKernel::Portable
@@ -637,7 +640,7 @@ impl QuadKernel {
 type Visible = (usize, usize, [f32; 4]);
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,popcnt,bmi1")]
 fn sample_quads_avx2(b: &mut Bucket, g: &ShadedGrid, win: [f32; 4], visible: &[Visible]) {
     sample_quads(
         b,
