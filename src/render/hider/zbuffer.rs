@@ -183,6 +183,7 @@ struct Scratch {
     recs: Vec<Rec>,
     heads: Vec<u32>,
     second: Vec<f32>,
+    pmax: Vec<f32>,
     points: Vec<VisPoint>,
     aovs: Vec<f32>,
     times: Vec<f32>,
@@ -210,6 +211,12 @@ struct Bucket<'c> {
     points: Vec<VisPoint>,
     /// Second-nearest opaque depth per sample (only for the midpoint depth filter).
     second: Vec<f32>,
+    /// Per pixel, the farthest opaque front of its samples (∞ while one sees none),
+    /// recomputed over a grid's window before a grid that may lie behind some front: a
+    /// micropolygon nearer to no sample than that is skipped.
+    pmax: Vec<f32>,
+    /// The nearest opaque front of any sample: a grid nearer than it hides behind nothing.
+    fzmin: f32,
     aovs: Vec<f32>,
     tested: u64,
     hits: u64,
@@ -233,6 +240,74 @@ impl<'c> Bucket<'c> {
             x1: self.lay.x0 + self.lay.width as i32,
             y1: self.lay.y0 + self.lay.height as i32,
         }
+    }
+
+    /// The bucket's pixels (relative column and row ranges, inclusive) holding samples that
+    /// may lie in box `bx`: pixel p's samples lie in [p, p + 1].
+    #[inline]
+    fn pixels_of(&self, bx: [f32; 4]) -> Option<((usize, usize), (usize, usize))> {
+        let lay = &self.lay;
+        let range = |lo: f32, hi: f32, origin: i32, n: usize| {
+            let a = (lo.ceil() as i64 - 1 - origin as i64).max(0);
+            let b = (hi.floor() as i64 - origin as i64).min(n as i64 - 1);
+            (a <= b).then_some((a as usize, b as usize))
+        };
+        Some((
+            range(bx[0], bx[2], lay.x0, lay.width)?,
+            range(bx[1], bx[3], lay.y0, lay.height)?,
+        ))
+    }
+
+    /// The farthest front of pixel (i, j)'s samples.
+    #[inline]
+    fn pixel_far(&self, i: usize, j: usize) -> f32 {
+        let lay = &self.lay;
+        let mut m = [f32::NEG_INFINITY; 4];
+        for sy in 0..lay.ys {
+            let row = (j * lay.ys + sy) * lay.cols + i * lay.xs;
+            let zs = &self.fz[row..row + lay.xs];
+            let mut c = zs.chunks_exact(4);
+            for q in &mut c {
+                for l in 0..4 {
+                    m[l] = if q[l] > m[l] { q[l] } else { m[l] };
+                }
+            }
+            for &z in c.remainder() {
+                m[0] = m[0].max(z);
+            }
+        }
+        m[0].max(m[1]).max(m[2].max(m[3]))
+    }
+
+    /// Recomputes [`Bucket::pmax`] over the pixels of window `win`.
+    fn refresh_pmax(&mut self, win: [f32; 4]) {
+        let Some(((i0, i1), (j0, j1))) = self.pixels_of(win) else {
+            return;
+        };
+        let w = self.lay.width;
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                self.pmax[j * w + i] = self.pixel_far(i, j);
+            }
+        }
+    }
+
+    /// Whether every sample box `bx` may hold sees an opaque front nearer than `z`, by
+    /// [`Bucket::pmax`] (stale values are larger, so the answer stays safe).
+    #[inline]
+    fn occluded(&self, bx: [f32; 4], z: f32) -> bool {
+        let Some(((i0, i1), (j0, j1))) = self.pixels_of(bx) else {
+            return false;
+        };
+        let w = self.lay.width;
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                if !(z > self.pmax[j * w + i]) {
+                    return false;
+                }
+            }
+        }
+        true
     }
 
     /// The (grid key, micropolygon) of sample `s`'s opaque front ((MAX, MAX) when none).
@@ -317,6 +392,7 @@ impl<'c> Bucket<'c> {
         }
         self.fz[s] = z;
         self.fref[s] = r;
+        self.fzmin = self.fzmin.min(z);
         if self.heads.is_empty() {
             return;
         }
@@ -452,6 +528,8 @@ impl ZBuffer {
             heads: std::mem::take(&mut scratch.heads),
             points: std::mem::take(&mut scratch.points),
             second: std::mem::take(&mut scratch.second),
+            pmax: std::mem::take(&mut scratch.pmax),
+            fzmin: f32::INFINITY,
             aovs: std::mem::take(&mut scratch.aovs),
             tested: 0,
             hits: 0,
@@ -476,6 +554,9 @@ impl ZBuffer {
             b.second.resize(n, f32::INFINITY);
         }
         b.aovs.clear();
+        b.pmax.clear();
+        b.pmax.resize(lay.width * lay.height, f32::INFINITY);
+
         let (mut px_x, mut px_y) = (vec![0f32; spp], vec![0f32; spp]);
         for j in 0..lay.height {
             for i in 0..lay.width {
@@ -596,6 +677,7 @@ impl ZBuffer {
         scratch.heads = b.heads;
         scratch.points = b.points;
         scratch.second = b.second;
+        scratch.pmax = b.pmax;
         scratch.aovs = b.aovs;
         scratch.times = times;
         scratch.lens = lens;
@@ -626,12 +708,19 @@ impl QuadKernel {
         QuadKernel::Portable
     }
 
-    fn run(self, b: &mut Bucket, g: &ShadedGrid, win: [f32; 4], visible: &[Visible]) {
+    fn run(
+        self,
+        b: &mut Bucket,
+        g: &ShadedGrid,
+        win: [f32; 4],
+        visible: &[Visible],
+        occlusion: bool,
+    ) {
         match self {
-            QuadKernel::Portable => sample_quads(b, g, win, visible, quad_chunk),
+            QuadKernel::Portable => sample_quads(b, g, win, visible, occlusion, quad_chunk),
             // SAFETY: `pick` chose this only where the CPU has AVX2.
             #[cfg(target_arch = "x86_64")]
-            QuadKernel::Avx2 => unsafe { sample_quads_avx2(b, g, win, visible) },
+            QuadKernel::Avx2 => unsafe { sample_quads_avx2(b, g, win, visible, occlusion) },
         }
     }
 }
@@ -641,12 +730,19 @@ type Visible = (usize, usize, [f32; 4]);
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,popcnt,bmi1")]
-fn sample_quads_avx2(b: &mut Bucket, g: &ShadedGrid, win: [f32; 4], visible: &[Visible]) {
+fn sample_quads_avx2(
+    b: &mut Bucket,
+    g: &ShadedGrid,
+    win: [f32; 4],
+    visible: &[Visible],
+    occlusion: bool,
+) {
     sample_quads(
         b,
         g,
         win,
         visible,
+        occlusion,
         |q, bx, x, y, fz, n, persp, near, far| {
             avx2::quad_chunk(q, bx, x, y, fz, n, persp, near, far)
         },
@@ -985,6 +1081,7 @@ fn sample_quads(
     g: &ShadedGrid,
     win: [f32; 4],
     visible: &[Visible],
+    occlusion: bool,
     chunk: impl ChunkFn,
 ) {
     let cfg = b.cfg;
@@ -1004,6 +1101,24 @@ fn sample_quads(
             continue;
         }
         let corner = [k, k + 1, k + nu + 1, k + nu];
+        if occlusion {
+            // The nearest depth anywhere on the micropolygon (depth interpolates between
+            // its corners; the margin covers the rounding).
+            let d = corner.map(|c| g.depth[c]);
+            let znear = if persp {
+                let qmax = d[0].max(d[1]).max(d[2]).max(d[3]);
+                if qmax > 0.0 {
+                    1.0 / qmax
+                } else {
+                    0.0
+                }
+            } else {
+                d[0].min(d[1]).min(d[2]).min(d[3])
+            };
+            if b.occluded(bx, znear - znear.abs() * 1e-5) {
+                continue;
+            }
+        }
         let p = corner.map(|c| g.xy[c]);
         let Some(q) = QuadTest::new(p, corner, &g.depth) else {
             b.tested += tested;
@@ -1085,7 +1200,12 @@ fn sample_grid(b: &mut Bucket, g: &ShadedGrid, kernel: QuadKernel, visible: &mut
         && g.oi.len() == g.xy.len()
         && g.depth.len() == g.xy.len();
     if fast {
-        kernel.run(b, g, win, visible);
+        // Some micropolygon may lie behind the fronts drawn so far: check each.
+        let occlusion = g.zmin > b.fzmin;
+        if occlusion {
+            b.refresh_pmax(win);
+        }
+        kernel.run(b, g, win, visible, occlusion);
         return;
     }
     let mut mean_aov = vec![0f32; aw];
