@@ -783,18 +783,8 @@ fn fragment_grid(b: &mut Bucket, rect: PixelRect, w: usize, g: &ShadedGrid, mask
             q.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)),
         );
         let plane = plane_of(&poly, &q);
-        let mean = |f: &dyn Fn(usize) -> [f32; 3]| {
-            let mut s = [0f32; 3];
-            for &c in &corner {
-                let v = f(c);
-                for t in 0..3 {
-                    s[t] += 0.25 * v[t];
-                }
-            }
-            s
-        };
-        let flat_c = mean(&|c| g.ci[c]);
-        let flat_o = mean(&|c| g.oi[c]);
+        // Constant shading: the mean of the corners (see zbuffer::flat_shade).
+        let (flat_c, flat_o) = super::zbuffer::flat_shade(g, &corner, &mut []);
         let npx = (px1 - px0 + 1) as usize;
         let sub = m as u32;
         for py in py0..=py1 {
@@ -903,7 +893,6 @@ fn fragment_grid_blurred(
     let rw = rect.width();
     let n = w * w;
     let inv_w = 1.0 / w as f32;
-    let mo = g.motion.as_deref();
     let dof = cfg.dof;
     let mut visible = Vec::new();
     g.micropolygons_in(win, &mut visible);
@@ -927,17 +916,8 @@ fn fragment_grid_blurred(
         if px0 > px1 || py0 > py1 {
             continue;
         }
-        let mut flat_c = [0f32; 3];
-        let mut flat_o = [0f32; 3];
-        for &c in &corner {
-            for t in 0..3 {
-                flat_c[t] += 0.25 * g.ci[c][t];
-                flat_o[t] += 0.25 * g.oi[c][t];
-            }
-        }
-        for t in 0..aw {
-            flat_aov[t] = corner.iter().map(|&c| 0.25 * g.aov[c * aw + t]).sum();
-        }
+        // Constant shading: the mean of the corners (see zbuffer::flat_shade).
+        let (flat_c, flat_o) = super::zbuffer::flat_shade(g, &corner, &mut flat_aov);
         for py in py0..=py1 {
             for px in px0..=px1 {
                 b.micro_pixels += 1;
@@ -959,35 +939,7 @@ fn fragment_grid_blurred(
                             continue;
                         }
                         let s = pix * n + j * w + i;
-                        let mut p = [[0f32; 2]; 4];
-                        let mut q = [0f32; 4];
-                        match mo {
-                            Some(mo) => {
-                                let (ki, f) = crate::scene::motion_segment(&mo.times, times[s]);
-                                let (xa, xb) = (&mo.xy[ki], &mo.xy[ki + 1]);
-                                let (da, db) = (&mo.depth[ki], &mo.depth[ki + 1]);
-                                for c in 0..4 {
-                                    let (a, e) = (xa[corner[c]], xb[corner[c]]);
-                                    p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
-                                    q[c] = da[corner[c]] + (db[corner[c]] - da[corner[c]]) * f;
-                                }
-                            }
-                            None => {
-                                for c in 0..4 {
-                                    p[c] = g.xy[corner[c]];
-                                    q[c] = g.depth[corner[c]];
-                                }
-                            }
-                        }
-                        if let Some(d) = &dof {
-                            let l = lens[s];
-                            let (kx, ky) = (l[0] * d.raster_k[0], l[1] * d.raster_k[1]);
-                            for c in 0..4 {
-                                let f = d.inv_focus - q[c];
-                                p[c][0] += kx * f;
-                                p[c][1] += ky * f;
-                            }
-                        }
+                        let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
                         let pos = [x, y];
                         for tri in [[0usize, 1, 2], [0, 2, 3]] {
                             let mut v = tri.map(|t| p[t]);

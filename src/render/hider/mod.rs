@@ -113,6 +113,48 @@ pub struct MovingPoints {
     pub depth: Vec<Vec<f32>>,
 }
 
+/// A micropolygon's four corners (raster xy and depth) as a sample at `time` through lens
+/// point `lens` sees them: moved linearly between the grid's motion keys, then shifted by the
+/// lens offset times each corner's circle of confusion. Shared by both hiders' blur paths.
+#[inline]
+pub fn corners_at(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    time: f32,
+    lens: [f32; 2],
+    dof: Option<&super::camera::Dof>,
+) -> ([[f32; 2]; 4], [f32; 4]) {
+    let mut p = [[0f32; 2]; 4];
+    let mut q = [0f32; 4];
+    match g.motion.as_deref() {
+        Some(mo) => {
+            let (ki, f) = crate::scene::motion_segment(&mo.times, time);
+            let (xa, xb) = (&mo.xy[ki], &mo.xy[ki + 1]);
+            let (da, db) = (&mo.depth[ki], &mo.depth[ki + 1]);
+            for c in 0..4 {
+                let (a, e) = (xa[corner[c]], xb[corner[c]]);
+                p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
+                q[c] = da[corner[c]] + (db[corner[c]] - da[corner[c]]) * f;
+            }
+        }
+        None => {
+            for c in 0..4 {
+                p[c] = g.xy[corner[c]];
+                q[c] = g.depth[corner[c]];
+            }
+        }
+    }
+    if let Some(d) = dof {
+        let (kx, ky) = (lens[0] * d.raster_k[0], lens[1] * d.raster_k[1]);
+        for c in 0..4 {
+            let f = d.inv_focus - q[c];
+            p[c][0] += kx * f;
+            p[c][1] += ky * f;
+        }
+    }
+    (p, q)
+}
+
 /// A CSG grid's place in its tree and, per micropolygon, whether a ray enters its primitive
 /// solid there (the micropolygon faces the eye against the leaf's outward normal).
 #[derive(Clone, Debug, Default)]
