@@ -249,6 +249,17 @@ fn null_error(b: &mut Builder<'_>, span: Span, request: &str, what: &str) {
 }
 
 /// Every element count is `n` (shader and attribute parameters are single values).
+/// The value counts of a primitive with one face (uniform) and `n` vertices.
+fn one_face(n: usize) -> Counts {
+    Counts {
+        uniform: 1,
+        varying: n,
+        vertex: n,
+        facevarying: n,
+        facevertex: n,
+    }
+}
+
 const SINGLE: Counts = Counts {
     uniform: 1,
     varying: 1,
@@ -730,13 +741,7 @@ pub unsafe extern "C" fn RiPolygonV(
 ) {
     with_builder("Polygon", |b, span| {
         let nv = nvertices.max(0) as usize;
-        let c = Counts {
-            uniform: 1,
-            varying: nv,
-            vertex: nv,
-            facevarying: nv,
-            facevertex: nv,
-        };
+        let c = one_face(nv);
         let p = plist(b, span, "PolygonV", c, None, n, tokens, parms);
         run(b, "Polygon", span, vec![], p);
     });
@@ -830,13 +835,7 @@ pub unsafe extern "C" fn RiPointsV(
 ) {
     with_builder("Points", |b, span| {
         let np = npoints.max(0) as usize;
-        let c = Counts {
-            uniform: 1,
-            varying: np,
-            vertex: np,
-            facevarying: np,
-            facevertex: np,
-        };
+        let c = one_face(np);
         let p = plist(b, span, "PointsV", c, None, n, tokens, parms);
         run(b, "Points", span, vec![], p);
     });

@@ -942,19 +942,11 @@ fn fragment_grid_blurred(
                         let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
                         let pos = [x, y];
                         for tri in [[0usize, 1, 2], [0, 2, 3]] {
-                            let mut v = tri.map(|t| p[t]);
-                            let mut idx = tri.map(|t| corner[t]);
-                            let mut dq = tri.map(|t| q[t]);
-                            let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
-                                - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
-                            if area == 0.0 || !area.is_finite() {
+                            let Some((v, idx, dq, area)) =
+                                super::ccw_triangle(&p, &q, &corner, tri)
+                            else {
                                 continue;
-                            }
-                            if area < 0.0 {
-                                v.swap(1, 2);
-                                idx.swap(1, 2);
-                                dq.swap(1, 2);
-                            }
+                            };
                             let e1 = zedge(v[2], v[0], pos);
                             let e2 = zedge(v[0], v[1], pos);
                             if !(zinside(zedge(v[1], v[2], pos)) && zinside(e1) && zinside(e2)) {

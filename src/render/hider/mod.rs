@@ -155,6 +155,32 @@ pub fn corners_at(
     (p, q)
 }
 
+/// Triangle `tri` (indices into a micropolygon's corners) of corners `p`/`q` made
+/// counter-clockwise: its points, grid indices and depths, and its (positive) doubled area;
+/// None when degenerate. Shared by both hiders' blur paths.
+#[inline]
+pub fn ccw_triangle(
+    p: &[[f32; 2]; 4],
+    q: &[f32; 4],
+    corner: &[usize; 4],
+    tri: [usize; 3],
+) -> Option<([[f32; 2]; 3], [usize; 3], [f32; 3], f32)> {
+    let mut v = tri.map(|t| p[t]);
+    let mut idx = tri.map(|t| corner[t]);
+    let mut dq = tri.map(|t| q[t]);
+    let area =
+        (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+    if area == 0.0 || !area.is_finite() {
+        return None;
+    }
+    if area < 0.0 {
+        v.swap(1, 2);
+        idx.swap(1, 2);
+        dq.swap(1, 2);
+    }
+    Some((v, idx, dq, area.abs()))
+}
+
 /// A CSG grid's place in its tree and, per micropolygon, whether a ray enters its primitive
 /// solid there (the micropolygon faces the eye against the leaf's outward normal).
 #[derive(Clone, Debug, Default)]

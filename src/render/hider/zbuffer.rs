@@ -1394,19 +1394,9 @@ fn sample_grid_blurred(
         for_samples(b, bx, |b, s, pos| {
             let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
             for (t, tri) in [[0usize, 1, 2], [0, 2, 3]].into_iter().enumerate() {
-                let mut v = tri.map(|i| p[i]);
-                let mut idx = tri.map(|i| corner[i]);
-                let mut dq = tri.map(|i| q[i]);
-                let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
-                    - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
-                if area == 0.0 || !area.is_finite() {
+                let Some((v, idx, dq, area)) = super::ccw_triangle(&p, &q, &corner, tri) else {
                     continue;
-                }
-                if area < 0.0 {
-                    v.swap(1, 2);
-                    idx.swap(1, 2);
-                    dq.swap(1, 2);
-                }
+                };
                 if inside(edge(v[1], v[2], pos))
                     && inside(edge(v[2], v[0], pos))
                     && inside(edge(v[0], v[1], pos))
