@@ -227,6 +227,13 @@ struct JobArgs {
     /// Template file to write (default: standard output).
     #[arg(short, long)]
     output: Option<PathBuf>,
+    /// Let the render tasks run `Procedural "RunProgram"` programs and load `"DynamicLoad"`
+    /// libraries (as `arbor render --allow-programs`; also used while reading the scene here).
+    #[arg(long)]
+    allow_programs: bool,
+    /// Seconds a RunProgram program may stay silent before it is killed (render tasks).
+    #[arg(long, value_name = "SECONDS")]
+    program_timeout: Option<f32>,
 }
 
 #[derive(Args)]
@@ -330,6 +337,12 @@ fn job_cmd(
     if a.tiles == 0 {
         eprintln!("error: --tiles must be at least 1");
         return ExitCode::from(2);
+    }
+    s.allow_programs = a.allow_programs
+        || std::env::var_os("ARBOR_ALLOW_PROGRAMS").is_some_and(|v| v == "1");
+    s.program_timeout = a.program_timeout;
+    if s.allow_programs {
+        arbor::scene::ri_api::keep_exports();
     }
     let scenes = pipeline::load_scenes(&a.scene, &s, sources, diags);
     let mut frames: Vec<i32> = scenes
@@ -439,6 +452,16 @@ fn job_cmd(
         frames,
         tiles: a.tiles,
         settings_args: args,
+        render_args: {
+            let mut r = Vec::new();
+            if s.allow_programs {
+                r.push("--allow-programs".to_string());
+            }
+            if let Some(t) = a.program_timeout {
+                r.extend(["--program-timeout".to_string(), t.to_string()]);
+            }
+            r
+        },
     };
     let failed = report(diags, sources, quiet, verbose);
     if failed {

@@ -27,6 +27,8 @@ pub struct JobSpec {
     pub tiles: u32,
     /// Arguments both `arbor render` and `arbor merge` get (resolution, search paths…).
     pub settings_args: Vec<String>,
+    /// Arguments only the render tasks get (`--allow-programs`, `--program-timeout`).
+    pub render_args: Vec<String>,
 }
 
 /// An OpenJD `<IntRangeExpr>` for sorted, distinct numbers: runs become `a-b`.
@@ -73,6 +75,7 @@ pub fn template(spec: &JobSpec) -> String {
     render[2] = "render".into();
     render.push("{{Param.ScenePath}}".into());
     render.extend(spec.settings_args.iter().cloned());
+    render.extend(spec.render_args.iter().cloned());
     frame_args(&mut render);
     render.push("--tile".into());
     render.push(format!("{{{{Task.Param.Tile}}}}/{}", spec.tiles));
@@ -217,6 +220,7 @@ mod tests {
             frames: vec![1, 2],
             tiles: 4,
             settings_args: vec!["--res".into(), "64".into(), "48".into()],
+            render_args: vec!["--allow-programs".into()],
         });
         assert!(t.contains("specificationVersion: 'jobtemplate-2023-09'\n"));
         assert!(t.contains("name: 'arbor it''s.rib (4 tiles)'\n"));
@@ -226,7 +230,8 @@ mod tests {
         assert!(t.contains("  - dependsOn: Render\n"));
         assert!(t.contains(
             "args: ['-C', '{{Param.OutputDir}}', 'render', '{{Param.ScenePath}}', '--res', '64', \
-             '48', '--frames', '{{Task.Param.Frame}}', '--tile', '{{Task.Param.Tile}}/4']"
+             '48', '--allow-programs', '--frames', '{{Task.Param.Frame}}', '--tile', \
+             '{{Task.Param.Tile}}/4']"
         ));
         assert!(t.contains(
             "args: ['-C', '{{Param.OutputDir}}', 'merge', '{{Param.ScenePath}}', '--res', '64', \
@@ -236,6 +241,7 @@ mod tests {
         let u = template(&JobSpec {
             frames: vec![],
             settings_args: vec![],
+            render_args: vec![],
             ..JobSpec {
                 name: "n".into(),
                 arbor: "arbor".into(),
@@ -244,6 +250,7 @@ mod tests {
                 frames: vec![],
                 tiles: 2,
                 settings_args: vec![],
+                render_args: vec![],
             }
         });
         assert!(!u.contains("Frame"));
