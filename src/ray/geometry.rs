@@ -44,6 +44,8 @@ pub struct RayGrid {
     pub trace: bool,
     /// Blocks shadow rays (`transmission`, `shadow("raytrace")`, `occlusion`).
     pub shadows: bool,
+    /// The area light this grid is the surface of (`Attributes::area_light`).
+    pub area_light: Option<usize>,
 }
 
 /// The ray-traceable scene.
@@ -203,6 +205,7 @@ pub fn build(
                 grid,
                 trace,
                 shadows,
+                area_light: a.area_light,
             });
         }
     }

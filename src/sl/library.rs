@@ -219,7 +219,51 @@ impl ShaderLibrary {
         result
     }
 
+    /// The program for a shader name compiled with extra preprocessor `defines` (cached under
+    /// `name` and `tag`). Its compile diagnostics are not reported: the plain program
+    /// ([`ShaderLibrary::get`]) reports them; None when the variant does not compile.
+    pub fn get_variant(
+        &self,
+        name: &str,
+        tag: &str,
+        defines: &[(&str, &str)],
+        sources: &SourceMap,
+    ) -> Option<Arc<Program>> {
+        let key = format!("{name}\u{0}{tag}");
+        if let Some(p) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return p.clone();
+        }
+        let mut opts = self.opts.clone();
+        for (k, v) in defines {
+            opts.defines.push((k.to_string(), Some(v.to_string())));
+        }
+        let scratch = Diagnostics::new();
+        let result = self
+            .load_with(name, &opts, sources, &scratch)
+            .filter(|_| !scratch.has_errors());
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, result.clone());
+        result
+    }
+
     fn load(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
+        self.load_with(name, &self.opts, sources, diags)
+    }
+
+    fn load_with(
+        &self,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Arc<Program>> {
         let stem = name
             .strip_suffix(".sl")
             .or_else(|| name.strip_suffix(".slo"))
@@ -232,8 +276,7 @@ impl ShaderLibrary {
             .and_then(|s| s.to_str())
             .unwrap_or(stem)
             .to_string();
-        let mut candidates: Vec<PathBuf> = self
-            .opts
+        let mut candidates: Vec<PathBuf> = opts
             .search_paths
             .iter()
             .map(|d| d.join(&file_name))
@@ -247,7 +290,7 @@ impl ShaderLibrary {
                     Some(&c),
                     sources,
                     diags,
-                    &self.opts,
+                    opts,
                 );
                 return pick(progs, &base, name, diags);
             }
@@ -262,7 +305,7 @@ impl ShaderLibrary {
                 None,
                 sources,
                 diags,
-                &self.opts,
+                opts,
             );
             return pick(progs, &base, name, diags);
         }
