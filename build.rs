@@ -1,5 +1,6 @@
 //! Embeds the standard library (stdlib/shaders/*.sl, stdlib/include/*) into the binary so
-//! `arbor render` works from any directory.
+//! `arbor render` works from any directory, and exports the binary's C RI functions (`Ri*`,
+//! src/scene/ri_api.rs) so `Procedural "DynamicLoad"` libraries can call back into it.
 use std::{env, fs, path::Path};
 
 fn main() {
@@ -33,4 +34,15 @@ fn main() {
         code.push_str("];\n");
     }
     fs::write(out, code).unwrap();
+
+    // Only the `Ri*` C functions go in the binary's dynamic symbol table (not every Rust
+    // symbol, as plain -rdynamic would).
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("linux") {
+        let list = Path::new(&env::var("OUT_DIR").unwrap()).join("ri-exports.list");
+        fs::write(&list, "{\n  Ri*;\n};\n").unwrap();
+        println!(
+            "cargo:rustc-link-arg-bins=-Wl,--dynamic-list={}",
+            list.display()
+        );
+    }
 }

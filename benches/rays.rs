@@ -55,6 +55,7 @@ fn rig() -> Rig {
         archive_paths: Vec::new(),
         base_dir: None,
         frames: None,
+        procedurals: Default::default(),
     };
     let scene = build_scenes(reqs, &ctx).remove(0);
     let library = ShaderLibrary::new(CompileOptions::default());

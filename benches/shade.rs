@@ -79,6 +79,7 @@ fn build(sources: &SourceMap, diags: &Diagnostics) -> arbor::scene::Scene {
         archive_paths: vec![],
         base_dir: None,
         frames: None,
+        procedurals: Default::default(),
     };
     build_scenes(reqs, &ctx).remove(0)
 }
@@ -95,6 +96,7 @@ fn bench(c: &mut Criterion) {
         archive_paths: vec![],
         base_dir: None,
         frames: None,
+        procedurals: Default::default(),
     };
     let scenes = build_scenes(reqs, &ctx);
     let scene = &scenes[0];

@@ -172,6 +172,14 @@ struct RenderArgs {
     /// `DISPLAY.tileIofN.exr` next to the frame's first Display; `arbor merge` assembles them.
     #[arg(long, value_name = "I/N")]
     tile: Option<String>,
+    /// Run the programs of `Procedural "RunProgram"` and load the libraries of
+    /// `Procedural "DynamicLoad"` (off by default: a scene file is untrusted input; the
+    /// environment variable ARBOR_ALLOW_PROGRAMS=1 does the same).
+    #[arg(long)]
+    allow_programs: bool,
+    /// Seconds a RunProgram program may stay silent before it is killed (default 60).
+    #[arg(long, value_name = "SECONDS")]
+    program_timeout: Option<f32>,
 }
 
 #[derive(Args)]
@@ -547,6 +555,11 @@ fn main() -> ExitCode {
             s.bucket_size = a.bucket.map(|b| [b.max(1), b.max(1)]);
             s.output = a.output.clone();
             s.stats = a.stats;
+            s.allow_programs = a.allow_programs
+                || std::env::var_os("ARBOR_ALLOW_PROGRAMS").is_some_and(|v| v == "1");
+            s.program_timeout = a.program_timeout;
+            // DynamicLoad libraries call back into the RI functions this binary exports.
+            arbor::scene::ri_api::keep_exports();
             s.progress = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
             if s.threads > 0 {
                 let _ = rayon::ThreadPoolBuilder::new()

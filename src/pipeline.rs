@@ -35,6 +35,26 @@ pub struct Settings {
     pub tile: Option<crate::farm::TileSpec>,
     pub stats: bool,
     pub progress: bool,
+    /// Run the programs and load the libraries that `Procedural "RunProgram"`/`"DynamicLoad"`
+    /// name (`--allow-programs`).
+    pub allow_programs: bool,
+    /// How long such a program may stay silent, in seconds (None: the default, 60 s).
+    pub program_timeout: Option<f32>,
+}
+
+impl Settings {
+    /// The procedural settings these command-line settings give the scene builder.
+    pub fn procedurals(&self) -> crate::scene::builder::ProceduralSettings {
+        let mut p = crate::scene::builder::ProceduralSettings {
+            allow: self.allow_programs,
+            resolution: self.resolution,
+            ..Default::default()
+        };
+        if let Some(t) = self.program_timeout.filter(|t| t.is_finite() && *t > 0.0) {
+            p.timeout = std::time::Duration::from_secs_f32(t);
+        }
+        p
+    }
 }
 
 /// Reads and builds every scene of a RIB file.
@@ -70,6 +90,7 @@ pub fn load_scenes(
         archive_paths: settings.archive_paths.clone(),
         base_dir,
         frames: settings.frames,
+        procedurals: settings.procedurals(),
     };
     build_scenes(requests, &ctx)
 }
@@ -496,6 +517,7 @@ pub fn render_text(
         archive_paths: settings.archive_paths.clone(),
         base_dir: None,
         frames: settings.frames,
+        procedurals: settings.procedurals(),
     };
     let scenes = build_scenes(requests, &ctx);
     let mut films = Vec::new();

@@ -272,6 +272,7 @@ pub fn render_swatch(
         archive_paths: Vec::new(),
         base_dir: std::env::current_dir().ok(),
         frames: None,
+        procedurals: Default::default(),
     };
     let scenes = build_scenes(requests, &ctx);
     let Some(scene) = scenes.first() else {
@@ -357,6 +358,7 @@ mod tests {
             archive_paths: Vec::new(),
             base_dir: None,
             frames: None,
+            procedurals: Default::default(),
         };
         let scenes = build_scenes(reqs, &ctx);
         assert!(!diags.has_errors(), "{:?}", diags.snapshot());

@@ -43,6 +43,48 @@ fn a_missing_texture_map_reads_as_white() {
     );
 }
 
+/// A grey picture of `level` (0–255), size 8×8, written as `path` (format from its extension).
+fn grey_picture(path: &Path, level: u8) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    image::GrayImage::from_pixel(8, 8, image::Luma([level]))
+        .save(path)
+        .unwrap();
+}
+
+#[test]
+fn a_map_never_made_is_read_from_the_picture_beside_it_or_the_packages_texture_folder() {
+    // Published scenes name `star.tx` and ship `star.tiff` (the texture tool was never run
+    // here), or keep their maps in `../texture` where an options file points.
+    let root = common::scratch_dir("fallbacks_texture_standin");
+    let dir = root.join("scenes");
+    grey_picture(&dir.join("beside.tiff"), 64);
+    grey_picture(&root.join("texture").join("above.tx.png"), 0);
+    grey_picture(&root.join("tifftexture").join("above.tif"), 128);
+    grey_picture(&root.join("shared.tiff"), 32);
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         Surface \"twomaps\"\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let shader = "surface twomaps() { Oi = 1; \
+                  Ci = float texture(\"beside.tx\") + float texture(\"above.tx\") \
+                  + float texture(\"shared.tx\"); }";
+    let (log, px, _) = render(&dir, &rib, Some(("twomaps", shader)));
+    assert!(log.contains("texture::stand-in"), "{log}");
+    assert!(
+        log.contains("beside.tiff") && log.contains("above.tif"),
+        "{log}"
+    );
+    // 64 + 128 (the first picture of the stem that exists in the package's folders) + 32 (the
+    // package folder above the scene's).
+    assert!(
+        px.iter().all(|&v| (223..=225).contains(&v)),
+        "{:?}",
+        &px[..8]
+    );
+}
+
 #[test]
 fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
     let dir = common::scratch_dir("fallbacks_surface");

@@ -254,3 +254,134 @@ fn bad_motion_blocks_are_diagnosed() {
         "{d:?}"
     );
 }
+
+/// `Hider "abuffer"`: each mask cell is a sample with its own time and lens position, so the
+/// same analytic pictures come out.
+#[test]
+fn the_abuffer_blurs_and_focuses_like_the_zbuffer() {
+    let ab = |text: String| text.replacen("WorldBegin", "Hider \"abuffer\"\nWorldBegin", 1);
+    let (f, diags) = render_with(&ab(bar("Shutter 0 1", SLIDE, BAR)), &Settings::default());
+    assert!(
+        !diags
+            .snapshot()
+            .iter()
+            .any(|(d, _)| d.message.contains("blur")),
+        "the A-buffer still warns"
+    );
+    check_spread(&f, 10);
+    let keys = "MotionBegin [0 1]\n\
+        Polygon \"P\" [-2 -9 5  2 -9 5  2 9 5  -2 9 5]\n\
+        Polygon \"P\" [8 -9 5  12 -9 5  12 9 5  8 9 5]\nMotionEnd";
+    check_spread(&render(&ab(bar("Shutter 0 0.5", "", keys))), 5);
+
+    // Depth of field with 16×16 masks (256 cells a pixel, like PixelSamples 16 16).
+    let lens = |fstop: &str| {
+        point(fstop).replacen(
+            "WorldBegin",
+            "Hider \"abuffer\" \"masksize\" 16\nWorldBegin",
+            1,
+        )
+    };
+    let p = 6.0f64;
+    let (e0, r0) = moments(&render(&lens("1e38")));
+    let area = std::f64::consts::PI * p * p / 4.0;
+    assert!((e0 - area).abs() < 0.04 * area, "energy {e0}");
+    let f = render(&lens("0.5"));
+    let (e, r2) = moments(&f);
+    assert!((e - e0).abs() < 0.01 * e0, "energy {e} (sharp {e0})");
+    let want = 0.6 * 50.5;
+    let d = (8.0 * (r2 - r0)).sqrt();
+    assert!((d - want).abs() < 1.0, "blur diameter {d}, want {want}");
+
+    // Same bits for any bucket size and thread count.
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    let one = Settings {
+        threads: 1,
+        ..Settings::default()
+    };
+    let two = Settings {
+        threads: 2,
+        ..Settings::default()
+    };
+    let (a, _) = render_with(&ab(busy("16 16")), &one);
+    let (b, _) = render_with(&ab(busy("7 5")), &two);
+    assert!(bits(&a) == bits(&b), "A-buffer blur depends on the buckets");
+}
+
+/// Renders the first frame with statistics kept: (film, micropolygons).
+fn render_counting(text: &str) -> (Film, u64) {
+    use arbor::render::driver::{render_frame, RenderOptions};
+    use arbor::render::stats::Stats;
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = arbor::rib::parse_bytes("t.rib", text.as_bytes(), &sources, &diags);
+    let ctx = arbor::scene::BuildContext::new(&sources, &diags);
+    let scenes = arbor::scene::build_scenes(reqs, &ctx);
+    let settings = Settings::default();
+    let library = arbor::pipeline::library_for(&scenes[0], &settings);
+    let system = arbor::shade::system::ShadeSystem {
+        library: &library,
+        sources: &sources,
+        diags: &diags,
+        textures: None,
+        aovs: Vec::new(),
+        rays: Default::default(),
+    };
+    let stats = Stats::default();
+    let opts = RenderOptions {
+        stats: Some(&stats),
+        ..Default::default()
+    };
+    let film = render_frame(&scenes[0], &system, &opts, &diags);
+    let report = diags.render_plain(&sources);
+    assert!(!diags.has_errors(), "{report}");
+    assert!(!report.contains("GeometricApproximation"), "{report}");
+    let micropolygons = stats
+        .micropolygons
+        .load(std::sync::atomic::Ordering::Relaxed);
+    (film, micropolygons)
+}
+
+#[test]
+fn motionfactor_shades_blurred_surfaces_coarser() {
+    // The bar travels 10 pixels: "motionfactor" 16 multiplies its rate by 1 + 16·10/16 = 11.
+    let plain = bar("Shutter 0 1", SLIDE, BAR);
+    let coarse = plain.replacen(
+        "Surface",
+        "GeometricApproximation \"motionfactor\" 16\nSurface",
+        1,
+    );
+    let (f0, n0) = render_counting(&plain);
+    let (f1, n1) = render_counting(&coarse);
+    let ratio = n0 as f64 / n1 as f64;
+    assert!(ratio > 5.0 && ratio < 20.0, "micropolygons {n0} vs {n1}");
+    // The flat bar blurs the same.
+    check_spread(&f0, 10);
+    check_spread(&f1, 10);
+    // A still bar is not affected.
+    let still = bar("", SLIDE, BAR);
+    let (_, s0) = render_counting(&still);
+    let (_, s1) = render_counting(&still.replacen(
+        "Surface",
+        "GeometricApproximation \"motionfactor\" 16\nSurface",
+        1,
+    ));
+    assert_eq!(s0, s1);
+    // "focusfactor": an out-of-focus disk (circle of confusion ≈ 30 pixels) shades fewer
+    // points; one in focus does not change.
+    let blurred = point("0.5");
+    let ff = |t: &str| {
+        t.replacen(
+            "Surface",
+            "GeometricApproximation \"focusfactor\" 4\nSurface",
+            1,
+        )
+    };
+    let (_, d0) = render_counting(&blurred);
+    let (_, d1) = render_counting(&ff(&blurred));
+    assert!(d1 * 3 < d0, "focusfactor: {d0} vs {d1}");
+    let sharp = blurred.replace("DepthOfField 0.5 1 10", "DepthOfField 0.5 1 2.5");
+    let (_, e0) = render_counting(&sharp);
+    let (_, e1) = render_counting(&ff(&sharp));
+    assert_eq!(e0, e1);
+}

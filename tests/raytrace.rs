@@ -322,6 +322,7 @@ fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
         archive_paths: vec![],
         base_dir: None,
         frames: None,
+        procedurals: Default::default(),
     };
     let scene = build_scenes(reqs, &ctx).remove(0);
     let library = ShaderLibrary::new(CompileOptions::default());

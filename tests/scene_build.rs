@@ -846,6 +846,8 @@ fn scoped_coordinate_systems_delayed_archives_and_area_lights() {
         r#"ArchiveBegin "bulb"
   Sphere 0.1 -0.1 0.1 360
 ArchiveEnd
+# A procedural whose bound is off the image is culled: this window shows it.
+ScreenWindow -5 5 -5 5
 WorldBegin
 AttributeBegin
   Translate 0 3 0
@@ -960,4 +962,71 @@ WorldEnd
         );
     }
     assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn delayed_archives_out_of_view_are_never_read() {
+    // Perspective camera 5 units back: the first bound is in view, the second far off to the
+    // side, the third behind the eye. Only the first archive is read (the others do not
+    // exist: reading them would be an error).
+    let b = build(
+        r#"ArchiveBegin "ball"
+  Sphere 0.5 -0.5 0.5 360
+ArchiveEnd
+Format 64 64 1
+Projection "perspective" "fov" 45
+Translate 0 0 5
+WorldBegin
+  Procedural "DelayedReadArchive" ["ball"] [-1 1 -1 1 -1 1]
+  AttributeBegin
+    Translate 40 0 0
+    Procedural "DelayedReadArchive" ["offscreen.rib"] [-1 1 -1 1 -1 1]
+  AttributeEnd
+  Translate 0 0 -10
+  Procedural "DelayedReadArchive" ["behind.rib"] [-1 1 -1 1 -1 1]
+WorldEnd
+"#,
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn programs_are_not_run_unless_allowed() {
+    let b = build(
+        "WorldBegin\nProcedural \"RunProgram\" [\"rm -rf /\" \"\"] [-1 1 -1 1 -1 1]\n\
+         Procedural \"DynamicLoad\" [\"evil.so\" \"\"] [-1 1 -1 1 -1 1]\nWorldEnd\n",
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let w = b.warnings();
+    assert_eq!(w.len(), 2, "{w:#?}");
+    assert!(w[0].0.contains("`rm -rf /`") && w[0].0.contains("not run unless allowed"));
+    assert!(w[1].0.contains("`evil.so`"));
+    assert!(b.one().primitives.is_empty());
+}
+
+#[test]
+fn a_printed_nan_or_infinity_drops_its_request_with_a_warning() {
+    // Animation scripts of the era printed NaN into RIB (RenderMan Repository's terran.rib:
+    // `Rotate NaN 0 1 0`). The request is left out, the rest of the frame renders.
+    let b = build(
+        "Rotate 0 0 1 0\nRotate NaN 0 1 0\nTranslate 0 0 5\nWorldBegin\n\
+         Sphere 1 -1 1 inf\nSphere [1 -1 1 360]\nPolygon \"P\" [0 0 0 1 0 0 -nan 1 0]\nWorldEnd\n",
+    );
+    assert!(b.errors().is_empty(), "{:?}", b.errors());
+    let w = b.warnings();
+    let nf: usize = w
+        .iter()
+        .filter(|(m, _)| m.contains("not a finite number"))
+        .map(|(_, n)| n)
+        .sum();
+    assert_eq!(nf, 3, "{w:?}");
+    let s = &b.scenes[0];
+    // Only the finite sphere is left; the camera is the translation alone.
+    assert_eq!(s.primitives.len(), 1);
+    assert!(s.camera_from_world.is_finite());
+    assert!(close(
+        s.camera_from_world.transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 0.0, 5.0)
+    ));
 }

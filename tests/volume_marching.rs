@@ -6,8 +6,8 @@ mod common;
 
 use arbor::render::driver::RenderOptions;
 
-/// Renders `rib` with the shaders in `files`; returns the centre pixel's rgb.
-fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
+/// Renders `rib` (21×21) with the shaders in `files`; returns the picture as rgb rows.
+fn picture(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> Vec<f32> {
     let dir = common::scratch_dir(name);
     for (f, text) in files {
         std::fs::write(dir.join(f), text).unwrap();
@@ -17,8 +17,13 @@ fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32
         ..Default::default()
     };
     let (film, _, _) = common::render_rib_with(rib, &[dir], &opts);
-    let rgb = common::film_rgb(&film);
-    let k = (film.height / 2 * film.width + film.width / 2) * 3;
+    common::film_rgb(&film)
+}
+
+/// The centre pixel's rgb of [`picture`].
+fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
+    let rgb = picture(name, rib, files, threads);
+    let k = (10 * 21 + 10) * 3;
     [rgb[k], rgb[k + 1], rgb[k + 2]]
 }
 
@@ -92,4 +97,96 @@ LightSource "foglamp" 2 "from" [0 0 3] "intensity" [5] "__foglight" [0]"#,
     }
     // The same picture with every core.
     assert_eq!(centre("vol_foglight", &rib, &files, 0), c);
+}
+
+// A march whose length differs across the grid: points left of the axis take one step to the
+// midpoint, points right of it take three (the last at the midpoint), so the lights run on
+// fewer points than the grid holds from the second step on. Each step's light is what a light
+// at that position gives, whichever points are still marching.
+const UNEVEN: &str = "volume uneven()
+{
+    color c = 0;
+    float steps = xcomp(P) < 0 ? 1 : 3;
+    float k;
+    for (k = 1; k <= steps; k += 1) {
+        point at = P - (0.5 * k / steps) * I;
+        color here = 0;
+        illuminance(at) {
+            float fog = 1;
+            lightsource(\"__foglight\", fog);
+            if (fog > 0)
+                here += Cl;
+        }
+        c = here;
+    }
+    Ci = c;
+    Oi = 1;
+}
+";
+
+#[test]
+fn lights_run_for_the_points_still_marching_see_each_points_position() {
+    let rib = scene(r#"LightSource "foglamp" 1 "from" [0 0 1]"#).replace("midway", "uneven");
+    let files = [("uneven.sl", UNEVEN), ("foglamp.sl", FOGLAMP)];
+    let rgb = picture("vol_uneven", &rib, &files, 1);
+    // Every point ends at its midpoint P/2, whatever its step count: on the axis row the
+    // colour is 1 / |P/2 - (0,0,1)|², the same on both sides of the centre.
+    let row = 10;
+    for col in [6usize, 8, 12, 14] {
+        let k = (row * 21 + col) * 3;
+        // The pixel's ray through the wall at z = 4 (fov 30 over 21 pixels).
+        let x = ((col as f32 + 0.5) / 21.0 * 2.0 - 1.0) * (15f32.to_radians()).tan() * 4.0;
+        let mid = glam::Vec3::new(x / 2.0, 0.0, 2.0);
+        let want = 1.0 / (mid - glam::Vec3::Z).length_squared();
+        // The shading point is up to a pixel from the sample: a tolerance of a few percent.
+        assert!(
+            (rgb[k] - want).abs() < 0.04 * want,
+            "column {col}: {} against {want}",
+            rgb[k]
+        );
+    }
+    assert_eq!(picture("vol_uneven", &rib, &files, 0), rgb);
+}
+
+// The standard library's `smoke` (BMRT's interface): with neither light nor noise, a uniform
+// medium of density σ in front of a white wall 4 units away transmits exp(-4σ).
+#[test]
+fn smoke_attenuates_the_background_by_its_optical_depth() {
+    let rib = scene("")
+        .replace(
+            "Atmosphere \"midway\"",
+            "Atmosphere \"smoke\" \"density\" [0.5] \"stepsize\" [0.01] \"use_lighting\" [0] \
+             \"use_noise\" [0] \"lightscale\" [0]",
+        )
+        .replace("Surface \"constant\"", "Surface \"constant\" Color [1 1 1]");
+    let c = centre("vol_smoke_depth", &rib, &[], 1);
+    let want = (-0.5f32 * 4.0).exp();
+    for v in c {
+        assert!((v - want).abs() < 0.01, "{c:?} against {want}");
+    }
+}
+
+// A scene written for BMRT's `smoke` finds another shader of that name first on its path
+// (Advanced RenderMan's, whose parameters are different): the one whose parameters the scene
+// gives is used, with a warning, instead of a medium the scene never asked for.
+#[test]
+fn a_same_named_shader_with_the_scenes_parameters_is_preferred() {
+    let other = "volume smoke(float opacdensity = 1, lightdensity = 1) { Ci = 0; Oi = 1; }";
+    let rib = scene("")
+        .replace(
+            "Atmosphere \"midway\"",
+            "Atmosphere \"smoke\" \"density\" [0.5] \"stepsize\" [0.01] \"use_lighting\" [0] \
+             \"use_noise\" [0] \"lightscale\" [0]",
+        )
+        .replace("Surface \"constant\"", "Surface \"constant\" Color [1 1 1]");
+    let dir = common::scratch_dir("vol_smoke_version");
+    std::fs::write(dir.join("smoke.sl"), other).unwrap();
+    let (film, diags, _) = common::render_rib_with(&rib, &[dir], &RenderOptions::default());
+    assert!(
+        diags.iter().any(|(d, _)| d.code == "shade::version"),
+        "no version warning"
+    );
+    let rgb = common::film_rgb(&film);
+    let k = (film.height / 2 * film.width + film.width / 2) * 3;
+    assert!((rgb[k] - (-2f32).exp()).abs() < 0.01, "{}", rgb[k]);
 }

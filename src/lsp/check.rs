@@ -198,6 +198,7 @@ pub fn check_rib(name: &str, text: &str, path: Option<&Path>, settings: &Setting
         archive_paths: settings.archive_paths.clone(),
         base_dir: base_dir.clone(),
         frames: None,
+        procedurals: Default::default(),
     };
     let scenes: Vec<Scene> = build_scenes(requests.clone(), &ctx);
     let mut shaders: HashMap<String, Option<Arc<Program>>> = HashMap::new();

@@ -286,6 +286,7 @@ mod tests {
             archive_paths: Vec::new(),
             base_dir: None,
             frames: None,
+            procedurals: Default::default(),
         };
         let scene = crate::scene::build_scenes(reqs, &ctx).remove(0);
         let camera = Camera::new(&scene);

@@ -325,8 +325,13 @@ impl Builder<'_> {
     pub(super) fn geometric_approximation(&mut self, call: &Call<'_>) {
         let kind = call.pos[0].str().to_string();
         let v = call.pos[1].num();
-        // arbor dices by ShadingRate alone: flatness, motionfactor, focusfactor… are hints it
-        // does not take (one warning per kind).
+        if matches!(kind.as_str(), "motionfactor" | "focusfactor") {
+            // Used by the dicer: blurred surfaces get a coarser shading rate.
+            self.attrs().geometric_approximation.insert(kind, v);
+            return;
+        }
+        // Otherwise arbor dices by ShadingRate alone: flatness and the like are hints it does
+        // not take (one warning per kind).
         let d = Diag::warning(
             "scene::unimplemented",
             format!("`GeometricApproximation \"{kind}\"` is not used by arbor (grids follow `ShadingRate`); ignored"),

@@ -14,7 +14,7 @@ use std::sync::Arc;
 use glam::{Mat4, Vec3};
 
 use crate::diag::{Diag, Diagnostics, Severity, SourceMap, Span};
-use crate::rib::Request;
+use crate::rib::{Request, Value};
 
 use super::params::{parse_params, validate_single, ColorMap, Dictionary, ParamUse};
 use super::table::{self, Call};
@@ -33,6 +33,32 @@ pub struct BuildContext<'a> {
     /// Only frames in this inclusive range are built (frame numbers from `FrameBegin`, else
     /// the 1-based count of world blocks).
     pub frames: Option<(i32, i32)>,
+    /// What `Procedural "RunProgram"`/`"DynamicLoad"` may do, and the image size their detail
+    /// is measured in.
+    pub procedurals: ProceduralSettings,
+}
+
+/// Settings for procedural primitives that run code named by the scene.
+#[derive(Clone, Debug)]
+pub struct ProceduralSettings {
+    /// Run `RunProgram` programs and load `DynamicLoad` libraries. Off by default: a scene
+    /// file is untrusted input, so only the user (`arbor render --allow-programs`) turns it on.
+    pub allow: bool,
+    /// How long a `RunProgram` program may stay silent before it is killed.
+    pub timeout: std::time::Duration,
+    /// The image size replacing Format's (`--res`), so the detail passed to a procedural is
+    /// the raster area of its bound in the picture actually rendered.
+    pub resolution: Option<(u32, u32)>,
+}
+
+impl Default for ProceduralSettings {
+    fn default() -> ProceduralSettings {
+        ProceduralSettings {
+            allow: false,
+            timeout: std::time::Duration::from_secs(60),
+            resolution: None,
+        }
+    }
 }
 
 impl<'a> BuildContext<'a> {
@@ -45,6 +71,7 @@ impl<'a> BuildContext<'a> {
             archive_paths: Vec::new(),
             base_dir: None,
             frames: None,
+            procedurals: ProceduralSettings::default(),
         }
     }
 }
@@ -65,6 +92,8 @@ pub(super) enum BlockKind {
     Solid,
     Object,
     Motion,
+    /// The implicit attribute block around a procedural's output.
+    Procedural,
 }
 
 impl BlockKind {
@@ -77,6 +106,7 @@ impl BlockKind {
             BlockKind::Solid => "SolidBegin",
             BlockKind::Object => "ObjectBegin",
             BlockKind::Motion => "MotionBegin",
+            BlockKind::Procedural => "Procedural",
         }
     }
     pub(super) fn end(self) -> &'static str {
@@ -88,6 +118,7 @@ impl BlockKind {
             BlockKind::Solid => "SolidEnd",
             BlockKind::Object => "ObjectEnd",
             BlockKind::Motion => "MotionEnd",
+            BlockKind::Procedural => "(the end of the procedural's output)",
         }
     }
 }
@@ -201,6 +232,14 @@ pub struct Builder<'a> {
     /// Geometry met before any `WorldBegin`: held back, because a file that never opens a
     /// world is a geometry archive (one warning at the end), not a scene with N errors.
     pub(super) orphans: Vec<Diag>,
+    /// The procedurals being expanded, outermost first.
+    pub(super) expanding: Vec<super::procedural::Expansion>,
+    /// The RunProgram programs started so far.
+    pub(super) programs: super::runprogram::Programs,
+    /// Replies read from RunProgram programs (each is registered as a source).
+    pub(super) program_replies: usize,
+    /// DynamicLoad libraries loaded so far (or why they could not be).
+    pub(super) libraries: super::ri_api::Libraries,
 }
 
 /// A light declared before WorldBegin: added to every following world until its frame ends.
@@ -247,11 +286,21 @@ impl<'a> Builder<'a> {
             pending_texture_jobs: Vec::new(),
             pending_lights: Vec::new(),
             orphans: Vec::new(),
+            expanding: Vec::new(),
+            programs: Default::default(),
+            program_replies: 0,
+            libraries: Default::default(),
         }
     }
 
     /// Reports a diagnostic under the current ErrorHandler.
-    pub(super) fn report(&mut self, d: Diag) {
+    pub(super) fn report(&mut self, mut d: Diag) {
+        if let Some(note) = self.expansion_note() {
+            d.help = Some(match d.help.take() {
+                Some(h) => format!("{h}\n{note}"),
+                None => note,
+            });
+        }
         match self.error_mode {
             ErrorMode::Ignore => {}
             ErrorMode::Print => self.ctx.diags.report(d),
@@ -362,6 +411,26 @@ impl<'a> Builder<'a> {
             self.report(d);
             return;
         };
+        // `nan`/`inf` (C's printf of a broken value): the request would poison a transform
+        // or a primitive's bound, so it is left out, naming the value.
+        if let Some(a) = r.args.iter().find(|a| match &a.value {
+            Value::Float(f) => !f.is_finite(),
+            Value::FloatArray(v) => v.iter().any(|f| !f.is_finite()),
+            _ => false,
+        }) {
+            self.report(
+                Diag::warning(
+                    "scene::not-finite",
+                    format!(
+                        "`{}` has a value that is not a finite number; the request is ignored",
+                        r.name
+                    ),
+                )
+                .label(a.span, "not a finite number")
+                .help("the program that wrote this RIB printed a NaN or an infinity here"),
+            );
+            return;
+        }
         let ncomps = self.colors.as_ref().map_or(3, |c| c.n);
         match table::check_args(r, spec, ncomps) {
             Ok(call) => {
@@ -390,6 +459,7 @@ impl<'a> Builder<'a> {
     /// Ends the stream: reports unclosed blocks (each at its opener) and closes an open world
     /// so its scene is still produced.
     pub fn finish(mut self) -> Vec<Scene> {
+        self.close_programs();
         // After an abort nothing more is reported; an open world still yields its scene.
         if self.aborted {
             self.error_mode = ErrorMode::Ignore;
@@ -548,6 +618,23 @@ impl<'a> Builder<'a> {
             self.report(d);
             return None;
         };
+        if let Some(p) = self.blocks[pos + 1..]
+            .iter()
+            .find(|b| b.kind == BlockKind::Procedural)
+        {
+            let d = Diag::error(
+                "scene::nesting",
+                format!(
+                    "`{}` in a procedural's output would close a block opened outside it",
+                    kind.end()
+                ),
+            )
+            .label(call.span(), "ignored")
+            .label(p.span, "the procedural")
+            .help("a procedural's output may only close the blocks it opened");
+            self.report(d);
+            return None;
+        }
         // Blocks opened after the one being closed are closed with it (and reported).
         while self.blocks.len() > pos + 1 {
             let inner = self.blocks.pop()?;
@@ -571,7 +658,7 @@ impl<'a> Builder<'a> {
     }
 
     /// Undoes a block closed implicitly.
-    fn unwind_block(&mut self, b: Block) {
+    pub(super) fn unwind_block(&mut self, b: Block) {
         match b.kind {
             BlockKind::World => self.close_world(b),
             BlockKind::Object => {

@@ -1020,52 +1020,6 @@ impl Builder<'_> {
         );
     }
 
-    pub(super) fn procedural(&mut self, call: &Call<'_>) {
-        let bound = call.pos[2].floats();
-        if bound.len() != 6 {
-            return self.geom_error(
-                call,
-                call.pos_spans[2],
-                format!("the bound needs 6 numbers, found {}", bound.len()),
-                call.spec.describe(),
-            );
-        }
-        match call.pos[0].str() {
-            "DelayedReadArchive" => {
-                // Read now: the archive's primitives land where the procedural stands.
-                let Some(file) = call.pos[1].strs().first().cloned() else {
-                    return self.geom_error(
-                        call,
-                        call.pos_spans[1],
-                        "DelayedReadArchive needs a file name".into(),
-                        "Procedural \"DelayedReadArchive\" [\"file.rib\"] [bound]".into(),
-                    );
-                };
-                self.read_archive_named(&file, call.pos_spans[1], call.req.span);
-            }
-            "RunProgram" | "DynamicLoad" => {
-                let d = Diag::warning(
-                    "scene::unimplemented",
-                    format!(
-                        "`Procedural \"{}\"` is not implemented yet; ignored",
-                        call.pos[0].str()
-                    ),
-                )
-                .label(call.span(), "ignored");
-                self.report(d);
-            }
-            other => {
-                let d = Diag::error(
-                    "scene::arguments",
-                    format!("unknown procedural \"{other}\""),
-                )
-                .label(call.pos_spans[0], "here")
-                .help("use \"DelayedReadArchive\", \"RunProgram\" or \"DynamicLoad\"");
-                self.report(d);
-            }
-        }
-    }
-
     // ---- retained objects ----
 
     pub(super) fn object_begin(&mut self, call: &Call<'_>) {

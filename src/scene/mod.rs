@@ -6,7 +6,9 @@
 //!
 //! Layout: `table` (one row per request), `params` (declarations and value counts),
 //! `builder` (driver, blocks, frames), and one file per request family: `options`,
-//! `attributes`, `transforms`, `geometry`, `archive`, `cond` (conditional RIB).
+//! `attributes`, `transforms`, `geometry`, `archive`, `cond` (conditional RIB), `procedural`
+//! (procedural primitives, with `runprogram` for RunProgram's processes and `ri_api` for the
+//! C RI functions DynamicLoad libraries call).
 
 mod archive;
 mod attributes;
@@ -18,6 +20,9 @@ pub mod known;
 mod motion;
 mod options;
 pub mod params;
+mod procedural;
+pub mod ri_api;
+mod runprogram;
 pub mod table;
 mod texjobs;
 mod transforms;

@@ -265,11 +265,16 @@ pub struct Exec<'a> {
 
 /// Runs the grid's lights with the lit points at `ps`, for the lights flagged in `want` (by
 /// index into `env.lights`; None where not wanted or not runnable).
-pub type Relight<'a> = dyn Fn(&[Vec3], &[bool]) -> Vec<Option<LightResult>> + 'a;
+///
+/// With `Some(idx)` only the grid points `idx` are lit (the live points of a loop): `ps` holds
+/// their positions in that order and the results have `idx.len()` entries.
+pub type Relight<'a> = dyn Fn(&[Vec3], &[bool], Option<&[usize]>) -> Vec<Option<LightResult>> + 'a;
 
 /// Lights evaluated at positions other than the grid's.
 pub struct RelitLights {
     ps: Vec<Vec3>,
+    /// The points the lights were run for (the others read unlit).
+    active: Vec<bool>,
     want: Vec<bool>,
     lights: Vec<Option<LightResult>>,
 }
@@ -284,6 +289,43 @@ impl RelitLights {
 }
 
 impl LightResult {
+    /// This result, computed for the grid points `idx`, spread over a grid of `n` points
+    /// (the others unlit, with zero L and Cl).
+    pub fn scattered(self, idx: &[usize], n: usize) -> LightResult {
+        fn spread<T: Copy>(v: &[T], idx: &[usize], n: usize, fill: T) -> Vec<T> {
+            let mut out = vec![fill; n];
+            for (k, &i) in idx.iter().enumerate() {
+                if let Some(x) = v.get(k) {
+                    out[i] = *x;
+                }
+            }
+            out
+        }
+        let outputs = self
+            .outputs
+            .into_iter()
+            .map(|s| match s {
+                Slot::VF(v) => Slot::VF(spread(&v, idx, n, 0.0)),
+                Slot::VT(v) => Slot::VT(spread(&v, idx, n, Vec3::ZERO)),
+                Slot::VM(v) => Slot::VM(spread(&v, idx, n, Mat4::IDENTITY)),
+                s => s,
+            })
+            .collect();
+        LightResult {
+            ambient: self.ambient,
+            lit: spread(&self.lit, idx, n, false),
+            l: spread(&self.l, idx, n, Vec3::ZERO),
+            l_uniform: self.l_uniform,
+            cl: spread(&self.cl, idx, n, Vec3::ZERO),
+            ol: spread(&self.ol, idx, n, Vec3::ONE),
+            category: self.category,
+            nondiffuse: self.nondiffuse,
+            nonspecular: self.nonspecular,
+            program: self.program,
+            outputs,
+        }
+    }
+
     /// Gives the grid buffers back to this thread's pool.
     pub fn recycle(self) {
         crate::shade::value::recycle([Slot::VT(self.l), Slot::VT(self.cl), Slot::VT(self.ol)]);
@@ -839,9 +881,11 @@ impl<'a> Exec<'a> {
     }
 
     /// The lights `illuminance(pos)` sees: those of the grid when `pos` is the grid's P,
-    /// otherwise every wanted light run once over the whole grid at `pos` (cached while the
-    /// positions repeat). None: the grid's lights.
-    fn lights_at(&mut self, pos: Reg, cat: Option<&str>) -> Option<Rc<RelitLights>> {
+    /// otherwise every wanted light run again at `pos` (cached while the positions repeat).
+    /// Only the running points are lit: a volume march whose points leave its loop at
+    /// different steps runs its lights (often marching loops themselves) on the points still
+    /// marching, not on the whole grid. None: the grid's lights.
+    fn lights_at(&mut self, pos: Reg, cat: Option<&str>, mask: &Mask) -> Option<Rc<RelitLights>> {
         let relight = self.relight?;
         let at = self.lights_at?;
         let n = self.n;
@@ -860,18 +904,34 @@ impl<'a> Exec<'a> {
             .map(|l| !l.ambient && cat.is_none_or(|c| category_matches(c, &l.category)))
             .collect();
         if let Some(c) = &self.relit {
-            if c.want == want && (0..n).all(|i| c.ps[i] == p.at(i)) {
+            if c.want == want
+                && (0..n).all(|i| !mask.bits[i] || (c.active[i] && c.ps[i] == p.at(i)))
+            {
                 return Some(c.clone());
             }
         }
         let ps: Vec<Vec3> = (0..n).map(|i| p.at(i)).collect();
-        let lights = relight(&ps, &want);
+        let lights = if mask.is_all() {
+            relight(&ps, &want, None)
+        } else {
+            let idx: Vec<usize> = (0..n).filter(|&i| mask.bits[i]).collect();
+            let sub: Vec<Vec3> = idx.iter().map(|&i| ps[i]).collect();
+            relight(&sub, &want, Some(&idx))
+                .into_iter()
+                .map(|l| l.map(|l| l.scattered(&idx, n)))
+                .collect()
+        };
         if let Some(old) = self.relit.take() {
             if let Ok(old) = Rc::try_unwrap(old) {
                 old.recycle();
             }
         }
-        let r = Rc::new(RelitLights { ps, want, lights });
+        let r = Rc::new(RelitLights {
+            ps,
+            active: mask.bits.clone(),
+            want,
+            lights,
+        });
         self.relit = Some(r.clone());
         Some(r)
     }
@@ -908,7 +968,7 @@ impl<'a> Exec<'a> {
                 (0..n).map(|i| ang.at(i)).collect(),
             )
         });
-        let relit = self.lights_at(pos, cat.as_deref());
+        let relit = self.lights_at(pos, cat.as_deref(), mask);
         let outer = std::mem::replace(&mut self.lights_in_use, relit.clone());
         let grid_lights = self.env.lights;
         for li in 0..grid_lights.len() {

@@ -104,6 +104,59 @@ impl Grid {
             motion: None,
         }
     }
+    /// The points at `idx` as a `len × 1` grid (every per-point field and varying primitive
+    /// variable picked, uniform ones kept). Neighbours in the result are unrelated points, so
+    /// it serves runs that take no derivatives (lights evaluated for a volume march's live
+    /// points); motion is dropped.
+    pub fn subset(&self, idx: &[usize]) -> Grid {
+        fn pick<T: Copy>(v: &[T], idx: &[usize]) -> Vec<T> {
+            if v.is_empty() {
+                return Vec::new();
+            }
+            idx.iter().map(|&i| v[i]).collect()
+        }
+        let pick_var = |g: &GridVar| -> GridVar {
+            if g.uniform {
+                return g.clone();
+            }
+            let w = g.width();
+            let mut floats = Vec::with_capacity(idx.len() * w);
+            for &i in idx {
+                floats.extend_from_slice(&g.floats[i * w..(i + 1) * w]);
+            }
+            GridVar {
+                name: g.name.clone(),
+                ty: g.ty,
+                array_len: g.array_len,
+                uniform: false,
+                floats,
+                strings: Vec::new(),
+            }
+        };
+        Grid {
+            nu: idx.len(),
+            nv: 1,
+            p: pick(&self.p, idx),
+            n: pick(&self.n, idx),
+            ng: pick(&self.ng, idx),
+            dpdu: pick(&self.dpdu, idx),
+            dpdv: pick(&self.dpdv, idx),
+            u: pick(&self.u, idx),
+            v: pick(&self.v, idx),
+            s: pick(&self.s, idx),
+            t: pick(&self.t, idx),
+            du: self.du,
+            dv: self.dv,
+            cs: pick(&self.cs, idx),
+            os: pick(&self.os, idx),
+            i: pick(&self.i, idx),
+            ci: pick(&self.ci, idx),
+            oi: pick(&self.oi, idx),
+            primvars: self.primvars.iter().map(pick_var).collect(),
+            outputs: Vec::new(),
+            motion: None,
+        }
+    }
     pub fn primvar(&self, name: &str) -> Option<&GridVar> {
         self.primvars.iter().find(|v| v.name == name)
     }

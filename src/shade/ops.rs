@@ -734,7 +734,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 0.0
             }
         }),
-        Exp => f1!(|x: f32| x.exp()),
+        Exp => f1!(exp_f),
         Sqrt => f1!(|x: f32| x.max(0.0).sqrt()),
         InvSqrt => f1!(|x: f32| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 }),
         Log => f1!(|x: f32| if x > 0.0 { x.ln() } else { -f32::MAX }),
@@ -2301,4 +2301,18 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
     } else {
         hz::grid_height(&table, &g, prm.scale)
     })
+}
+
+/// `exp` for shaders: libm's `expf` takes a slow error-reporting path on underflow, which
+/// volume shaders hit at every step of a march (`exp(-falloff * height)` far from a
+/// surface). Below ln of the smallest subnormal the result is 0 anyway.
+#[inline]
+fn exp_f(x: f32) -> f32 {
+    if x < -104.0 {
+        0.0
+    } else if x > 89.0 {
+        f32::INFINITY
+    } else {
+        x.exp()
+    }
 }

@@ -150,7 +150,10 @@ impl<'a> ShadeSystem<'a> {
     }
 
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
-        let p = self.library.get(&sref.name, self.sources, self.diags)?;
+        let given: Vec<&str> = sref.params.0.iter().map(|g| g.name.as_str()).collect();
+        let p = self
+            .library
+            .get_for(&sref.name, &given, self.sources, self.diags)?;
         let ok = match kind {
             ShaderKind::Volume => p.kind == ShaderKind::Volume,
             k => p.kind == k || (sref.name == "null"),
@@ -449,8 +452,8 @@ impl<'a> ShadeSystem<'a> {
         // illuminance() away from the grid's P runs the same lights again there.
         let surface_regs = {
             let g: &Grid = grid;
-            let relight = |ps: &[Vec3], want: &[bool]| {
-                self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+            let relight = |ps: &[Vec3], want: &[bool], idx: Option<&[usize]>| {
+                self.relight(g, &ctx, &grid_lights, ps, want, idx)
             };
             self.run(&prog, &sref, g, &ctx, &lights, None, None, Some(&relight))
         };
@@ -514,8 +517,8 @@ impl<'a> ShadeSystem<'a> {
                 let ci = grid.ci.clone();
                 let oi = grid.oi.clone();
                 let g: &Grid = grid;
-                let relight = |ps: &[Vec3], want: &[bool]| {
-                    self.eval_lights(g, &ctx, &grid_lights, Some(ps), Some(want))
+                let relight = |ps: &[Vec3], want: &[bool], idx: Option<&[usize]>| {
+                    self.relight(g, &ctx, &grid_lights, ps, want, idx)
                 };
                 if let Some(mut regs) = self.run(
                     &aprog,
@@ -640,6 +643,32 @@ impl<'a> ShadeSystem<'a> {
             return None;
         }
         Some(shape.clone())
+    }
+
+    /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
+    /// those grid points only, as a grid of just them.
+    fn relight(
+        &self,
+        grid: &Grid,
+        ctx: &RunCtx,
+        lights: &[GridLight],
+        ps: &[Vec3],
+        want: &[bool],
+        idx: Option<&[usize]>,
+    ) -> Vec<Option<LightResult>> {
+        match idx {
+            None => self.eval_lights(grid, ctx, lights, Some(ps), Some(want)),
+            Some(idx) => {
+                let sub = grid.subset(idx);
+                let sub_ctx = RunCtx {
+                    alpha: None,
+                    // Its neighbours are unrelated points: derivatives read zero.
+                    hits: true,
+                    ..*ctx
+                };
+                self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want))
+            }
+        }
     }
 
     /// Runs `lights` over the grid: with the lit points at the grid's P, or at `ps`

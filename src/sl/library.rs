@@ -253,17 +253,9 @@ impl ShaderLibrary {
         result
     }
 
-    fn load(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
-        self.load_with(name, &self.opts, sources, diags)
-    }
-
-    fn load_with(
-        &self,
-        name: &str,
-        opts: &CompileOptions,
-        sources: &SourceMap,
-        diags: &Diagnostics,
-    ) -> Option<Arc<Program>> {
+    /// Where a shader name may come from, in search order: `stem.sl` in each search directory,
+    /// as a path of its own, then the embedded standard library.
+    fn candidates(name: &str, search: &[PathBuf]) -> (String, Vec<Candidate>) {
         let stem = name
             .strip_suffix(".sl")
             .or_else(|| name.strip_suffix(".slo"))
@@ -276,38 +268,74 @@ impl ShaderLibrary {
             .and_then(|s| s.to_str())
             .unwrap_or(stem)
             .to_string();
-        let mut candidates: Vec<PathBuf> = opts
-            .search_paths
+        let mut out: Vec<Candidate> = search
             .iter()
-            .map(|d| d.join(&file_name))
+            .map(|d| Candidate::File(d.join(&file_name)))
             .collect();
-        candidates.push(PathBuf::from(&file_name));
-        for c in candidates {
-            if let Ok(text) = crate::encoding::read_text(&c) {
+        out.push(Candidate::File(PathBuf::from(&file_name)));
+        if let Some(k) = stdlib_shaders()
+            .iter()
+            .position(|(n, _)| n.strip_suffix(".sl") == Some(&base))
+        {
+            out.push(Candidate::Stdlib(k));
+        }
+        (base, out)
+    }
+
+    /// Compiles one candidate; None when it does not exist (Some(None): it did not compile).
+    fn compile_candidate(
+        &self,
+        c: &Candidate,
+        base: &str,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Option<Arc<Program>>> {
+        match c {
+            Candidate::File(path) => {
+                let text = crate::encoding::read_text(path).ok()?;
                 let progs = compile_source(
-                    &c.display().to_string(),
+                    &path.display().to_string(),
                     &text,
-                    Some(&c),
+                    Some(path),
                     sources,
                     diags,
                     opts,
                 );
-                return pick(progs, &base, name, diags);
+                Some(pick(progs, base, name, diags))
+            }
+            Candidate::Stdlib(k) => {
+                let (n, text) = stdlib_shaders()[*k];
+                let progs = compile_source(
+                    &format!("<stdlib>/shaders/{n}"),
+                    text,
+                    None,
+                    sources,
+                    diags,
+                    opts,
+                );
+                Some(pick(progs, base, name, diags))
             }
         }
-        if let Some((n, text)) = stdlib_shaders()
-            .iter()
-            .find(|(n, _)| n.strip_suffix(".sl") == Some(&base))
-        {
-            let progs = compile_source(
-                &format!("<stdlib>/shaders/{n}"),
-                text,
-                None,
-                sources,
-                diags,
-                opts,
-            );
-            return pick(progs, &base, name, diags);
+    }
+
+    fn load(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
+        self.load_with(name, &self.opts, sources, diags)
+    }
+
+    fn load_with(
+        &self,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Arc<Program>> {
+        let (base, candidates) = Self::candidates(name, &opts.search_paths);
+        for c in &candidates {
+            if let Some(p) = self.compile_candidate(c, &base, name, opts, sources, diags) {
+                return p;
+            }
         }
         diags.report(
             Diag::warning(
@@ -317,6 +345,106 @@ impl ShaderLibrary {
             .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
         );
         None
+    }
+
+    /// The program for a shader name as an instance uses it, giving values for `given`
+    /// parameters. When the first shader of that name on the path lacks several of them (the
+    /// scene was written for another shader of the same name, e.g. BMRT's `smoke` where the
+    /// path first holds *Advanced RenderMan*'s), a later one on the path or in the standard
+    /// library that has more of them is used instead, with a warning naming both.
+    pub fn get_for(
+        &self,
+        name: &str,
+        given: &[&str],
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Arc<Program>> {
+        let first = self.get(name, sources, diags)?;
+        let lacks = |p: &Program| given.iter().filter(|g| p.param(g).is_none()).count();
+        let missing = lacks(&first);
+        if missing < 2 {
+            return Some(first);
+        }
+        let mut key = format!("{name}\u{0}");
+        for g in given {
+            key.push_str(g);
+            key.push('\u{0}');
+        }
+        if let Some(p) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return p.clone();
+        }
+        let (base, candidates) = Self::candidates(name, &self.opts.search_paths);
+        // The candidates after the first that exists; compiled quietly (a broken alternative
+        // is no alternative).
+        let mut found_first: Option<String> = None;
+        let mut best: Option<(usize, Arc<Program>, String)> = None;
+        for c in &candidates {
+            let exists = match c {
+                Candidate::File(p) => p.is_file(),
+                Candidate::Stdlib(_) => true,
+            };
+            if !exists {
+                continue;
+            }
+            if found_first.is_none() {
+                found_first = Some(c.describe());
+                continue;
+            }
+            let quiet = Diagnostics::new();
+            let Some(Some(p)) = self.compile_candidate(c, &base, name, &self.opts, sources, &quiet) else {
+                continue;
+            };
+            if p.kind != first.kind || quiet.has_errors() {
+                continue;
+            }
+            let m = lacks(&p);
+            if m < best.as_ref().map_or(missing, |b| b.0) {
+                best = Some((m, p, c.describe()));
+            }
+        }
+        let chosen = match best {
+            Some((_, p, place)) => {
+                diags.report(
+                    Diag::warning(
+                        "shade::version",
+                        format!(
+                            "shader `{name}` at {} lacks {missing} of the parameters this scene \
+                             gives it; the `{name}` at {place} has more of them and is used",
+                            found_first.unwrap_or_default()
+                        ),
+                    )
+                    .help("put the intended shader first on the shader search path"),
+                );
+                p
+            }
+            None => first,
+        };
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, Some(chosen.clone()));
+        Some(chosen)
+    }
+}
+
+/// One place a shader may be loaded from.
+enum Candidate {
+    File(PathBuf),
+    /// Index into [`stdlib_shaders`].
+    Stdlib(usize),
+}
+
+impl Candidate {
+    fn describe(&self) -> String {
+        match self {
+            Candidate::File(p) => format!("`{}`", p.display()),
+            Candidate::Stdlib(k) => format!("the standard library (`{}`)", stdlib_shaders()[*k].0),
+        }
     }
 }
 

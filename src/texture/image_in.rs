@@ -58,6 +58,61 @@ pub fn read_image(path: &Path) -> Result<Image, String> {
     })
 }
 
+/// The wrap modes a BMRT-made mip-map TIFF records in its ImageDescription ("black black",
+/// "periodic clamp", …: s then t), so such a map read as a plain picture wraps as made.
+pub fn tiff_wrap_hint(path: &Path) -> Option<(super::mipmap::Wrap, super::mipmap::Wrap)> {
+    use super::mipmap::Wrap;
+    let bytes = std::fs::read(path).ok()?;
+    let desc = tiff_description(&bytes)?;
+    let mut words = desc.split_whitespace();
+    let s = Wrap::parse(words.next()?)?;
+    let t = Wrap::parse(words.next()?)?;
+    Some((s, t))
+}
+
+/// Tag 270 (ImageDescription) of a TIFF's first directory.
+fn tiff_description(b: &[u8]) -> Option<String> {
+    let big = match b.get(..4)? {
+        [b'I', b'I', 42, 0] => false,
+        [b'M', b'M', 0, 42] => true,
+        _ => return None,
+    };
+    let u16_at = |o: usize| -> Option<u32> {
+        let x: [u8; 2] = b.get(o..o + 2)?.try_into().ok()?;
+        Some(if big {
+            u16::from_be_bytes(x)
+        } else {
+            u16::from_le_bytes(x)
+        } as u32)
+    };
+    let u32_at = |o: usize| -> Option<u32> {
+        let x: [u8; 4] = b.get(o..o + 4)?.try_into().ok()?;
+        Some(if big {
+            u32::from_be_bytes(x)
+        } else {
+            u32::from_le_bytes(x)
+        })
+    };
+    let ifd = u32_at(4)? as usize;
+    let count = u16_at(ifd)? as usize;
+    for k in 0..count.min(512) {
+        let e = ifd + 2 + 12 * k;
+        if u16_at(e)? != 270 || u16_at(e + 2)? != 2 {
+            continue;
+        }
+        let len = u32_at(e + 4)? as usize;
+        let at = if len <= 4 {
+            e + 8
+        } else {
+            u32_at(e + 8)? as usize
+        };
+        let text = b.get(at..at + len)?;
+        let text = text.split(|&c| c == 0).next()?;
+        return Some(String::from_utf8_lossy(text).into_owned());
+    }
+    None
+}
+
 /// OpenEXR: the first layer, every channel in the file's (alphabetical) order, with R G B A
 /// moved to the front in that order so colour lookups find them first.
 fn read_exr(path: &Path) -> Result<Image, String> {
@@ -115,5 +170,61 @@ mod tests {
         assert_eq!(im.nchan, 4);
         assert!((im.data[2] - 0.2).abs() < 1e-6);
         assert!(read_image(&dir.join("missing.png")).is_err());
+    }
+
+    /// A one-entry TIFF directory holding only an ImageDescription.
+    fn tiff_with_description(big: bool, text: &str) -> Vec<u8> {
+        let u16b = |x: u16| {
+            if big {
+                x.to_be_bytes()
+            } else {
+                x.to_le_bytes()
+            }
+        };
+        let u32b = |x: u32| {
+            if big {
+                x.to_be_bytes()
+            } else {
+                x.to_le_bytes()
+            }
+        };
+        let mut b: Vec<u8> = if big {
+            b"MM\0\x2a".to_vec()
+        } else {
+            b"II\x2a\0".to_vec()
+        };
+        b.extend(u32b(8));
+        b.extend(u16b(1));
+        let mut t = text.as_bytes().to_vec();
+        t.push(0);
+        b.extend(u16b(270));
+        b.extend(u16b(2));
+        b.extend(u32b(t.len() as u32));
+        b.extend(u32b(8 + 2 + 12 + 4));
+        b.extend(u32b(0));
+        b.extend(t);
+        b
+    }
+
+    #[test]
+    fn bmrt_wrap_modes_are_read_from_the_tiff_description() {
+        assert_eq!(
+            tiff_description(&tiff_with_description(true, "black black")).as_deref(),
+            Some("black black")
+        );
+        assert_eq!(
+            tiff_description(&tiff_with_description(false, "periodic clamp")).as_deref(),
+            Some("periodic clamp")
+        );
+        assert_eq!(tiff_description(b"\x89PNG...."), None);
+        let dir = std::env::temp_dir().join(format!("arbor-imgin-wrap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("hint.tif");
+        std::fs::write(&p, tiff_with_description(true, "periodic clamp")).unwrap();
+        use super::super::mipmap::Wrap;
+        assert_eq!(tiff_wrap_hint(&p), Some((Wrap::Periodic, Wrap::Clamp)));
+        std::fs::write(&p, tiff_with_description(false, "the GIMP was here")).unwrap();
+        assert_eq!(tiff_wrap_hint(&p), None);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

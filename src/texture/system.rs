@@ -37,6 +37,11 @@ use super::shadow::{pcf, LightView, ShadowParams};
 /// Default cache size when the scene sets no `Option "limits" "texturememory"`: 256 MB.
 pub const DEFAULT_MEMORY_KB: usize = 256 * 1024;
 
+/// Folders that published scene packages keep their maps in (beside or above the scenes).
+const TEXTURE_FOLDERS: [&str; 5] = ["texture", "textures", "tifftexture", "tex", "maps"];
+/// Picture files a missing map may have been made from.
+const PICTURE_EXTENSIONS: [&str; 8] = ["tif", "tiff", "TIF", "TIFF", "png", "exr", "jpg", "tga"];
+
 pub struct TextureSystem<'a> {
     search: Vec<PathBuf>,
     pub cache: TileCache,
@@ -77,19 +82,93 @@ impl<'a> TextureSystem<'a> {
         if let Some(t) = map.get(name) {
             return t.clone();
         }
-        let t = match self.load(name) {
+        let t = match self.load(name, &resolve(name, &self.search), true) {
             Ok(t) => Some(Arc::new(t)),
-            Err(e) => {
-                self.diags.report(Diag::warning("texture::open", e));
-                None
-            }
+            Err(e) => match self.stand_in(name) {
+                Some((path, t)) => {
+                    self.diags.report(
+                        Diag::warning(
+                            "texture::stand-in",
+                            format!(
+                                "texture `{name}` is not on the texture path ({e}); using `{}`, \
+                                 found where published scenes keep their maps",
+                                path.display()
+                            ),
+                        )
+                        .help(format!(
+                            "make the map explicit: `arbor texture {} {name}`, or add its folder \
+                             to `Option \"searchpath\" \"texture\"` (--textures)",
+                            path.display()
+                        )),
+                    );
+                    Some(Arc::new(t))
+                }
+                None => {
+                    self.diags.report(Diag::warning("texture::open", e));
+                    None
+                }
+            },
         };
         map.insert(name.to_string(), t.clone());
         t
     }
 
-    fn load(&self, name: &str) -> Result<Texture, String> {
-        let path = resolve(name, &self.search);
+    /// A map for a texture name that cannot be opened as given: published scenes refer to
+    /// `name.tx` made by a texture tool that was never run (the source picture `name.tiff`
+    /// lies beside the RIB, or in the package folder above a scene's subfolder), or keep their
+    /// maps in a `texture`/`textures`/`tifftexture` folder that an options file (`prman.opt`,
+    /// `bmrt.opt`) puts on the path. Tries, in the scene's search directories, those folders
+    /// beside and above them, then the folders above: the name itself, then the pictures of
+    /// the same stem; the first that loads is used (a renderer's own binary format that arbor
+    /// cannot read is passed over).
+    fn stand_in(&self, name: &str) -> Option<(PathBuf, Texture)> {
+        let given = std::path::Path::new(name);
+        let file = given.file_name()?.to_str()?.to_string();
+        let stem = given.file_stem()?.to_str()?.to_string();
+        let mut dirs: Vec<PathBuf> = Vec::new();
+        let mut push = |d: PathBuf| {
+            if d.is_dir() && !dirs.contains(&d) {
+                dirs.push(d);
+            }
+        };
+        for d in &self.search {
+            push(d.clone());
+        }
+        for d in &self.search {
+            for up in [d.clone(), d.join("..")] {
+                for sub in TEXTURE_FOLDERS {
+                    push(up.join(sub));
+                }
+            }
+        }
+        // A scene in a subfolder of its package shares the package's maps.
+        for d in &self.search {
+            push(d.join(".."));
+        }
+        let mut names = vec![file.clone()];
+        for ext in PICTURE_EXTENSIONS {
+            let n = format!("{stem}.{ext}");
+            if n != file {
+                names.push(n);
+            }
+        }
+        for d in &dirs {
+            for n in &names {
+                let c = d.join(n);
+                if !c.is_file() || (n == &file && self.search.contains(d)) {
+                    continue;
+                }
+                if let Ok(t) = self.load(name, &c, false) {
+                    return Some((c, t));
+                }
+            }
+        }
+        None
+    }
+
+    /// Opens the map at `path` for `name`; `note_raw`: warn when it is a plain picture.
+    fn load(&self, name: &str, path: &std::path::Path, note_raw: bool) -> Result<Texture, String> {
+        let path = path.to_path_buf();
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         let mut file = File::open(&path)
             .map_err(|e| format!("texture `{name}`: cannot open `{}`: {e}", path.display()))?;
@@ -129,22 +208,26 @@ impl<'a> TextureSystem<'a> {
             ));
         }
         let im = read_image(&path).map_err(|e| format!("texture `{name}`: {e}"))?;
-        self.diags.report(
-            Diag::warning(
-                "texture::raw",
-                format!("texture `{name}` is a plain picture: converted to a mip-map on first use"),
-            )
-            .help(format!(
-                "prepare it once with `arbor texture {name} {name}.tex`"
-            )),
-        );
+        if note_raw {
+            self.diags.report(
+                Diag::warning(
+                    "texture::raw",
+                    format!(
+                        "texture `{name}` is a plain picture: converted to a mip-map on first use"
+                    ),
+                )
+                .help(format!(
+                    "prepare it once with `arbor texture {name} {name}.tex`"
+                )),
+            );
+        }
         let nchan = im.nchan;
-        let levels = build_pyramid(im, Wrap::Periodic, Wrap::Periodic, Downsample::Box);
-        Ok(Texture::from_pyramids(
-            id,
-            blank(Kind::Texture, nchan, Wrap::Periodic, None),
-            &[levels],
-        ))
+        let (swrap, twrap) =
+            super::image_in::tiff_wrap_hint(&path).unwrap_or((Wrap::Periodic, Wrap::Periodic));
+        let levels = build_pyramid(im, swrap, twrap, Downsample::Box);
+        let mut header = blank(Kind::Texture, nchan, swrap, None);
+        header.twrap = twrap;
+        Ok(Texture::from_pyramids(id, header, &[levels]))
     }
 
     fn filter_kind(&self, name: &str) -> FilterKind {

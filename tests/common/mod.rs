@@ -65,6 +65,7 @@ pub fn render_rib_with(
         archive_paths: Vec::new(),
         base_dir: None,
         frames: None,
+        procedurals: Default::default(),
     };
     let scenes = build_scenes(reqs, &ctx);
     assert!(

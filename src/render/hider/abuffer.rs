@@ -20,6 +20,12 @@
 //!   micropolygons of one grid with disjoint masks and touching depth ranges are merged (OR of
 //!   masks, area-weighted colour) so a diced surface leaves no seams; the pool is bounded,
 //!   and hitting the bound is reported once per render through [`Hider::finish`];
+//! * a grid that moves (motion blur) or is seen through a lens (depth of field) is point
+//!   sampled instead: each cell is a sample at its centre with its own shutter time and lens
+//!   position, stratified over the pixel's cells and hashed from (pixel, cell, seed) like the
+//!   Z-buffer's (see [`fragment_grid_blurred`]);
+//! * grids are taken front to back (zmin, then key), so a pixel's fragments arrive in the
+//!   same order whatever the bucket size;
 //! * the resolve walks each pixel's fragments front to back in the total order
 //!   (zmin, grid key, micropolygon) with a search mask; fragments whose depth ranges overlap
 //!   are blended over their common cells by Carpenter's zmin/zmax rule, so the image does not
@@ -36,7 +42,9 @@ use crate::film::SampleBuffer;
 use crate::scene::ParamList;
 
 use super::super::camera::PixelRect;
+use super::super::sampler::time_and_lens;
 use super::super::stats::Stats;
+use super::zbuffer::{edge as zedge, inside as zinside};
 use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
 
 const NONE: u32 = u32::MAX;
@@ -672,6 +680,10 @@ impl Hider for ABuffer {
         }
     }
 
+    fn samples_per_pixel(&self) -> usize {
+        self.w * self.w
+    }
+
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
         let cfg = &self.config;
         let w = self.w;
@@ -698,8 +710,30 @@ impl Hider for ABuffer {
             overflowed: 0,
         };
         let mut masks = Vec::new();
-        for g in grids {
-            if g.aov_width == aw {
+        // Motion blur and depth of field: each cell's time and lens position, stratified over
+        // the pixel's cells as the Z-buffer's are over its samples.
+        let (mut times, mut lens) = (Vec::new(), Vec::new());
+        if cfg.dof.is_some() || grids.iter().any(|g| g.motion.is_some()) {
+            let mut perm = Vec::new();
+            for py in rect.y0..rect.y1 {
+                for px in rect.x0..rect.x1 {
+                    time_and_lens(
+                        px, py, w, w, cfg.jitter, cfg.seed, &mut perm, &mut times, &mut lens,
+                    );
+                }
+            }
+        }
+        // Front to back, ties by key: a pixel's fragments then arrive in the same order
+        // whatever the bucket (merges and trims depend on it), and opaque fronts trim early.
+        let mut order: Vec<&ShadedGrid> = grids.to_vec();
+        order.sort_by(|a, c| a.zmin.total_cmp(&c.zmin).then(a.key.cmp(&c.key)));
+        for g in order {
+            if g.aov_width != aw {
+                continue;
+            }
+            if g.motion.is_some() || cfg.dof.is_some() {
+                fragment_grid_blurred(&mut b, rect, w, g, &times, &lens);
+            } else {
                 fragment_grid(&mut b, rect, w, g, &mut masks);
             }
         }
@@ -830,6 +864,208 @@ fn fragment_grid(b: &mut Bucket, rect: PixelRect, w: usize, g: &ShadedGrid, mask
                         zmax,
                         key: g.key,
                         sub,
+                        next: NONE,
+                        matte: g.matte,
+                        c,
+                        o,
+                    },
+                    &aov,
+                );
+            }
+        }
+    }
+}
+
+/// [`fragment_grid`] for a grid that moves or is seen through a lens. Each cell of a pixel's
+/// mask is a point sample at the cell's centre with its own shutter time and lens position
+/// (`times`/`lens`, `w`² per pixel of `rect`, row-major): a cell is covered when, at its time
+/// and through its lens point, it lies in the micropolygon (corners moving linearly between
+/// keys, then shifted by the lens times their circle of confusion, as in the Z-buffer). The
+/// fragment's depth range is the range over its covered cells; its colour the corner mean,
+/// or for smooth shading the mean of the colours interpolated at its cells. Micropolygons
+/// sharing an edge give disjoint cells (one canonical edge function owns points on the edge),
+/// so a diced surface merges back into one fragment per pixel.
+fn fragment_grid_blurred(
+    b: &mut Bucket,
+    rect: PixelRect,
+    w: usize,
+    g: &ShadedGrid,
+    times: &[f32],
+    lens: &[[f32; 2]],
+) {
+    let cfg = b.cfg;
+    let nu = g.nu;
+    let aw = g.aov_width;
+    let Some(win) = g.window(&rect) else {
+        return;
+    };
+    let [wx0, wy0, wx1, wy1] = win;
+    let rw = rect.width();
+    let n = w * w;
+    let inv_w = 1.0 / w as f32;
+    let mo = g.motion.as_deref();
+    let dof = cfg.dof;
+    let mut visible = Vec::new();
+    g.micropolygons_in(win, &mut visible);
+    let mut flat_aov = vec![0f32; aw];
+    let mut aov = vec![0f32; aw];
+    for &(m, k, mb) in &visible {
+        let corner = [k, k + 1, k + nu + 1, k + nu];
+        let bx = [
+            mb[0].max(wx0),
+            mb[1].max(wy0),
+            mb[2].min(wx1),
+            mb[3].min(wy1),
+        ];
+        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+            continue;
+        }
+        let px0 = floor_i32(bx[0]).max(rect.x0);
+        let px1 = floor_i32(bx[2]).min(rect.x1 - 1);
+        let py0 = floor_i32(bx[1]).max(rect.y0);
+        let py1 = floor_i32(bx[3]).min(rect.y1 - 1);
+        if px0 > px1 || py0 > py1 {
+            continue;
+        }
+        let mut flat_c = [0f32; 3];
+        let mut flat_o = [0f32; 3];
+        for &c in &corner {
+            for t in 0..3 {
+                flat_c[t] += 0.25 * g.ci[c][t];
+                flat_o[t] += 0.25 * g.oi[c][t];
+            }
+        }
+        for t in 0..aw {
+            flat_aov[t] = corner.iter().map(|&c| 0.25 * g.aov[c * aw + t]).sum();
+        }
+        for py in py0..=py1 {
+            for px in px0..=px1 {
+                b.micro_pixels += 1;
+                let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;
+                let mut mask = [0u64; 4];
+                let (mut zlo, mut zhi) = (f32::INFINITY, f32::NEG_INFINITY);
+                let mut sum_c = [0f32; 3];
+                let mut sum_o = [0f32; 3];
+                aov.iter_mut().for_each(|a| *a = 0.0);
+                let mut hits = 0u32;
+                for j in 0..w {
+                    let y = py as f32 + (j as f32 + 0.5) * inv_w;
+                    if y < bx[1] || y > bx[3] {
+                        continue;
+                    }
+                    for i in 0..w {
+                        let x = px as f32 + (i as f32 + 0.5) * inv_w;
+                        if x < bx[0] || x > bx[2] {
+                            continue;
+                        }
+                        let s = pix * n + j * w + i;
+                        let mut p = [[0f32; 2]; 4];
+                        let mut q = [0f32; 4];
+                        match mo {
+                            Some(mo) => {
+                                let (ki, f) = crate::scene::motion_segment(&mo.times, times[s]);
+                                let (xa, xb) = (&mo.xy[ki], &mo.xy[ki + 1]);
+                                let (da, db) = (&mo.depth[ki], &mo.depth[ki + 1]);
+                                for c in 0..4 {
+                                    let (a, e) = (xa[corner[c]], xb[corner[c]]);
+                                    p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
+                                    q[c] = da[corner[c]] + (db[corner[c]] - da[corner[c]]) * f;
+                                }
+                            }
+                            None => {
+                                for c in 0..4 {
+                                    p[c] = g.xy[corner[c]];
+                                    q[c] = g.depth[corner[c]];
+                                }
+                            }
+                        }
+                        if let Some(d) = &dof {
+                            let l = lens[s];
+                            let (kx, ky) = (l[0] * d.raster_k[0], l[1] * d.raster_k[1]);
+                            for c in 0..4 {
+                                let f = d.inv_focus - q[c];
+                                p[c][0] += kx * f;
+                                p[c][1] += ky * f;
+                            }
+                        }
+                        let pos = [x, y];
+                        for tri in [[0usize, 1, 2], [0, 2, 3]] {
+                            let mut v = tri.map(|t| p[t]);
+                            let mut idx = tri.map(|t| corner[t]);
+                            let mut dq = tri.map(|t| q[t]);
+                            let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1])
+                                - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+                            if area == 0.0 || !area.is_finite() {
+                                continue;
+                            }
+                            if area < 0.0 {
+                                v.swap(1, 2);
+                                idx.swap(1, 2);
+                                dq.swap(1, 2);
+                            }
+                            let e1 = zedge(v[2], v[0], pos);
+                            let e2 = zedge(v[0], v[1], pos);
+                            if !(zinside(zedge(v[1], v[2], pos)) && zinside(e1) && zinside(e2)) {
+                                continue;
+                            }
+                            let inv = 1.0 / area.abs();
+                            let (w1, w2) = (e1.0 * inv, e2.0 * inv);
+                            let w0 = 1.0 - w1 - w2;
+                            let qz = dq[0] + w1 * (dq[1] - dq[0]) + w2 * (dq[2] - dq[0]);
+                            let z = if cfg.perspective { 1.0 / qz } else { qz };
+                            if !(z >= cfg.near && z <= cfg.far) {
+                                break;
+                            }
+                            if !cfg.clip_planes.is_empty() {
+                                let cp = cfg.camera_point(x, y, z);
+                                if cfg
+                                    .clip_planes
+                                    .iter()
+                                    .any(|pl| pl.truncate().dot(cp) + pl.w > 0.0)
+                                {
+                                    break;
+                                }
+                            }
+                            let bit = j * w + i;
+                            mask[bit / 64] |= 1u64 << (bit % 64);
+                            zlo = zlo.min(z);
+                            zhi = zhi.max(z);
+                            hits += 1;
+                            if g.smooth {
+                                let wts = [w0, w1, w2];
+                                for (vi, &gi) in idx.iter().enumerate() {
+                                    for t in 0..3 {
+                                        sum_c[t] += wts[vi] * g.ci[gi][t];
+                                        sum_o[t] += wts[vi] * g.oi[gi][t];
+                                    }
+                                    for t in 0..aw {
+                                        aov[t] += wts[vi] * g.aov[gi * aw + t];
+                                    }
+                                }
+                            }
+                            break;
+                        }
+                    }
+                }
+                if hits == 0 {
+                    continue;
+                }
+                let (c, o) = if g.smooth {
+                    let r = 1.0 / hits as f32;
+                    aov.iter_mut().for_each(|a| *a *= r);
+                    (sum_c.map(|v| v * r), sum_o.map(|v| v * r))
+                } else {
+                    aov.copy_from_slice(&flat_aov);
+                    (flat_c, flat_o)
+                };
+                b.insert(
+                    pix,
+                    Frag {
+                        mask,
+                        zmin: zlo,
+                        zmax: zhi,
+                        key: g.key,
+                        sub: m as u32,
                         next: NONE,
                         matte: g.matte,
                         c,
