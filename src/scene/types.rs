@@ -351,6 +351,9 @@ pub struct Attributes {
     /// The innermost CSG solid (an index into `Scene::solids`) this primitive belongs to;
     /// None outside boolean solids (a top-level `SolidBegin "primitive"` renders as is).
     pub solid: Option<u32>,
+    /// The area light (an index into `Scene::lights`) whose geometry this primitive is: set by
+    /// `AreaLightSource` for the rest of its attribute block (RISpec §4.2.3).
+    pub area_light: Option<usize>,
 }
 
 impl Default for Attributes {
@@ -381,6 +384,7 @@ impl Default for Attributes {
             user: HashMap::new(),
             geometric_approximation: HashMap::new(),
             solid: None,
+            area_light: None,
         }
     }
 }
@@ -414,6 +418,9 @@ pub struct Light {
     /// BMRT's `Attribute "light" "shadows" "on"` when the light was declared: the renderer
     /// traces a shadow ray for it at every lit point (whatever the light shader does).
     pub ray_shadows: bool,
+    /// `Attribute "light" "nsamples"` when the light was declared (BMRT): points sampled on an
+    /// area light's geometry per lit point (default 1).
+    pub samples: u32,
 }
 
 /// Geometry as given by the request, in object space. Angles are in degrees as in RIB.
