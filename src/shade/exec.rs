@@ -14,32 +14,50 @@ use glam::{Mat4, Vec3};
 
 use crate::diag::{Diag, Diagnostics, Span};
 use crate::shade::ops;
+pub use crate::shade::value::Lanes;
 use crate::shade::value::*;
 use crate::sl::ir::*;
 
 /// The running mask: which points execute.
+///
+/// When few points run (at most one in [`SPARSE_DIVISOR`]), `idx` lists them and pointwise
+/// instructions compute just those (see [`Lanes`]); otherwise `idx` is empty and they compute
+/// every point. Whoever changes `bits` calls [`Mask::recount`].
 #[derive(Clone, Debug)]
 pub struct Mask {
     pub bits: Vec<bool>,
     pub count: usize,
+    idx: Vec<u32>,
 }
+
+/// A mask with at most one running point in this many runs its pointwise instructions over
+/// the running points only (a scalar loop over their indices costs about what a vectorised
+/// loop over four or five points does).
+pub const SPARSE_DIVISOR: usize = 4;
 
 impl Mask {
     pub fn all(n: usize) -> Mask {
         Mask {
             bits: vec![true; n],
             count: n,
+            idx: Vec::new(),
         }
     }
     pub fn none(n: usize) -> Mask {
         Mask {
             bits: vec![false; n],
             count: 0,
+            idx: Vec::new(),
         }
     }
     pub fn from_bits(bits: Vec<bool>) -> Mask {
-        let count = bits.iter().filter(|&&b| b).count();
-        Mask { bits, count }
+        let mut m = Mask {
+            bits,
+            count: 0,
+            idx: Vec::new(),
+        };
+        m.recount();
+        m
     }
     pub fn is_all(&self) -> bool {
         self.count == self.bits.len()
@@ -53,14 +71,44 @@ impl Mask {
         }
         self.recount();
     }
+    /// Counts the running points (and lists them when they are few).
     pub fn recount(&mut self) {
         self.count = self.bits.iter().filter(|&&b| b).count();
+        self.idx.clear();
+        if self.sparse() {
+            self.idx.extend(
+                self.bits
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &b)| b)
+                    .map(|(i, _)| i as u32),
+            );
+        }
     }
-    /// Becomes a copy of `other`, reusing this mask's buffer.
+    /// No point runs any more.
+    pub fn clear(&mut self) {
+        self.bits.iter_mut().for_each(|b| *b = false);
+        self.count = 0;
+        self.idx.clear();
+    }
+    /// Becomes a copy of `other`, reusing this mask's buffers.
     pub fn copy_from(&mut self, other: &Mask) {
         self.bits.clear();
         self.bits.extend_from_slice(&other.bits);
         self.count = other.count;
+        self.idx.clear();
+        self.idx.extend_from_slice(&other.idx);
+    }
+    fn sparse(&self) -> bool {
+        self.count * SPARSE_DIVISOR <= self.bits.len()
+    }
+    /// The points pointwise instructions compute under this mask.
+    pub fn lanes(&self) -> Lanes<'_> {
+        if self.sparse() && self.idx.len() == self.count {
+            Lanes::Some(&self.idx)
+        } else {
+            Lanes::All
+        }
     }
 }
 
@@ -249,6 +297,7 @@ pub struct Exec<'a> {
     pub loop_limit: u64,
     /// Spare mask buffers, so control flow allocates nothing per instruction.
     bits_pool: Vec<Vec<bool>>,
+    idx_pool: Vec<Vec<u32>>,
     /// Where `env.lights` were evaluated (the grid's P), and how to evaluate them elsewhere:
     /// `illuminance(pos)` at other positions (a volume shader marching a ray) runs the lights
     /// again, once over the whole grid. None: `env.lights` serve every position.
@@ -261,6 +310,11 @@ pub struct Exec<'a> {
     /// True inside `solar()` (a ray-traced shadow then looks along L to infinity rather than
     /// to the point `Ps − L`).
     pub in_solar: bool,
+    /// Whether pointwise instructions may compute just the running points when few run
+    /// (false: every instruction computes every point; same results, for tests).
+    pub sparse: bool,
+    /// Instructions run over the listed running points only, so far (for tests and stats).
+    pub sparse_ops: u64,
 }
 
 /// Runs the grid's lights with the lit points at `ps`, for the lights flagged in `want` (by
@@ -268,8 +322,7 @@ pub struct Exec<'a> {
 ///
 /// With `Some(idx)` only the grid points `idx` are lit (the live points of a loop): `ps` holds
 /// their positions in that order and the results have `idx.len()` entries.
-pub type Relight<'a> =
-    dyn Fn(&[Vec3], &[bool], Option<&[usize]>) -> Vec<Option<LightResult>> + 'a;
+pub type Relight<'a> = dyn Fn(&[Vec3], &[bool], Option<&[usize]>) -> Vec<Option<LightResult>> + 'a;
 
 /// Lights evaluated at positions other than the grid's.
 pub struct RelitLights {
@@ -334,6 +387,9 @@ impl LightResult {
     }
 }
 
+/// The default of [`Exec::sparse`] for new executions (tests turn it off to compare).
+pub static SPARSE_LANES: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
 /// Default for [`Exec::loop_limit`]: far beyond any real shader's loop (a ray march at the
 /// smallest step real shaders use runs some ten thousand steps).
 pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
@@ -376,11 +432,14 @@ impl<'a> Exec<'a> {
             env,
             frames: Vec::new(),
             in_solar: false,
+            sparse: SPARSE_LANES.load(std::sync::atomic::Ordering::Relaxed),
+            sparse_ops: 0,
             light: None,
             current_light: None,
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
             bits_pool: Vec::new(),
+            idx_pool: Vec::new(),
             lights_at: None,
             relight: None,
             relit: None,
@@ -388,14 +447,18 @@ impl<'a> Exec<'a> {
         }
     }
 
-    /// A copy of `m` in a pooled buffer (give it back with [`Exec::release`]).
+    /// A copy of `m` in pooled buffers (give it back with [`Exec::release_mask`]).
     fn mask_like(&mut self, m: &Mask) -> Mask {
         let mut bits = self.bits_pool.pop().unwrap_or_default();
         bits.clear();
         bits.extend_from_slice(&m.bits);
+        let mut idx = self.idx_pool.pop().unwrap_or_default();
+        idx.clear();
+        idx.extend_from_slice(&m.idx);
         Mask {
             bits,
             count: m.count,
+            idx,
         }
     }
 
@@ -409,6 +472,11 @@ impl<'a> Exec<'a> {
 
     fn release(&mut self, bits: Vec<bool>) {
         self.bits_pool.push(bits);
+    }
+
+    fn release_mask(&mut self, m: Mask) {
+        self.bits_pool.push(m.bits);
+        self.idx_pool.push(m.idx);
     }
 
     fn push_frame(&mut self, kind: FrameKind) {
@@ -501,8 +569,7 @@ impl<'a> Exec<'a> {
             }
             k += 1;
         }
-        mask.bits.iter_mut().for_each(|b| *b = false);
-        mask.count = 0;
+        mask.clear();
     }
 
     fn instr(&mut self, ins: &'a Instr, mask: &mut Mask) {
@@ -546,8 +613,8 @@ impl<'a> Exec<'a> {
                         *m = tb || eb;
                     }
                     mask.recount();
-                    self.release(t.bits);
-                    self.release(e.bits);
+                    self.release_mask(t);
+                    self.release_mask(e);
                 }
             },
             Instr::Loop {
@@ -564,10 +631,9 @@ impl<'a> Exec<'a> {
                 if k > 1 {
                     let mut m = self.mask_like(mask);
                     self.exit_to(k - 1, None, &mut m);
-                    self.release(m.bits);
+                    self.release_mask(m);
                 }
-                mask.bits.iter_mut().for_each(|b| *b = false);
-                mask.count = 0;
+                mask.clear();
             }
             Instr::Return => {
                 let levels = self
@@ -586,7 +652,7 @@ impl<'a> Exec<'a> {
                 self.push_frame(FrameKind::Function);
                 let mut m = self.mask_like(mask);
                 self.block(body, &mut m);
-                self.release(m.bits);
+                self.release_mask(m);
                 if let Some(f) = self.pop_frame() {
                     self.recycle_frame(f);
                 }
@@ -732,8 +798,8 @@ impl<'a> Exec<'a> {
         if let Some((regs, _)) = snapshot.take() {
             crate::shade::value::recycle(regs);
         }
-        self.release(live.bits);
-        self.release(scratch.bits);
+        self.release_mask(live);
+        self.release_mask(scratch);
         if let Some(f) = self.pop_frame() {
             mask.and_not(&f.outward);
             self.recycle_frame(f);
@@ -823,18 +889,7 @@ impl<'a> Exec<'a> {
                         v
                     }
                 };
-                if all {
-                    match a {
-                        F::U(x) => v.iter_mut().for_each(|o| *o = x),
-                        F::V(x) => v.copy_from_slice(x),
-                    }
-                } else {
-                    for i in 0..n {
-                        if mask.bits[i] {
-                            v[i] = a.at(i);
-                        }
-                    }
-                }
+                store(&mut v, a, mask);
                 out = Slot::VF(v);
             }
             Kind::Triple => {
@@ -844,18 +899,7 @@ impl<'a> Exec<'a> {
                     Slot::T(x) => crate::shade::value::grid_vt_filled(n, x),
                     _ => crate::shade::value::grid_vt_filled(n, Vec3::ZERO),
                 };
-                if all {
-                    match a {
-                        T::U(x) => v.iter_mut().for_each(|o| *o = x),
-                        T::V(x) => v.copy_from_slice(x),
-                    }
-                } else {
-                    for i in 0..n {
-                        if mask.bits[i] {
-                            v[i] = a.at(i);
-                        }
-                    }
-                }
+                store(&mut v, a, mask);
                 out = Slot::VT(v);
             }
             Kind::Matrix => {
@@ -875,6 +919,27 @@ impl<'a> Exec<'a> {
             Kind::Str => out = s.clone(),
         }
         self.regs[dst as usize] = out;
+    }
+
+    /// The points a pointwise instruction writing `dst` computes under `mask`.
+    #[inline]
+    pub fn lanes_for<'m>(&mut self, dst: Reg, mask: &'m Mask) -> Lanes<'m> {
+        if self.sparse
+            && !self
+                .prog
+                .full_width
+                .get(dst as usize)
+                .copied()
+                .unwrap_or(true)
+        {
+            let l = mask.lanes();
+            if let Lanes::Some(_) = l {
+                self.sparse_ops += 1;
+            }
+            l
+        } else {
+            Lanes::All
+        }
     }
 
     fn reg_of(&self, name: &str) -> Option<Reg> {
@@ -1012,7 +1077,7 @@ impl<'a> Exec<'a> {
                 any |= ok;
             }
             if !any {
-                self.release(m.bits);
+                self.release_mask(m);
                 continue;
             }
             m.recount();
@@ -1026,7 +1091,7 @@ impl<'a> Exec<'a> {
             self.current_light = Some(li);
             self.block(body, &mut m);
             self.current_light = None;
-            self.release(m.bits);
+            self.release_mask(m);
         }
         self.lights_in_use = outer;
     }
@@ -1217,7 +1282,43 @@ impl<'a> Exec<'a> {
         if !m.is_none() {
             self.block(body, &mut m);
         }
-        self.release(m.bits);
+        self.release_mask(m);
+    }
+}
+
+/// `v = a` at the running points of `mask`: a copy when every point runs, the listed points
+/// when few do, otherwise a select over every point (which vectorises).
+#[inline]
+fn store<X: Copy + Default>(v: &mut [X], a: Op<X>, mask: &Mask) {
+    let n = v.len();
+    if mask.is_all() {
+        match a {
+            Op::U(x) => v.fill(x),
+            Op::V(x) => v.copy_from_slice(&x[..n]),
+        }
+        return;
+    }
+    match (mask.lanes(), a) {
+        (Lanes::Some(idx), Op::U(x)) => {
+            for &i in idx {
+                v[i as usize] = x;
+            }
+        }
+        (Lanes::Some(idx), Op::V(x)) => {
+            for &i in idx {
+                v[i as usize] = x[i as usize];
+            }
+        }
+        (Lanes::All, Op::U(x)) => {
+            for (o, &m) in v.iter_mut().zip(&mask.bits[..n]) {
+                *o = if m { x } else { *o };
+            }
+        }
+        (Lanes::All, Op::V(x)) => {
+            for ((o, &m), &x) in v.iter_mut().zip(&mask.bits[..n]).zip(&x[..n]) {
+                *o = if m { x } else { *o };
+            }
+        }
     }
 }
 

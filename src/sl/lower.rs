@@ -574,9 +574,11 @@ impl<'a> Lowerer<'a> {
             init,
             body,
             movable: Vec::new(),
+            full_width: Vec::new(),
             span: def.span,
         };
         prog.movable = prog.movable_temps();
+        prog.full_width = prog.full_width_regs();
         prog
     }
 
