@@ -46,7 +46,9 @@ fn a_missing_texture_map_reads_as_white() {
 /// A grey picture of `level` (0–255), size 8×8, written as `path` (format from its extension).
 fn grey_picture(path: &Path, level: u8) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    image::GrayImage::from_pixel(8, 8, image::Luma([level])).save(path).unwrap();
+    image::GrayImage::from_pixel(8, 8, image::Luma([level]))
+        .save(path)
+        .unwrap();
 }
 
 #[test]
@@ -70,10 +72,17 @@ fn a_map_never_made_is_read_from_the_picture_beside_it_or_the_packages_texture_f
                   + float texture(\"shared.tx\"); }";
     let (log, px, _) = render(&dir, &rib, Some(("twomaps", shader)));
     assert!(log.contains("texture::stand-in"), "{log}");
-    assert!(log.contains("beside.tiff") && log.contains("above.tif"), "{log}");
+    assert!(
+        log.contains("beside.tiff") && log.contains("above.tif"),
+        "{log}"
+    );
     // 64 + 128 (the first picture of the stem that exists in the package's folders) + 32 (the
     // package folder above the scene's).
-    assert!(px.iter().all(|&v| (223..=225).contains(&v)), "{:?}", &px[..8]);
+    assert!(
+        px.iter().all(|&v| (223..=225).contains(&v)),
+        "{:?}",
+        &px[..8]
+    );
 }
 
 #[test]

@@ -1004,3 +1004,29 @@ fn programs_are_not_run_unless_allowed() {
     assert!(w[1].0.contains("`evil.so`"));
     assert!(b.one().primitives.is_empty());
 }
+
+#[test]
+fn a_printed_nan_or_infinity_drops_its_request_with_a_warning() {
+    // Animation scripts of the era printed NaN into RIB (RenderMan Repository's terran.rib:
+    // `Rotate NaN 0 1 0`). The request is left out, the rest of the frame renders.
+    let b = build(
+        "Rotate 0 0 1 0\nRotate NaN 0 1 0\nTranslate 0 0 5\nWorldBegin\n\
+         Sphere 1 -1 1 inf\nSphere [1 -1 1 360]\nPolygon \"P\" [0 0 0 1 0 0 -nan 1 0]\nWorldEnd\n",
+    );
+    assert!(b.errors().is_empty(), "{:?}", b.errors());
+    let w = b.warnings();
+    let nf: usize = w
+        .iter()
+        .filter(|(m, _)| m.contains("not a finite number"))
+        .map(|(_, n)| n)
+        .sum();
+    assert_eq!(nf, 3, "{w:?}");
+    let s = &b.scenes[0];
+    // Only the finite sphere is left; the camera is the translation alone.
+    assert_eq!(s.primitives.len(), 1);
+    assert!(s.camera_from_world.is_finite());
+    assert!(close(
+        s.camera_from_world.transform_point3(Vec3::ZERO),
+        Vec3::new(0.0, 0.0, 5.0)
+    ));
+}

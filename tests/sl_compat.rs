@@ -516,3 +516,29 @@ fn deriv_ignores_a_direction_den_does_not_change_along() {
         }
     }
 }
+
+#[test]
+fn an_ambiguous_call_inside_arithmetic_is_a_float_whatever_the_assignment() {
+    // LGParquetPlank's `woodcolor *= (1 - plankvary/2 + plankvary * noise(whichplank + 0.5))`:
+    // the colour being assigned does not make that `noise` a colour (PRMan and Aqsis give every
+    // plank one grey factor, not a different noise per channel).
+    let (prog, _) = compile_ok(
+        "surface t() { color c = 1; float k = 0.8; \
+         c *= (1 - k/2 + k * noise(s * 7.3 + 0.5)); \
+         Ci = c; Oi = 1; }",
+    );
+    let (ci, _) = run(&prog, 16);
+    let mut spread = 0f32;
+    for c in &ci {
+        assert!(
+            (c.x - c.y).abs() < 1e-6 && (c.y - c.z).abs() < 1e-6,
+            "{c:?}"
+        );
+        spread = spread.max((c.x - ci[0].x).abs());
+    }
+    assert!(spread > 0.01, "the noise should vary along s: {ci:?}");
+    // An explicit cast or a colour sibling still asks for colour noise.
+    let (prog, _) = compile_ok("surface t() { Ci = color noise(s * 7.3 + 0.5); Oi = 1; }");
+    let (ci, _) = run(&prog, 16);
+    assert!(ci.iter().any(|c| (c.x - c.y).abs() > 1e-3), "{ci:?}");
+}

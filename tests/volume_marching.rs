@@ -6,8 +6,8 @@ mod common;
 
 use arbor::render::driver::RenderOptions;
 
-/// Renders `rib` with the shaders in `files`; returns the centre pixel's rgb.
-fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
+/// Renders `rib` (21×21) with the shaders in `files`; returns the picture as rgb rows.
+fn picture(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> Vec<f32> {
     let dir = common::scratch_dir(name);
     for (f, text) in files {
         std::fs::write(dir.join(f), text).unwrap();
@@ -17,8 +17,13 @@ fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32
         ..Default::default()
     };
     let (film, _, _) = common::render_rib_with(rib, &[dir], &opts);
-    let rgb = common::film_rgb(&film);
-    let k = (film.height / 2 * film.width + film.width / 2) * 3;
+    common::film_rgb(&film)
+}
+
+/// The centre pixel's rgb of [`picture`].
+fn centre(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> [f32; 3] {
+    let rgb = picture(name, rib, files, threads);
+    let k = (10 * 21 + 10) * 3;
     [rgb[k], rgb[k + 1], rgb[k + 2]]
 }
 
@@ -118,20 +123,6 @@ const UNEVEN: &str = "volume uneven()
     Oi = 1;
 }
 ";
-
-/// The picture as rgb rows (21×21).
-fn picture(name: &str, rib: &str, files: &[(&str, &str)], threads: usize) -> Vec<f32> {
-    let dir = common::scratch_dir(name);
-    for (f, text) in files {
-        std::fs::write(dir.join(f), text).unwrap();
-    }
-    let opts = RenderOptions {
-        threads,
-        ..Default::default()
-    };
-    let (film, _, _) = common::render_rib_with(rib, &[dir], &opts);
-    common::film_rgb(&film)
-}
 
 #[test]
 fn lights_run_for_the_points_still_marching_see_each_points_position() {

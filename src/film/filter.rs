@@ -251,6 +251,12 @@ impl Table1d {
         }
     }
 
+    /// The raw table (`steps + 2` values), `steps / h` and `steps`, for vectorised lookups that
+    /// must give [`Table1d::at`]'s bits.
+    pub(crate) fn parts(&self) -> (&[f32], f32, i32) {
+        (&self.t, self.scale, self.steps)
+    }
+
     /// f(x) for |x| ≤ h, interpolated.
     #[inline(always)]
     pub fn at(&self, x: f32) -> f32 {

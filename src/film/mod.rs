@@ -6,10 +6,12 @@
 //! depend on the bucket size.
 //!
 //! Modules: [`filter`] (the RenderMan filter functions), [`resolve`] (samples → [`Film`]
-//! pixels, depth filters), [`quantize`] (exposure, background imager, quantize/dither),
-//! [`output`] (display drivers), [`zfile`] (arbor's depth-image format).
+//! pixels, depth filters), [`gather`] (the vectorised filter for the usual r g b a z
+//! buffer), [`quantize`] (exposure, background imager, quantize/dither), [`output`] (display
+//! drivers), [`zfile`] (arbor's depth-image format).
 
 pub mod filter;
+pub mod gather;
 pub mod output;
 pub mod quantize;
 pub mod resolve;

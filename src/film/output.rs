@@ -619,18 +619,39 @@ fn write_target(
             (3, true) => E::Rgb16,
             (_, true) => E::Rgba16,
         };
-        let mut bytes = Vec::with_capacity(w * h * nout * if sixteen { 2 } else { 1 });
-        for y in 0..h {
-            for x in 0..w {
-                for k in 0..nout {
-                    let v = quantize(sample(x, y, k), &q, x as u32, y as u32, k as u32);
-                    if sixteen {
-                        bytes.extend_from_slice(&(v.clamp(0.0, 65535.0) as u16).to_ne_bytes());
-                    } else {
-                        bytes.push(v.clamp(0.0, 255.0) as u8);
+        // Rows in parallel: this runs after the frame, on the critical path.
+        let bpv = if sixteen { 2 } else { 1 };
+        let mut bytes = vec![0u8; w * h * nout * bpv];
+        if w > 0 {
+            use rayon::prelude::*;
+            bytes
+                .par_chunks_mut(w * nout * bpv)
+                .enumerate()
+                .for_each(|(y, row)| {
+                    // Plain colour planes (the usual case): read the pixel's floats directly.
+                    let plain: Option<Vec<usize>> = (znorm.is_none())
+                        .then(|| planes.iter().take(nout).map(|p| p.src).collect())
+                        .flatten()
+                        .filter(|v: &Vec<usize>| v.len() == nout);
+                    let nch = film.channels();
+                    for x in 0..w {
+                        let px = &film.data[(y * w + x) * nch..(y * w + x + 1) * nch];
+                        for k in 0..nout {
+                            let v = match &plain {
+                                Some(src) => px[src[k]],
+                                None => sample(x, y, k),
+                            };
+                            let v = quantize(v, &q, x as u32, y as u32, k as u32);
+                            let at = (x * nout + k) * bpv;
+                            if sixteen {
+                                row[at..at + 2]
+                                    .copy_from_slice(&(v.clamp(0.0, 65535.0) as u16).to_ne_bytes());
+                            } else {
+                                row[at] = v.clamp(0.0, 255.0) as u8;
+                            }
+                        }
                     }
-                }
-            }
+                });
         }
         encode(path, t.format, &bytes, w, h, ct)
     };

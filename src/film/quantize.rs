@@ -91,12 +91,28 @@ pub fn quantize(v: f32, q: &Quantize, x: u32, y: u32, channel: u32) -> f32 {
     if q.dither != 0.0 {
         t += q.dither * dither_noise(x, y, channel);
     }
-    let r = t.round();
+    let r = round(t);
     // NaN → min; clamp keeps the range even for odd min/max orders.
     if r.is_nan() {
         return q.min;
     }
     r.max(q.min).min(q.max.max(q.min))
+}
+
+/// `t.round()` (half away from zero) without the library call the baseline x86-64 target
+/// makes for it: below 2²³ the truncating cast and the fraction are exact.
+#[inline]
+pub fn round(t: f32) -> f32 {
+    if t.abs() < 8_388_608.0 {
+        let i = t as i32 as f32;
+        let d = t - i;
+        // Branch-free: the fraction is random under dither.
+        let up = if d >= 0.5 { 1.0 } else { 0.0 };
+        let down = if d <= -0.5 { 1.0 } else { 0.0 };
+        (i + up - down).copysign(t)
+    } else {
+        t.round()
+    }
 }
 
 /// True when the quantizer asks for float output (one = 0, RISpec).
@@ -114,6 +130,42 @@ mod tests {
             f.pixel_mut(i, 0).copy_from_slice(v);
         }
         f
+    }
+
+    #[test]
+    fn round_is_the_library_round() {
+        let mut k = 1u32;
+        let mut vals = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            0.49999997,
+            -0.49999997,
+            8388607.5,
+            8388608.0,
+            -8388609.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e30,
+            -1e-30,
+            254.5,
+            255.49998,
+        ];
+        for _ in 0..100_000 {
+            k = k.wrapping_mul(747796405).wrapping_add(2891336453);
+            vals.push(f32::from_bits(k));
+            vals.push((k >> 8) as f32 / 65536.0 - 128.0);
+        }
+        for v in vals {
+            let (a, b) = (round(v), v.round());
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{v}: {a} vs {b}"
+            );
+        }
     }
 
     #[test]

@@ -13,6 +13,7 @@
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -289,6 +290,61 @@ struct Kept {
     cols: (usize, usize),
 }
 
+/// A hidden bucket waiting for its row (and the rows either side) to be filtered: its
+/// samples, or their filter-ready form.
+enum Hidden {
+    Samples(SampleBuffer),
+    /// Prepared for the gather, and the bucket's tile with the pixels that need no
+    /// neighbour already filtered.
+    Prepared(
+        crate::film::gather::Prepared,
+        Option<crate::film::gather::Partial>,
+    ),
+}
+
+impl Hidden {
+    fn bytes(&self) -> usize {
+        match self {
+            Hidden::Samples(b) => b.positions.len() * 8 + b.values.len() * 4,
+            Hidden::Prepared(p, _) => p.bytes(),
+        }
+    }
+}
+
+/// The samples of `parts` (buffers of whole pixels, same samples per pixel and channels)
+/// that lie in `region`, as one buffer over it. The parts must hold every pixel of the
+/// region (the sample regions of a bucket's neighbours do).
+fn assemble(region: PixelRect, parts: &[&SampleBuffer]) -> SampleBuffer {
+    let Some(first) = parts.first() else {
+        return SampleBuffer::new(region.x0, region.y0, 0, 0, 1, 1, 5);
+    };
+    let (sx, sy, ch) = (first.spp_x, first.spp_y, first.channels);
+    let spp = sx * sy;
+    let (w, h) = (region.width(), region.height());
+    let mut out = SampleBuffer::new(region.x0, region.y0, w, h, sx, sy, ch);
+    for p in parts {
+        let pr = PixelRect {
+            x0: p.x0,
+            y0: p.y0,
+            x1: p.x0 + p.width as i32,
+            y1: p.y0 + p.height as i32,
+        }
+        .intersect(region);
+        if pr.is_empty() {
+            continue;
+        }
+        let n = pr.width() * spp;
+        for y in pr.y0..pr.y1 {
+            let src = ((y - p.y0) as usize * p.width + (pr.x0 - p.x0) as usize) * spp;
+            let dst = ((y - region.y0) as usize * w + (pr.x0 - region.x0) as usize) * spp;
+            out.positions[dst..dst + n].copy_from_slice(&p.positions[src..src + n]);
+            out.values[dst * ch..(dst + n) * ch]
+                .copy_from_slice(&p.values[src * ch..(src + n) * ch]);
+        }
+    }
+    out
+}
+
 /// The bucket layout over the crop region.
 #[derive(Clone, Copy, Debug)]
 struct Buckets {
@@ -311,11 +367,24 @@ impl Buckets {
             y1: (y0 + self.size[1]).min(self.crop.y1),
         }
     }
-    /// The pixels a bucket samples: itself plus the filter margin, inside the image.
+    /// The pixels a bucket samples: its own, and where it lies on the edge of the crop region
+    /// the filter margin beyond that edge (inside the image). These regions partition the
+    /// crop region grown by the margin, so every sample is hidden once; a pixel's filter
+    /// reads the samples of the neighbouring buckets.
     fn sample_rect(&self, col: usize, row: usize) -> PixelRect {
-        self.rect(col, row)
-            .grow(self.margin[0], self.margin[1])
-            .intersect(self.image)
+        let r = self.rect(col, row);
+        let [mx, my] = self.margin;
+        PixelRect {
+            x0: r.x0 - if col == 0 { mx } else { 0 },
+            y0: r.y0 - if row == 0 { my } else { 0 },
+            x1: r.x1 + if col + 1 == self.cols { mx } else { 0 },
+            y1: r.y1 + if row + 1 == self.rows { my } else { 0 },
+        }
+        .intersect(self.image)
+    }
+    /// Buckets either side whose samples a bucket's filter reads: ⌈margin / size⌉.
+    fn reach(&self, axis: usize) -> usize {
+        (self.margin[axis].max(0) as usize).div_ceil(self.size[axis].max(1) as usize)
     }
     /// Bucket indices whose sample regions may contain raster positions in [lo, hi] along
     /// one axis (`axis` 0 = x, 1 = y), clamped to the layout; None when there are none.
@@ -330,17 +399,16 @@ impl Buckets {
         }
         let (s, m) = (self.size[axis] as i64, self.margin[axis] as i64);
         // Clamp first: huge or non-finite raster bounds must not overflow the arithmetic.
-        let p0 = lo.clamp(-1e9, 1e9).floor() as i64;
+        // Samples of pixel p lie in [p, p + 1] (the right end included when the jitter
+        // rounds up), so pixels ⌈lo⌉ − 1 to ⌊hi⌋ can have samples in [lo, hi].
+        let p0 = lo.clamp(-1e9, 1e9).ceil() as i64 - 1;
         let p1 = hi.clamp(-1e9, 1e9).floor() as i64;
         if p1 < origin as i64 - m || p0 >= end as i64 + m {
             return None;
         }
-        let first = (p0 - origin as i64 - m)
-            .div_euclid(s)
-            .clamp(0, n as i64 - 1);
-        let last = (p1 - origin as i64 + m)
-            .div_euclid(s)
-            .clamp(0, n as i64 - 1);
+        // The margin beyond the region belongs to the edge buckets.
+        let first = (p0 - origin as i64).div_euclid(s).clamp(0, n as i64 - 1);
+        let last = (p1 - origin as i64).div_euclid(s).clamp(0, n as i64 - 1);
         (first <= last).then_some((first as usize, last as usize))
     }
 }
@@ -804,21 +872,86 @@ fn render_inner(
     let total = buckets.rows * buckets.cols;
     let done = AtomicUsize::new(0);
     let pixel_filter = crate::film::Filter::from_scene(&options.pixel_filter);
-    // Buckets of a row are filtered in parallel into tiles, then written into the film.
-    let filter_row = |film: &mut Film, row: usize, bufs: &[SampleBuffer]| {
+    let tables = pixel_filter.tables();
+    // The usual r g b a z buffer under a narrow separable filter: each bucket's samples are
+    // prepared for the vectorised gather as soon as they are hidden.
+    let hcfg = frame.hider.config();
+    let gather = tables
+        .as_ref()
+        .filter(|t| {
+            crate::film::gather::applies(
+                &pixel_filter,
+                Some(t),
+                hcfg.channels(),
+                frame.hider.samples_per_pixel(),
+                &film,
+            )
+        })
+        .map(|t| crate::film::gather::PrepareCtx::new(&pixel_filter, t, depth_filter));
+    let (kx, ky) = (buckets.reach(0), buckets.reach(1));
+    // Filters row `row` once its neighbour rows are hidden: each bucket's pixels from its
+    // own samples and those of the buckets around it, in parallel into tiles, then written
+    // into the film.
+    let filter_row = |film: &mut Film, row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
         let t = Instant::now();
         let shared: &Film = film;
-        let tiles: Vec<crate::film::Tile> = bufs
-            .par_iter()
+        // The tiles the hiding started.
+        let partials: Vec<Option<crate::film::gather::Partial>> = rows
+            .iter_mut()
+            .find(|(r, _)| *r == row)
+            .map(|(_, hs)| {
+                hs.iter_mut()
+                    .map(|h| match h {
+                        Hidden::Prepared(_, partial) => partial.take(),
+                        Hidden::Samples(_) => None,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let rows: &VecDeque<(usize, Vec<Hidden>)> = rows;
+        let near = |col: usize| -> Vec<&Hidden> {
+            rows.iter()
+                .filter(|(r, _)| r + ky >= row && *r <= row + ky)
+                .flat_map(|(_, hs)| hs[col.saturating_sub(kx)..(col + kx + 1).min(hs.len())].iter())
+                .collect()
+        };
+        let tiles: Vec<crate::film::Tile> = partials
+            .into_par_iter()
             .enumerate()
-            .map(|(col, buf)| {
+            .map(|(col, partial)| {
                 let r = buckets.rect(col, row);
+                let parts = near(col);
+                let (x0, y0) = (r.x0 as usize, r.y0 as usize);
+                let prepared: Option<Vec<&crate::film::gather::Prepared>> = parts
+                    .iter()
+                    .map(|h| match h {
+                        Hidden::Prepared(p, _) => Some(p),
+                        Hidden::Samples(_) => None,
+                    })
+                    .collect();
+                if let Some(p) = prepared {
+                    let partial = partial.unwrap_or_else(|| {
+                        crate::film::gather::Partial::empty(shared, x0, y0, r.width(), r.height())
+                    });
+                    return crate::film::gather::finish_tile(shared, &p, partial);
+                }
+                let region = r
+                    .grow(buckets.margin[0], buckets.margin[1])
+                    .intersect(buckets.image);
+                let bufs: Vec<&SampleBuffer> = parts
+                    .iter()
+                    .filter_map(|h| match h {
+                        Hidden::Samples(b) => Some(b),
+                        Hidden::Prepared(..) => None,
+                    })
+                    .collect();
+                let buf = assemble(region, &bufs);
                 crate::film::filter_tile(
                     shared,
-                    buf,
+                    &buf,
                     &pixel_filter,
-                    r.x0 as usize,
-                    r.y0 as usize,
+                    x0,
+                    y0,
                     r.width(),
                     r.height(),
                     depth_filter,
@@ -836,7 +969,9 @@ fn render_inner(
         stats.time(Stage::Filter, t);
     };
     let mut kept: Vec<Kept> = Vec::new();
-    let mut hidden: Option<(usize, Vec<SampleBuffer>)> = None;
+    // Hidden rows still needed by a row to filter, oldest first.
+    let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
+    let mut next_filter = 0usize;
     for row in 0..buckets.rows {
         // Split, dice and shade everything that starts in this row.
         let mut frontier = std::mem::take(&mut pending[row]);
@@ -873,9 +1008,9 @@ fn render_inner(
                 }
             }
         }
-        // Hide this row's buckets in parallel while the previous row is filtered (filtering
-        // writes into the one film, so it runs on one thread).
-        let hide_row = || -> Vec<SampleBuffer> {
+        // Hide this row's buckets in parallel (each prepared for the filter at once).
+        let film_ref: &Film = &film;
+        let hide_row = || -> Vec<Hidden> {
             (0..buckets.cols)
                 .into_par_iter()
                 .map(|col| {
@@ -887,21 +1022,67 @@ fn render_inner(
                         })
                         .map(|k| k.grid.as_ref())
                         .collect();
-                    let buf = frame
-                        .hider
-                        .hide(buckets.sample_rect(col, row), &grids, stats);
-                    stats.time(Stage::Hide, t);
-                    buf
+                    let rect = buckets.sample_rect(col, row);
+                    let h = match &gather {
+                        Some(ctx) => {
+                            let p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
+                                Some(p) => {
+                                    stats.time(Stage::Hide, t);
+                                    p
+                                }
+                                None => {
+                                    let buf = frame.hider.hide(rect, &grids, stats);
+                                    stats.time(Stage::Hide, t);
+                                    let t = Instant::now();
+                                    let p = crate::film::gather::prepare(&buf, ctx);
+                                    stats.time(Stage::Filter, t);
+                                    p
+                                }
+                            };
+                            // The pixels needing no other bucket, filtered while hot.
+                            let t = Instant::now();
+                            let out = buckets.rect(col, row);
+                            let partial = crate::film::gather::start_tile(
+                                film_ref,
+                                &p,
+                                out.x0 as usize,
+                                out.y0 as usize,
+                                out.width(),
+                                out.height(),
+                            );
+                            stats.time(Stage::Filter, t);
+                            Hidden::Prepared(p, Some(partial))
+                        }
+                        None => {
+                            let buf = frame.hider.hide(rect, &grids, stats);
+                            stats.time(Stage::Hide, t);
+                            Hidden::Samples(buf)
+                        }
+                    };
+                    stats.alloc(h.bytes());
+                    h
                 })
                 .collect()
         };
-        let previous = hidden.take();
-        let (bufs, ()) = rayon::join(hide_row, || {
-            if let Some((r, bufs)) = previous {
-                filter_row(&mut film, r, &bufs);
+        let bufs = hide_row();
+        hidden.push_back((row, bufs));
+        // Filter the rows whose neighbours are now all hidden, while their samples are
+        // still in the caches.
+        while next_filter + ky <= row {
+            filter_row(&mut film, next_filter, &mut hidden);
+            next_filter += 1;
+        }
+        // Drop the rows no row left to filter needs.
+        while hidden.front().is_some_and(|(r, _)| r + ky < next_filter) {
+            if let Some((_, hs)) = hidden.pop_front() {
+                for h in hs {
+                    stats.free(h.bytes());
+                    if let (Hidden::Prepared(p, _), Some(ctx)) = (h, &gather) {
+                        ctx.recycle(p);
+                    }
+                }
             }
-        });
-        hidden = Some((row, bufs));
+        }
         // Free the grids no later row needs.
         kept.retain(|k| {
             let keep = k.rows.1 > row;
@@ -911,8 +1092,12 @@ fn render_inner(
             keep
         });
     }
-    if let Some((r, bufs)) = hidden.take() {
-        filter_row(&mut film, r, &bufs);
+    while next_filter < buckets.rows {
+        filter_row(&mut film, next_filter, &mut hidden);
+        next_filter += 1;
+    }
+    for (_, hs) in hidden.drain(..) {
+        hs.iter().for_each(|h| stats.free(h.bytes()));
     }
     frame.hider.finish(diags);
     stats.free(film_bytes);

@@ -87,6 +87,118 @@ pub fn pixel_positions(
     }
 }
 
+/// [`pixel_positions`] into separate x and y arrays (`xs·ys` values each, rows of `xs`
+/// strata): the same bits, the hashes of four samples at a time where the CPU has AVX2.
+pub fn pixel_positions_xy(
+    px: i32,
+    py: i32,
+    [xs, ys]: [usize; 2],
+    jitter: bool,
+    seed: u64,
+    out_x: &mut [f32],
+    out_y: &mut [f32],
+) {
+    let n = xs * ys;
+    let a = ((px as u32 as u64) << 32) | py as u32 as u64;
+    let h0 = mix64(a ^ seed.rotate_left(17));
+    #[cfg(target_arch = "x86_64")]
+    if jitter && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        unsafe { avx2::jitter(h0, n, &mut out_x[..n], &mut out_y[..n]) };
+        let (fx, fy) = (xs as f32, ys as f32);
+        for sy in 0..ys {
+            for sx in 0..xs {
+                let k = sy * xs + sx;
+                out_x[k] = px as f32 + (sx as f32 + out_x[k]) / fx;
+                out_y[k] = py as f32 + (sy as f32 + out_y[k]) / fy;
+            }
+        }
+        return;
+    }
+    let mut tmp = Vec::with_capacity(n);
+    pixel_positions(px, py, [xs, ys], jitter, seed, &mut tmp);
+    for (k, p) in tmp.iter().enumerate() {
+        out_x[k] = p[0];
+        out_y[k] = p[1];
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    /// The low 64 bits of a · c for four u64 lanes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn mul64(a: __m256i, c: u64) -> __m256i {
+        let (lo, hi) = (
+            _mm256_set1_epi64x(c as i64),
+            _mm256_set1_epi64x((c >> 32) as i64),
+        );
+        let ll = _mm256_mul_epu32(a, lo);
+        let hl = _mm256_mul_epu32(_mm256_srli_epi64::<32>(a), lo);
+        let lh = _mm256_mul_epu32(a, hi);
+        _mm256_add_epi64(ll, _mm256_slli_epi64::<32>(_mm256_add_epi64(hl, lh)))
+    }
+
+    /// [`super::mix64`] of four lanes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn mix64(z: __m256i) -> __m256i {
+        let z = _mm256_add_epi64(z, _mm256_set1_epi64x(0x9E37_79B9_7F4A_7C15u64 as i64));
+        let z = mul64(
+            _mm256_xor_si256(z, _mm256_srli_epi64::<30>(z)),
+            0xBF58_476D_1CE4_E5B9,
+        );
+        let z = mul64(
+            _mm256_xor_si256(z, _mm256_srli_epi64::<27>(z)),
+            0x94D0_49BB_1331_11EB,
+        );
+        _mm256_xor_si256(z, _mm256_srli_epi64::<31>(z))
+    }
+
+    /// [`super::unit`] of four lanes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn unit(h: __m256i) -> __m128 {
+        let top = _mm256_srli_epi64::<40>(h);
+        let packed = _mm256_permutevar8x32_epi32(top, _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6));
+        let i = _mm256_castsi256_si128(packed);
+        _mm_mul_ps(_mm_cvtepi32_ps(i), _mm_set1_ps(1.0 / (1u64 << 24) as f32))
+    }
+
+    /// The jitter (jx, jy) of samples 0..n of the pixel whose hash is `h0`.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn jitter(h0: u64, n: usize, jx: &mut [f32], jy: &mut [f32]) {
+        let mut k = 0;
+        while k < n {
+            let idx = _mm256_setr_epi64x(k as i64, k as i64 + 1, k as i64 + 2, k as i64 + 3);
+            let h1 = mix64(_mm256_xor_si256(_mm256_set1_epi64x(h0 as i64), idx));
+            let x = unit(mix64(_mm256_xor_si256(h1, _mm256_set1_epi64x(1))));
+            let y = unit(mix64(_mm256_xor_si256(h1, _mm256_set1_epi64x(2))));
+            if k + 4 <= n {
+                // SAFETY: four floats from k < n - 3.
+                unsafe {
+                    _mm_storeu_ps(jx.as_mut_ptr().add(k), x);
+                    _mm_storeu_ps(jy.as_mut_ptr().add(k), y);
+                }
+            } else {
+                let (mut bx, mut by) = ([0f32; 4], [0f32; 4]);
+                // SAFETY: four floats each.
+                unsafe {
+                    _mm_storeu_ps(bx.as_mut_ptr(), x);
+                    _mm_storeu_ps(by.as_mut_ptr(), y);
+                }
+                for m in 0..n - k {
+                    jx[k + m] = bx[m];
+                    jy[k + m] = by[m];
+                }
+            }
+            k += 4;
+        }
+    }
+}
+
 /// Shirley and Chiu's concentric map from the unit square to the unit disk (strata stay
 /// compact, so stratified lens samples stay stratified).
 #[inline]
@@ -175,6 +287,33 @@ mod tests {
             }
         }
         assert!((m / (n * n) as f32 - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn soa_positions_match_the_reference_bits() {
+        for (px, py, spp) in [
+            (0, 0, [4, 4]),
+            (-7, 1000, [3, 5]),
+            (123, 45, [1, 1]),
+            (9, 9, [8, 8]),
+        ] {
+            for jitter in [true, false] {
+                let mut v = Vec::new();
+                pixel_positions(px, py, spp, jitter, 77, &mut v);
+                let n = spp[0] * spp[1];
+                let (mut x, mut y) = (vec![0f32; n], vec![0f32; n]);
+                pixel_positions_xy(px, py, spp, jitter, 77, &mut x, &mut y);
+                for k in 0..n {
+                    assert_eq!(v[k][0].to_bits(), x[k].to_bits());
+                    assert_eq!(v[k][1].to_bits(), y[k].to_bits());
+                    let (sx, sy) = (k % spp[0], k / spp[0]);
+                    assert_eq!(
+                        v[k],
+                        sample_position(px, py, sx, sy, spp[0], spp[1], jitter, 77)
+                    );
+                }
+            }
+        }
     }
 
     #[test]

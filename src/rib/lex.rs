@@ -35,6 +35,23 @@ pub(crate) fn scan_number(b: &[u8], start: usize) -> Option<(Num, usize)> {
         neg = b[i] == b'-';
         i += 1;
     }
+    // `nan`, `inf` and `infinity` (any case): what C's printf writes for values that are not
+    // finite. RISpec has no such numbers; the scene builder warns and drops the request.
+    for (word, v) in [
+        (&b"infinity"[..], f32::INFINITY),
+        (&b"inf"[..], f32::INFINITY),
+        (&b"nan"[..], f32::NAN),
+    ] {
+        let end = i + word.len();
+        if end <= n
+            && b[i..end].eq_ignore_ascii_case(word)
+            && !b
+                .get(end)
+                .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+        {
+            return Some((Num::Float(if neg { -v } else { v }), end));
+        }
+    }
     // Up to 19 significant digits are kept exactly; the rest only move the exponent.
     let mut mant: u64 = 0;
     let mut kept = 0u32;

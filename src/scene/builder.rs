@@ -14,7 +14,7 @@ use std::sync::Arc;
 use glam::{Mat4, Vec3};
 
 use crate::diag::{Diag, Diagnostics, Severity, SourceMap, Span};
-use crate::rib::Request;
+use crate::rib::{Request, Value};
 
 use super::params::{parse_params, validate_single, ColorMap, Dictionary, ParamUse};
 use super::table::{self, Call};
@@ -411,6 +411,26 @@ impl<'a> Builder<'a> {
             self.report(d);
             return;
         };
+        // `nan`/`inf` (C's printf of a broken value): the request would poison a transform
+        // or a primitive's bound, so it is left out, naming the value.
+        if let Some(a) = r.args.iter().find(|a| match &a.value {
+            Value::Float(f) => !f.is_finite(),
+            Value::FloatArray(v) => v.iter().any(|f| !f.is_finite()),
+            _ => false,
+        }) {
+            self.report(
+                Diag::warning(
+                    "scene::not-finite",
+                    format!(
+                        "`{}` has a value that is not a finite number; the request is ignored",
+                        r.name
+                    ),
+                )
+                .label(a.span, "not a finite number")
+                .help("the program that wrote this RIB printed a NaN or an infinity here"),
+            );
+            return;
+        }
         let ncomps = self.colors.as_ref().map_or(3, |c| c.n);
         match table::check_args(r, spec, ncomps) {
             Ok(call) => {

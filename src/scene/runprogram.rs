@@ -51,6 +51,8 @@ struct Proc {
     /// Bytes read but not yet part of a reply.
     pending: Vec<u8>,
     stderr: Arc<Mutex<Vec<u8>>>,
+    /// Signalled when the stderr reader has seen the end of the program's standard error.
+    stderr_done: Receiver<()>,
     /// Set once the program has failed; later requests are refused with it.
     failed: Option<String>,
 }
@@ -220,6 +222,9 @@ impl Proc {
     /// The error for a program whose output ended before its reply did.
     fn ended(&mut self, what: &str, bytes: usize) -> ProgramError {
         let status = wait_with_grace(&mut self.child, Duration::from_millis(500));
+        // The program has exited: let the stderr reader drain what it wrote last, so the
+        // message can quote it (a short wait; a grandchild may still hold the pipe).
+        let _ = self.stderr_done.recv_timeout(Duration::from_millis(500));
         let status = match status {
             Some(s) => format!(" ({s})"),
             None => String::new(),
@@ -334,6 +339,7 @@ fn start(exe: &Path, args: &[String]) -> std::io::Result<Proc> {
     });
     let kept = Arc::new(Mutex::new(Vec::new()));
     let sink = kept.clone();
+    let (done_tx, stderr_done) = mpsc::channel::<()>();
     std::thread::spawn(move || {
         let mut buf = vec![0u8; 4096];
         loop {
@@ -351,6 +357,7 @@ fn start(exe: &Path, args: &[String]) -> std::io::Result<Proc> {
                 Err(_) => break,
             }
         }
+        let _ = done_tx.send(());
     });
     Ok(Proc {
         child,
@@ -358,6 +365,7 @@ fn start(exe: &Path, args: &[String]) -> std::io::Result<Proc> {
         from_child,
         pending: Vec::new(),
         stderr: kept,
+        stderr_done,
         failed: None,
     })
 }

@@ -1727,8 +1727,12 @@ impl<'a> Lowerer<'a> {
         span: Span,
         hint: Option<BaseType>,
     ) -> Val {
+        // The context's type does not reach into arithmetic: a call whose return type is
+        // ambiguous (`noise`, `texture`, …) inside `c *= 1 - k + k * noise(x)` is a float
+        // unless its sibling operand says otherwise, as PRMan and Aqsis compile it (a colour
+        // hint there gave LGParquetPlank's planks a different noise per channel).
+        let _ = hint;
         let sub_hint = match op {
-            BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div => hint,
             BinOp::Dot | BinOp::Cross => Some(BaseType::Vector),
             _ => None,
         };

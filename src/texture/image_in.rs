@@ -79,11 +79,19 @@ fn tiff_description(b: &[u8]) -> Option<String> {
     };
     let u16_at = |o: usize| -> Option<u32> {
         let x: [u8; 2] = b.get(o..o + 2)?.try_into().ok()?;
-        Some(if big { u16::from_be_bytes(x) } else { u16::from_le_bytes(x) } as u32)
+        Some(if big {
+            u16::from_be_bytes(x)
+        } else {
+            u16::from_le_bytes(x)
+        } as u32)
     };
     let u32_at = |o: usize| -> Option<u32> {
         let x: [u8; 4] = b.get(o..o + 4)?.try_into().ok()?;
-        Some(if big { u32::from_be_bytes(x) } else { u32::from_le_bytes(x) })
+        Some(if big {
+            u32::from_be_bytes(x)
+        } else {
+            u32::from_le_bytes(x)
+        })
     };
     let ifd = u32_at(4)? as usize;
     let count = u16_at(ifd)? as usize;
@@ -93,7 +101,11 @@ fn tiff_description(b: &[u8]) -> Option<String> {
             continue;
         }
         let len = u32_at(e + 4)? as usize;
-        let at = if len <= 4 { e + 8 } else { u32_at(e + 8)? as usize };
+        let at = if len <= 4 {
+            e + 8
+        } else {
+            u32_at(e + 8)? as usize
+        };
         let text = b.get(at..at + len)?;
         let text = text.split(|&c| c == 0).next()?;
         return Some(String::from_utf8_lossy(text).into_owned());
@@ -162,9 +174,25 @@ mod tests {
 
     /// A one-entry TIFF directory holding only an ImageDescription.
     fn tiff_with_description(big: bool, text: &str) -> Vec<u8> {
-        let u16b = |x: u16| if big { x.to_be_bytes() } else { x.to_le_bytes() };
-        let u32b = |x: u32| if big { x.to_be_bytes() } else { x.to_le_bytes() };
-        let mut b: Vec<u8> = if big { b"MM\0\x2a".to_vec() } else { b"II\x2a\0".to_vec() };
+        let u16b = |x: u16| {
+            if big {
+                x.to_be_bytes()
+            } else {
+                x.to_le_bytes()
+            }
+        };
+        let u32b = |x: u32| {
+            if big {
+                x.to_be_bytes()
+            } else {
+                x.to_le_bytes()
+            }
+        };
+        let mut b: Vec<u8> = if big {
+            b"MM\0\x2a".to_vec()
+        } else {
+            b"II\x2a\0".to_vec()
+        };
         b.extend(u32b(8));
         b.extend(u16b(1));
         let mut t = text.as_bytes().to_vec();

@@ -212,7 +212,9 @@ impl<'a> TextureSystem<'a> {
             self.diags.report(
                 Diag::warning(
                     "texture::raw",
-                    format!("texture `{name}` is a plain picture: converted to a mip-map on first use"),
+                    format!(
+                        "texture `{name}` is a plain picture: converted to a mip-map on first use"
+                    ),
                 )
                 .help(format!(
                     "prepare it once with `arbor texture {name} {name}.tex`"

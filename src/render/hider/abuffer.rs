@@ -680,6 +680,10 @@ impl Hider for ABuffer {
         }
     }
 
+    fn samples_per_pixel(&self) -> usize {
+        self.w * self.w
+    }
+
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
         let cfg = &self.config;
         let w = self.w;

@@ -381,7 +381,9 @@ impl ShadedGrid {
     }
 
     /// Where this grid is sampled in bucket `rect`: the region clipped by the grid's bound
-    /// as (x0, y0, x1, y1), or None when they do not meet.
+    /// as (x0, y0, x1, y1), or None when they do not meet. Closed: a pixel's samples lie in
+    /// [p, p + 1], the right end included (jitter can round up to it), so a grid whose bound
+    /// starts exactly at the bucket's right edge can still cover a sample of the bucket.
     pub fn window(&self, rect: &PixelRect) -> Option<[f32; 4]> {
         let w = [
             (rect.x0 as f32).max(self.bound[0]),
@@ -389,7 +391,7 @@ impl ShadedGrid {
             (rect.x1 as f32).min(self.bound[2]),
             (rect.y1 as f32).min(self.bound[3]),
         ];
-        (w[0] < w[2] && w[1] < w[3]).then_some(w)
+        (w[0] <= w[2] && w[1] <= w[3]).then_some(w)
     }
 
     /// The live micropolygons whose raster bound meets window `w`, as (micropolygon index,
@@ -617,7 +619,23 @@ impl HiderConfig {
 pub trait Hider: Sync {
     /// Samples `grids` in the pixels of `rect` (a bucket plus its filter margin).
     fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer;
+    /// [`Hider::hide`] straight into the gather filter's form, when the hider can: the same
+    /// as `gather::prepare(&self.hide(…), ctx)`. None when it cannot (the caller then hides
+    /// and prepares).
+    fn hide_prepared(
+        &self,
+        _rect: PixelRect,
+        _grids: &[&ShadedGrid],
+        _stats: &Stats,
+        _ctx: &crate::film::gather::PrepareCtx,
+    ) -> Option<crate::film::gather::Prepared> {
+        None
+    }
     fn config(&self) -> &HiderConfig;
+    /// Samples per pixel of the buffers [`Hider::hide`] returns.
+    fn samples_per_pixel(&self) -> usize {
+        self.config().spp[0] * self.config().spp[1]
+    }
     /// Called once after a frame's last bucket: reports what the buckets could not (they run
     /// in parallel without diagnostics), e.g. a resource bound that was hit.
     fn finish(&self, _diags: &Diagnostics) {}
