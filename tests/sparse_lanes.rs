@@ -3,12 +3,14 @@
 //! results must be exactly those of computing every point: the same bits in every output, for
 //! shaders that take derivatives, index arrays, break, continue and return inside divergent
 //! loops, for every built-in, and for whole renders with marching atmospheres and lights.
+//! The same holds for compacted loops (a loop whose points are pointwise computations goes on
+//! over its running points gathered into a smaller grid once few run).
 
 mod common;
 
 use arbor::diag::{Diagnostics, SourceMap};
 use arbor::render::driver::RenderOptions;
-use arbor::shade::exec::{Env, Exec, SPARSE_LANES};
+use arbor::shade::exec::{Env, Exec, COMPACT_LOOPS, SPARSE_LANES};
 use arbor::shade::value::Slot;
 use arbor::sl::ir::Program;
 use arbor::sl::library::{compile_source, CompileOptions};
@@ -34,9 +36,10 @@ fn compile(text: &str) -> Program {
 }
 
 /// Runs a surface program over an NU×NV grid (a gently curved patch facing the eye) with
-/// sparse lanes on or off; returns the bits of Ci and Oi at every point and how many
-/// instructions ran over listed points only.
-fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64) {
+/// sparse lanes on or off (and compacted loops when `sparse`); returns the bits of Ci and Oi
+/// at every point, how many instructions ran over listed points only and how many loops
+/// were compacted.
+fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64, u64) {
     let n = NU * NV;
     let diags = Diagnostics::new();
     let spaces = |_: &str| Some(Mat4::from_translation(Vec3::new(0.1, 0.2, 0.3)));
@@ -58,6 +61,7 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64) {
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.sparse = sparse;
+    ex.compact = sparse;
     ex.run_init();
     let (du, dv) = (1.0 / (NU - 1) as f32, 1.0 / (NV - 1) as f32);
     let u: Vec<f32> = (0..n).map(|k| (k % NU) as f32 * du).collect();
@@ -103,18 +107,26 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64) {
             [c.x, c.y, c.z, o.x, o.y, o.z].map(f32::to_bits)
         })
         .collect();
-    (bits, ex.sparse_ops)
+    (bits, ex.sparse_ops, ex.compactions)
 }
 
 /// Compiles and runs `src` both ways; the outputs must be the same bits, and (when
 /// `expect_sparse`) some instructions must really have run sparse.
 fn same_both_ways(src: &str, expect_sparse: bool) {
+    same_both_ways_c(src, expect_sparse, false)
+}
+
+/// [`same_both_ways`]; with `expect_compact`, some loop must have been compacted.
+fn same_both_ways_c(src: &str, expect_sparse: bool, expect_compact: bool) {
     let prog = compile(src);
-    let (dense, none) = run(&prog, false);
-    let (sparse, used) = run(&prog, true);
-    assert_eq!(none, 0);
+    let (dense, none, no_compactions) = run(&prog, false);
+    let (sparse, used, compactions) = run(&prog, true);
+    assert_eq!((none, no_compactions), (0, 0));
     if expect_sparse {
         assert!(used > 0, "no instruction ran sparse in:\n{src}");
+    }
+    if expect_compact {
+        assert!(compactions > 0, "no loop was compacted in:\n{src}");
     }
     for (k, (a, b)) in dense.iter().zip(&sparse).enumerate() {
         assert_eq!(
@@ -169,6 +181,58 @@ surface march(float k = 3;) {
 #[test]
 fn a_divergent_march_gives_the_same_bits_sparse_or_not() {
     same_both_ways(MARCH, true);
+}
+
+/// Loops of pointwise computations are compacted: a march whose points leave at very
+/// different steps (nested loops, break, continue, an inlined function with early returns,
+/// random numbers, noise, a variable made varying inside the loop, temporaries read after
+/// it) gives the same bits as running over the whole grid.
+#[test]
+fn compacted_loops_give_the_same_bits() {
+    same_both_ways_c(
+        r#"
+float bend(float x) {
+    if (x > 0.7)
+        return x * 0.5;
+    if (x < 0.1)
+        return 1 - x;
+    return x * x;
+}
+surface compact(float k = 3;) {
+    float i = 0, acc = 0, r = 0, late = 1;
+    float steps = floor(s * 57 + t * 13) + 1;
+    point p = P;
+    color c = 0;
+    uniform float u = 0;
+    while (i < steps) {
+        i += 1;
+        if (mod(i, 5) == 2)
+            continue;
+        float e = exp(-i * t * k) + pow(abs(sin(i * s)), 1.5);
+        acc += e * bend(s) + clamp(i / steps, 0.1, 0.9) + smoothstep(0.2, 0.8, t);
+        p += normalize(N + vector(i, s, t)) * 0.01;
+        r = random();
+        color rc = color random();
+        float j = 0;
+        while (j < mod(i, 4)) {
+            j += 1;
+            acc += 0.01 * noise(p * j) + 0.001 * float cellnoise(p * 2);
+            if (acc > 30 + 20 * s)
+                break;
+        }
+        late = i;
+        c += color(acc > 10 ? 1 : 0, min(acc, 3, i), max(e, 0.5)) * 0.01 + rc * 0.001;
+        u += 1;
+        if (acc > 40 + 30 * t)
+            break;
+    }
+    Ci = c + color(acc, i, length(p)) * 0.01 + late * 0.001;
+    Oi = color(xcomp(p), u * 0.001 + r, zcomp(p));
+}
+"#,
+        false,
+        true,
+    );
 }
 
 /// Nested loops, a temporary computed before a loop and read inside it, a derivative of a
@@ -361,6 +425,7 @@ WorldEnd
 "#;
     let render = |sparse: bool, threads: usize| {
         SPARSE_LANES.store(sparse, std::sync::atomic::Ordering::Relaxed);
+        COMPACT_LOOPS.store(sparse, std::sync::atomic::Ordering::Relaxed);
         let opts = RenderOptions {
             threads,
             ..Default::default()
@@ -372,6 +437,7 @@ WorldEnd
     let sparse1 = render(true, 1);
     let sparse2 = render(true, 2);
     SPARSE_LANES.store(true, std::sync::atomic::Ordering::Relaxed);
+    COMPACT_LOOPS.store(true, std::sync::atomic::Ordering::Relaxed);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert!(dense.iter().any(|&x| x > 0.01), "the fog is lit");
     assert_eq!(

@@ -987,18 +987,20 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         RandomF => {
             let seed = ex.env.seed;
             let base = random_site(ex, span);
+            let ex = &*ex;
             write_f_l(&mut out, n, lanes, true, |i| {
-                pn_hash(seed, base, i as u32, 0)
+                pn_hash(seed, base, ex.point_id(i), 0)
             });
         }
         RandomT => {
             let seed = ex.env.seed;
             let base = random_site(ex, span);
             write_t_l(&mut out, n, lanes, true, |i| {
+                let i = ex.point_id(i);
                 Vec3::new(
-                    pn_hash(seed, base, i as u32, 0),
-                    pn_hash(seed, base, i as u32, 1),
-                    pn_hash(seed, base, i as u32, 2),
+                    pn_hash(seed, base, i, 0),
+                    pn_hash(seed, base, i, 1),
+                    pn_hash(seed, base, i, 2),
                 )
             });
         }

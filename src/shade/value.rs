@@ -307,21 +307,62 @@ pub fn flat_mut(v: &mut [Vec3]) -> &mut [f32] {
     unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<f32>(), v.len() * 3) }
 }
 
-/// `o[i] = g(i)` over the lanes. Never inlined: each caller's closure gets its own small
-/// function, where the closure is inlined and the loop vectorised (inlined into the large
-/// instruction dispatch, the closures stayed calls per point).
-#[inline(never)]
-fn run<R: Copy>(o: &mut [R], lanes: Lanes, g: impl Fn(usize) -> R) {
-    match lanes {
-        Lanes::All => {
-            for (i, x) in o.iter_mut().enumerate() {
-                *x = g(i);
+/// Whether this CPU has AVX2 (detected once; the kernels below then run a copy compiled for
+/// it: eight points per vector instead of four, the same IEEE operations, so the same bits —
+/// no fused multiply-add is enabled).
+#[inline(always)]
+pub fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Defines `$name` (never inlined: each caller's closure gets its own small function, where
+/// the closure is inlined and the loop vectorised — inlined into the large instruction
+/// dispatch, the closures stayed calls per point) running `$body`, in a copy compiled for
+/// AVX2 when the CPU has it.
+macro_rules! kernel {
+    ($(#[$m:meta])* $vis:vis fn $name:ident <$($gen:ident $(: $bound:path)?),*> ($($arg:ident : $ty:ty),* $(,)?) $body:block) => {
+        $(#[$m])*
+        #[inline(never)]
+        $vis fn $name<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+            #[inline(always)]
+            fn body<$($gen $(: $bound)?),*>($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2")]
+            unsafe fn body_avx2<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+                body($($arg),*)
             }
+            #[cfg(target_arch = "x86_64")]
+            if $crate::shade::value::has_avx2() {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                return unsafe { body_avx2($($arg),*) };
+            }
+            body($($arg),*)
         }
-        Lanes::Some(idx) => {
-            for &i in idx {
-                let i = i as usize;
-                o[i] = g(i);
+    };
+}
+pub(crate) use kernel;
+
+kernel! {
+    /// `o[i] = g(i)` over the lanes.
+    fn run<R: Copy, G: Fn(usize) -> R>(o: &mut [R], lanes: Lanes, g: G) {
+        match lanes {
+            Lanes::All => {
+                for (i, x) in o.iter_mut().enumerate() {
+                    *x = g(i);
+                }
+            }
+            Lanes::Some(idx) => {
+                for &i in idx {
+                    let i = i as usize;
+                    o[i] = g(i);
+                }
             }
         }
     }
@@ -459,43 +500,46 @@ pub fn t2c(out: &mut Slot, n: usize, lanes: Lanes, a: T, b: T, f: impl Fn(f32, f
     *out = Slot::VT(v);
 }
 
-/// `o[k] = f(x[k], y[k])` (not inlined, see [`run`]).
-#[inline(never)]
-fn zip_flat(o: &mut [f32], x: &[f32], y: &[f32], f: impl Fn(f32, f32) -> f32) {
-    let m = o.len();
-    let (x, y) = (&x[..m], &y[..m]);
-    for i in 0..m {
-        o[i] = f(x[i], y[i]);
-    }
-}
-
-/// `o[k] = f(x[k])` (not inlined, see [`run`]).
-#[inline(never)]
-fn map_flat(o: &mut [f32], x: &[f32], f: impl Fn(f32) -> f32) {
-    for (o, &x) in o.iter_mut().zip(x) {
-        *o = f(x);
-    }
-}
-
-/// `o[k] = f(x[k], u[k % 3])` over flat triples: twelve floats (four points) at a time so the
-/// repeating uniform pattern lines up with the vector lanes. Not inlined (see [`run`]).
-#[inline(never)]
-fn pattern(o: &mut [f32], x: &[f32], u: Vec3, f: impl Fn(f32, f32) -> f32) {
-    let p: [f32; 12] = [u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z];
-    let mut oc = o.chunks_exact_mut(12);
-    let mut xc = x.chunks_exact(12);
-    for (oo, xx) in (&mut oc).zip(&mut xc) {
-        for j in 0..12 {
-            oo[j] = f(xx[j], p[j]);
+kernel! {
+    /// `o[k] = f(x[k], y[k])` (see [`run`]).
+    fn zip_flat<Fx: Fn(f32, f32) -> f32>(o: &mut [f32], x: &[f32], y: &[f32], f: Fx) {
+        let m = o.len();
+        let (x, y) = (&x[..m], &y[..m]);
+        for i in 0..m {
+            o[i] = f(x[i], y[i]);
         }
     }
-    for (j, (oo, xx)) in oc
-        .into_remainder()
-        .iter_mut()
-        .zip(xc.remainder())
-        .enumerate()
-    {
-        *oo = f(*xx, p[j]);
+}
+
+kernel! {
+    /// `o[k] = f(x[k])` (see [`run`]).
+    fn map_flat<Fx: Fn(f32) -> f32>(o: &mut [f32], x: &[f32], f: Fx) {
+        for (o, &x) in o.iter_mut().zip(x) {
+            *o = f(x);
+        }
+    }
+}
+
+kernel! {
+    /// `o[k] = f(x[k], u[k % 3])` over flat triples: twelve floats (four points) at a time so
+    /// the repeating uniform pattern lines up with the vector lanes (see [`run`]).
+    fn pattern<Fx: Fn(f32, f32) -> f32>(o: &mut [f32], x: &[f32], u: Vec3, f: Fx) {
+        let p: [f32; 12] = [u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z];
+        let mut oc = o.chunks_exact_mut(12);
+        let mut xc = x.chunks_exact(12);
+        for (oo, xx) in (&mut oc).zip(&mut xc) {
+            for j in 0..12 {
+                oo[j] = f(xx[j], p[j]);
+            }
+        }
+        for (j, (oo, xx)) in oc
+            .into_remainder()
+            .iter_mut()
+            .zip(xc.remainder())
+            .enumerate()
+        {
+            *oo = f(*xx, p[j]);
+        }
     }
 }
 

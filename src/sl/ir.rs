@@ -220,13 +220,15 @@ pub enum Instr {
         otherwise: Vec<Instr>,
     },
     /// `cond_code` computes `cond`; body; step. `span` is the loop statement (named by the
-    /// runaway-loop guard).
+    /// runaway-loop guard). `compact`: the registers the loop names, when it may run on its
+    /// running points gathered into a smaller grid (see [`Program::mark_compact_loops`]).
     Loop {
         cond_code: Vec<Instr>,
         cond: Reg,
         body: Vec<Instr>,
         step: Vec<Instr>,
         span: Span,
+        compact: Option<Vec<Reg>>,
     },
     Break(u32),
     Continue(u32),
@@ -606,6 +608,68 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
     }
 }
 
+/// The registers loop `ins` names (sorted, once each) when it may run compacted (see
+/// [`Program::mark_compact_loops`]).
+fn compact_loop_regs(ins: &Instr, full: &[bool]) -> Option<Vec<Reg>> {
+    let Instr::Loop {
+        cond_code,
+        cond,
+        body,
+        step,
+        ..
+    } = ins
+    else {
+        return None;
+    };
+    /// `depth`: frames between this code and the compacted loop's own (1 in its blocks);
+    /// `in_fn`: inside an inlined function body that starts within the loop.
+    fn ok(code: &[Instr], depth: u32, in_fn: bool, full: &[bool], regs: &mut Vec<Reg>) -> bool {
+        for ins in code {
+            let fine = match ins {
+                Instr::Mov { .. } | Instr::If { .. } => true,
+                Instr::Loop {
+                    cond_code,
+                    body,
+                    step,
+                    ..
+                } => [cond_code, body, step]
+                    .iter()
+                    .all(|b| ok(b, depth + 1, in_fn, full, regs)),
+                Instr::Function { body } => ok(body, depth + 1, true, full, regs),
+                Instr::Break(k) | Instr::Continue(k) => *k <= depth,
+                Instr::Return => in_fn,
+                other => match other.pointwise_dst() {
+                    Some(d) => !full.get(d as usize).copied().unwrap_or(true),
+                    None => false,
+                },
+            };
+            if !fine {
+                return false;
+            }
+            if let Instr::If {
+                then, otherwise, ..
+            } = ins
+            {
+                if !ok(then, depth, in_fn, full, regs) || !ok(otherwise, depth, in_fn, full, regs) {
+                    return false;
+                }
+            }
+            instr_regs(ins, regs);
+        }
+        true
+    }
+    let mut regs = vec![*cond];
+    if ![cond_code, body, step]
+        .iter()
+        .all(|b| ok(b, 1, false, full, &mut regs))
+    {
+        return None;
+    }
+    regs.sort_unstable();
+    regs.dedup();
+    Some(regs)
+}
+
 fn nested(ins: &Instr) -> Vec<&[Instr]> {
     match ins {
         Instr::If {
@@ -868,6 +932,58 @@ impl Program {
             }
         }
         full
+    }
+
+    /// Marks the loops that may run compacted: once few of a grid's points are still in a
+    /// loop (a march whose points leave at different steps), the interpreter gathers the
+    /// registers the loop names at those points into a grid of just them, runs the rest of
+    /// the loop there at full vector width, and scatters the values back. A loop qualifies
+    /// when everything in it is a masked store, control flow, or a pointwise computation
+    /// (see [`Instr::pointwise`]) whose destination is not [`Program::full_width_regs`]
+    /// (so no value at a point that left the loop is ever read: the same results as running
+    /// over the whole grid), and no `break`, `continue` or `return` leaves it. Needs
+    /// `full_width` computed.
+    pub fn mark_compact_loops(&mut self) {
+        fn walk(code: &mut [Instr], full: &[bool]) {
+            for ins in code.iter_mut() {
+                let compact_regs = compact_loop_regs(ins, full);
+                match ins {
+                    Instr::Loop {
+                        cond_code,
+                        body,
+                        step,
+                        compact,
+                        ..
+                    } => {
+                        walk(cond_code, full);
+                        walk(body, full);
+                        walk(step, full);
+                        *compact = compact_regs;
+                    }
+                    Instr::If {
+                        then, otherwise, ..
+                    } => {
+                        walk(then, full);
+                        walk(otherwise, full);
+                    }
+                    Instr::Function { body }
+                    | Instr::Illuminance { body, .. }
+                    | Instr::Illuminate { body, .. }
+                    | Instr::Solar { body, .. } => walk(body, full),
+                    Instr::Gather {
+                        body, otherwise, ..
+                    } => {
+                        walk(body, full);
+                        walk(otherwise, full);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let full = std::mem::take(&mut self.full_width);
+        walk(&mut self.init, &full);
+        walk(&mut self.body, &full);
+        self.full_width = full;
     }
 
     /// Registers whose value may be moved (not copied) into the destination of the one `Mov`

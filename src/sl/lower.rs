@@ -579,6 +579,7 @@ impl<'a> Lowerer<'a> {
         };
         prog.movable = prog.movable_temps();
         prog.full_width = prog.full_width_regs();
+        prog.mark_compact_loops();
         prog
     }
 
@@ -1184,6 +1185,7 @@ impl<'a> Lowerer<'a> {
             body: b,
             step: st,
             span,
+            compact: None,
         });
     }
 
