@@ -24,7 +24,7 @@ fn prim(geometry: Geometry, params: Vec<Param>, attrs: Attributes, m: Mat4) -> P
 
 fn param(name: &str, class: Class, ty: ParamType, data: &[f32]) -> Param {
     Param {
-        name: name.into(),
+        name: name.to_string().into(),
         decl: Decl {
             class,
             ty,

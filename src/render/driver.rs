@@ -1670,7 +1670,7 @@ mod tests {
 
     fn string_param(name: &str, value: &str) -> crate::scene::Param {
         crate::scene::Param {
-            name: name.into(),
+            name: name.to_string().into(),
             decl: crate::scene::Decl {
                 class: crate::scene::Class::Uniform,
                 ty: crate::scene::ParamType::String,

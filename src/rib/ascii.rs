@@ -462,7 +462,8 @@ mod tests {
         let sm = SourceMap::new();
         let f = sm.add("t.rib", text);
         let d = Diagnostics::new();
-        let r = parse_text(text, f, &d, &[]);
+        let mut r = Vec::new();
+        parse_text_into(text, f, &d, &[], &mut |q| r.push(q));
         (r, d.take().into_iter().map(|x| x.0).collect())
     }
 

@@ -100,10 +100,28 @@ impl ParamData {
 /// One entry of a parameter list, its declaration resolved.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Param {
-    pub name: String,
+    /// The name; the common primitive variable and shader parameter names are static
+    /// strings (no allocation per primitive), others are owned.
+    pub name: ParamName,
     pub decl: Decl,
     pub data: ParamData,
     pub span: Span,
+}
+
+/// A parameter's name (see [`Param::name`]).
+pub type ParamName = std::borrow::Cow<'static, str>;
+
+/// `name` as a [`ParamName`]: a static string when it is one of the common names.
+pub fn param_name(name: &str) -> ParamName {
+    const COMMON: [&str; 24] = [
+        "P", "Pw", "Pz", "N", "Np", "Cs", "Os", "s", "t", "st", "u", "v", "width",
+        "constantwidth", "Ka", "Kd", "Ks", "roughness", "specularcolor", "intensity",
+        "lightcolor", "from", "to", "texturename",
+    ];
+    match COMMON.iter().find(|c| **c == name) {
+        Some(c) => std::borrow::Cow::Borrowed(c),
+        None => std::borrow::Cow::Owned(name.to_string()),
+    }
 }
 
 /// A parameter list (shader parameters or primitive variables).

@@ -140,7 +140,7 @@ impl<'a> ShadeSystem<'a> {
     }
 
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
-        let given: Vec<&str> = sref.params.0.iter().map(|g| g.name.as_str()).collect();
+        let given: Vec<&str> = sref.params.0.iter().map(|g| &*g.name).collect();
         let p = self
             .library
             .get_for(&sref.name, &given, self.sources, self.diags)?;
