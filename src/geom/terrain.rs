@@ -128,7 +128,7 @@ pub(super) fn surfaces(
         }),
         primvars: Arc::new(ParamList(list)),
         attributes: prim.attributes.clone(),
-        world_from_object: prim.world_from_object,
+        world_from_object: prim.world_from_object.clone(),
         span: prim.span,
         motion: None,
     };

@@ -16,7 +16,7 @@ fn prim(geometry: Geometry, params: Vec<Param>, attrs: Attributes, m: Mat4) -> P
         geometry: Arc::new(geometry),
         primvars: Arc::new(ParamList(params)),
         attributes: Arc::new(attrs),
-        world_from_object: m,
+        world_from_object: m.into(),
         span: Span::default(),
         motion: None,
     }

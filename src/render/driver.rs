@@ -10,6 +10,10 @@
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
 //!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
 //!   film, one writer) of row r runs alongside the hiding of row r + 1;
+//! * surfaces are made from the scene's primitives in parallel before the first row; those
+//!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
+//!   made again when their first row opens, so memory holds the scene and the open rows'
+//!   surfaces, not every primitive's surfaces at once (same surfaces, keys and picture);
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
@@ -200,12 +204,12 @@ fn prim_info(
     if a.displacement_bound > 0.0 {
         let space = a.displacement_bound_space.as_str();
         let m = match space {
-            "object" => Some(camera.camera_from_world * prim.world_from_object),
+            "object" => Some(camera.camera_from_world * *prim.world_from_object),
             "shader" => a
                 .displacement
                 .as_ref()
                 .map(|d| camera.camera_from_world * d.world_from_shader)
-                .or(Some(camera.camera_from_world * prim.world_from_object)),
+                .or(Some(camera.camera_from_world * *prim.world_from_object)),
             other => camera.camera_from_space(other),
         };
         let m = m.unwrap_or_else(|| {
@@ -216,7 +220,7 @@ fn prim_info(
                 )
                 .label(prim.span, "this primitive"),
             );
-            camera.camera_from_world * prim.world_from_object
+            camera.camera_from_world * *prim.world_from_object
         });
         let scale = m
             .x_axis
@@ -1321,7 +1325,7 @@ mod tests {
             geometry: Arc::new(Geometry::Points { npoints: 0 }),
             primvars: Arc::default(),
             attributes: Arc::new(attributes),
-            world_from_object: glam::Mat4::IDENTITY,
+            world_from_object: glam::Mat4::IDENTITY.into(),
             span: Default::default(),
             motion: None,
         }

@@ -240,6 +240,8 @@ pub struct Builder<'a> {
     pub(super) program_replies: usize,
     /// DynamicLoad libraries loaded so far (or why they could not be).
     pub(super) libraries: super::ri_api::Libraries,
+    /// The last world_from_object given to a primitive, shared with the next when equal.
+    pub(super) last_ctm: Option<Arc<Mat4>>,
     /// The `ArchiveBegin` block being recorded.
     pub(super) recording: Option<super::archive::Recording>,
     /// The last small geometry emitted, shared with the next primitive when equal.
@@ -296,6 +298,7 @@ impl<'a> Builder<'a> {
             libraries: Default::default(),
             last_geometry: None,
             recording: None,
+            last_ctm: None,
         }
     }
 

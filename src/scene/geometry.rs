@@ -115,7 +115,14 @@ impl Builder<'_> {
             return;
         }
         let attributes = self.gs.attrs.clone();
-        let world_from_object = self.gs.ctm;
+        let world_from_object = match &self.last_ctm {
+            Some(m) if **m == self.gs.ctm => m.clone(),
+            _ => {
+                let m = Arc::new(self.gs.ctm);
+                self.last_ctm = Some(m.clone());
+                m
+            }
+        };
         let motion = self.primitive_motion(deform).map(Arc::new);
         if let Some(scene) = self.world.as_mut() {
             scene.primitives.push(Primitive {

@@ -609,7 +609,8 @@ pub struct Primitive {
     /// Primitive variables (P, N, Cs, s, t, user variables), counts validated.
     pub primvars: Arc<ParamList>,
     pub attributes: Arc<Attributes>,
-    pub world_from_object: Mat4,
+    /// Shared with the other primitives under the same transform (see [`Attributes`]).
+    pub world_from_object: Arc<Mat4>,
     pub span: Span,
     /// Motion blur: keys over time from `MotionBegin` blocks around the primitive's
     /// transform and/or the primitive itself (None for a still primitive). The fields above

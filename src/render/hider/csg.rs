@@ -217,7 +217,7 @@ mod tests {
                     a.solid = Some(p);
                     a
                 }),
-                world_from_object: glam::Mat4::IDENTITY,
+                world_from_object: glam::Mat4::IDENTITY.into(),
                 span: crate::diag::Span::new(0, 0, 0),
                 motion: None,
             });
