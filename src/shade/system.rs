@@ -150,7 +150,7 @@ impl<'a> ShadeSystem<'a> {
     }
 
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
-        let given: Vec<&str> = sref.params.0.iter().map(|g| g.name.as_str()).collect();
+        let given: Vec<&str> = sref.params.0.iter().map(|g| &*g.name).collect();
         let p = self
             .library
             .get_for(&sref.name, &given, self.sources, self.diags)?;
@@ -293,7 +293,7 @@ impl<'a> ShadeSystem<'a> {
             scene,
             camera,
             attrs: &p.attributes,
-            camera_from_object: camera.camera_from_world * p.world_from_object,
+            camera_from_object: camera.camera_from_world * *p.world_from_object,
             seed: crate::pattern::hash::hash_u32(prim as u32 ^ 0x9e37_79b9),
             alpha: None,
             depth: 0,
@@ -423,7 +423,7 @@ impl<'a> ShadeSystem<'a> {
                         name: "defaultsurface".into(),
                         params: Default::default(),
                         span: p.span,
-                        world_from_shader: p.world_from_object,
+                        world_from_shader: *p.world_from_object,
                     }),
                 ),
                 None => return,
@@ -1056,7 +1056,7 @@ fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
     let crate::scene::Geometry::Sphere { radius, .. } = *prim.geometry else {
         return false;
     };
-    let object_from_camera = (camera.camera_from_world * prim.world_from_object).inverse();
+    let object_from_camera = (camera.camera_from_world * *prim.world_from_object).inverse();
     let eye = object_from_camera.transform_point3(Vec3::ZERO);
     eye.is_finite() && eye.length() < radius.abs()
 }
