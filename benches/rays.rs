@@ -102,6 +102,7 @@ fn bench(c: &mut Criterion) {
         scene: &r.scene,
         camera: &camera,
         depth: 0,
+        skip_light: None,
     };
     let t0 = std::time::Instant::now();
     let rs = tracer.geometry().expect("ray geometry");

@@ -334,6 +334,25 @@ impl Diagnostics {
             .list
             .clone()
     }
+    /// Reports diagnostics taken from another sink, counts kept, in their order.
+    pub fn absorb(&self, taken: Vec<(Diag, usize)>) {
+        for (d, n) in taken {
+            let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+            if d.is_error() {
+                g.errors += 1;
+                g.list.push((d, n));
+                continue;
+            }
+            let key = (d.code, d.message.clone());
+            if let Some(&i) = g.index.get(&key) {
+                g.list[i].1 += n;
+            } else {
+                let i = g.list.len();
+                g.index.insert(key, i);
+                g.list.push((d, n));
+            }
+        }
+    }
     /// Removes and returns everything reported so far.
     pub fn take(&self) -> Vec<(Diag, usize)> {
         let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());

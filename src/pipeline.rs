@@ -13,7 +13,7 @@ use crate::diag::{Diag, Diagnostics, SourceMap};
 use crate::render::driver::{render_frame, RenderOptions};
 use crate::render::hider::Aov;
 use crate::render::stats::Stats;
-use crate::scene::{build_scenes, BuildContext, ParamType, Scene};
+use crate::scene::{build_scenes, BuildContext, Builder, ParamType, Scene};
 use crate::shade::system::ShadeSystem;
 use crate::sl::{CompileOptions, ShaderLibrary};
 
@@ -64,13 +64,6 @@ pub fn load_scenes(
     sources: &SourceMap,
     diags: &Diagnostics,
 ) -> Vec<Scene> {
-    let requests = match crate::rib::read_path(path, sources, diags) {
-        Ok(r) => r,
-        Err(d) => {
-            diags.report(d);
-            return Vec::new();
-        }
-    };
     let base_dir = if path.as_os_str() == "-" {
         std::env::current_dir().ok()
     } else {
@@ -92,7 +85,13 @@ pub fn load_scenes(
         frames: settings.frames,
         procedurals: settings.procedurals(),
     };
-    build_scenes(requests, &ctx)
+    // Each request is built as soon as it is read: a file's requests are never all in memory.
+    let mut builder = Builder::new(&ctx);
+    if let Err(d) = crate::rib::read_path_into(path, sources, diags, &mut |r| builder.feed(&r)) {
+        diags.report(d);
+        return Vec::new();
+    }
+    builder.finish()
 }
 
 /// The shader library for a scene: CLI paths, the scene's search path, the scene's folder.

@@ -171,7 +171,7 @@ fn teapot_supported() -> bool {
         }),
         primvars: Arc::new(ParamList::default()),
         attributes: Arc::new(Default::default()),
-        world_from_object: glam::Mat4::IDENTITY,
+        world_from_object: glam::Mat4::IDENTITY.into(),
         span: Default::default(),
         motion: None,
     };

@@ -134,7 +134,7 @@ fn companion_scene_builds() {
         Geometry::Polygons { nvertices: 4, .. }
     ));
     assert_eq!(poly.primvars.floats("Cs").unwrap().len(), 12);
-    assert_eq!(poly.world_from_object, Mat4::IDENTITY);
+    assert_eq!(*poly.world_from_object, Mat4::IDENTITY);
 }
 
 #[test]
@@ -279,7 +279,7 @@ WorldEnd
     );
     b.clean();
     let s = b.one();
-    let m = s.primitives[0].world_from_object;
+    let m = *s.primitives[0].world_from_object;
     // Scale first, then rotate (x → y), then translate.
     assert!(close(m.transform_point3(Vec3::X), Vec3::new(1.0, 2.0, 0.0)));
     assert!(close(
@@ -631,7 +631,7 @@ WorldEnd
         .contains("`GeometricRepresentation` is not implemented"));
     // Motion blocks apply (and compose): the sphere moves from x = 0 to x = 2.
     let p = &b.one().primitives[0];
-    assert_eq!(p.world_from_object, Mat4::IDENTITY);
+    assert_eq!(*p.world_from_object, Mat4::IDENTITY);
     let m = p.motion.as_ref().expect("a moving primitive");
     assert_eq!(m.times, vec![0.0, 1.0]);
     assert_eq!(
@@ -886,7 +886,7 @@ WorldEnd
         Vec3::new(0.0, 3.0, 0.0)
     ));
     // Disk: moved to "table" then skewed (y leans towards x).
-    let m = s.primitives[1].world_from_object;
+    let m = *s.primitives[1].world_from_object;
     assert!(close(m.transform_point3(Vec3::Y), Vec3::new(1.0, 4.0, 0.0)));
 }
 

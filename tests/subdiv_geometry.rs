@@ -51,7 +51,7 @@ fn mesh(
         geometry: Arc::new(geometry),
         primvars: Arc::new(ParamList(vec![param])),
         attributes: Arc::new(Attributes::default()),
-        world_from_object: Mat4::IDENTITY,
+        world_from_object: Mat4::IDENTITY.into(),
         span: Span::default(),
         motion: None,
     }

@@ -382,7 +382,7 @@ fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
 fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quantize, Quantize) {
     let (mut qc, mut qz) = (opts.quantize_rgba, opts.quantize_z);
     for p in t.params.iter() {
-        match p.name.as_str() {
+        match &*p.name {
             "quantize" => {
                 let f = p.data.floats();
                 if f.len() == 4 {
@@ -702,7 +702,7 @@ fn write_exr(film: &Film, t: &Target, planes: &[Plane], diags: &Diagnostics) -> 
     let mut float = false;
     let mut compression = Compression::ZIP16;
     for p in t.params.iter() {
-        match p.name.as_str() {
+        match &*p.name {
             "float" => float = true,
             "half" => float = false,
             "type" | "pixeltype" | "exrpixeltype" => {
@@ -926,7 +926,7 @@ mod tests {
 
     fn string_param(name: &str, v: &str) -> Param {
         Param {
-            name: name.into(),
+            name: name.to_string().into(),
             decl: crate::scene::Decl {
                 class: crate::scene::Class::Uniform,
                 ty: crate::scene::ParamType::String,

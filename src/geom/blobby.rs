@@ -739,7 +739,7 @@ mod tests {
             geometry: Arc::new(Geometry::Blobby(Arc::new(program))),
             primvars: Arc::new(ParamList::default()),
             attributes: Arc::new(Attributes::default()),
-            world_from_object: Mat4::IDENTITY,
+            world_from_object: Mat4::IDENTITY.into(),
             span: crate::diag::Span::new(0, 0, 0),
             motion: None,
         }

@@ -205,7 +205,7 @@ fn surfaces_full(
     decomp: Option<Arc<Vec<Vec3>>>,
     diags: &Diagnostics,
 ) -> Vec<Box<dyn Surface>> {
-    let m = camera_from_world * prim.world_from_object;
+    let m = camera_from_world * *prim.world_from_object;
     let invalid = |what: &str| {
         diags.report(
             Diag::error("geom::invalid", format!("{what}; the primitive is skipped"))

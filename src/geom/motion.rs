@@ -187,7 +187,7 @@ pub fn moving_surfaces(
         return Vec::new();
     };
     let times = Arc::new(times.to_vec());
-    let m0 = k0.camera_from_world * k0.prim.world_from_object;
+    let m0 = k0.camera_from_world * *k0.prim.world_from_object;
     if !deforming {
         let base = super::surfaces_for(index, &k0.prim, k0.camera_from_world, diags);
         if !m0.is_finite() || m0.determinant() == 0.0 {
@@ -196,7 +196,7 @@ pub fn moving_surfaces(
         let inv = m0.inverse();
         let deltas = Arc::new(
             keys.iter()
-                .map(|k| k.camera_from_world * k.prim.world_from_object * inv)
+                .map(|k| k.camera_from_world * *k.prim.world_from_object * inv)
                 .collect::<Vec<_>>(),
         );
         return base

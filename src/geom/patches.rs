@@ -146,7 +146,7 @@ fn defaults(prim: &Primitive, x: [f32; 2], y: [f32; 2]) -> Defaults {
 fn split_vertex(pv: &ParamList) -> (ParamList, ParamList) {
     let (v, o): (Vec<_>, Vec<_>) = pv
         .iter()
-        .filter(|p| !matches!(p.name.as_str(), "P" | "Pw" | "Pz"))
+        .filter(|p| !matches!(&*p.name, "P" | "Pw" | "Pz"))
         .cloned()
         .partition(|p| p.decl.class == Class::Vertex && p.decl.ty != ParamType::String);
     (ParamList(v), ParamList(o))

@@ -84,7 +84,7 @@ pub(crate) fn resolve(
     let normal_m = camera_from_object.inverse().transpose();
     let mut out = Vec::new();
     for p in params.iter() {
-        if matches!(p.name.as_str(), "P" | "Pw" | "Pz") {
+        if matches!(&*p.name, "P" | "Pw" | "Pz") {
             continue;
         }
         let need = match p.decl.class {
@@ -122,7 +122,7 @@ pub(crate) fn resolve(
             );
         }
         let mut v = SourceVar {
-            name: p.name.clone(),
+            name: p.name.to_string(),
             ty: p.decl.ty,
             array_len: p.decl.array_len.max(1),
             class: p.decl.class,

@@ -57,7 +57,7 @@ pub(super) fn surfaces(
         diags.report(Diag::warning("geom::fractalterrain", msg).label(prim.span, "this terrain"));
     };
     for p in pv.iter() {
-        let known = KNOWN.contains(&p.name.as_str())
+        let known = KNOWN.contains(&&*p.name)
             || matches!(p.decl.class, Class::Constant | Class::Uniform);
         if !known {
             warn(format!(
@@ -87,12 +87,12 @@ pub(super) fn surfaces(
         .iter()
         .filter(|p| {
             matches!(p.decl.class, Class::Constant | Class::Uniform)
-                && !KNOWN.contains(&p.name.as_str())
+                && !KNOWN.contains(&&*p.name)
         })
         .cloned()
         .collect();
     let param = |name: &str, class: Class, ty: ParamType, data: Vec<f32>| Param {
-        name: name.to_string(),
+        name: name.to_string().into(),
         decl: Decl {
             class,
             ty,
@@ -128,7 +128,7 @@ pub(super) fn surfaces(
         }),
         primvars: Arc::new(ParamList(list)),
         attributes: prim.attributes.clone(),
-        world_from_object: prim.world_from_object,
+        world_from_object: prim.world_from_object.clone(),
         span: prim.span,
         motion: None,
     };

@@ -16,7 +16,7 @@ fn prim(geometry: Geometry, params: Vec<Param>, attrs: Attributes, m: Mat4) -> P
         geometry: Arc::new(geometry),
         primvars: Arc::new(ParamList(params)),
         attributes: Arc::new(attrs),
-        world_from_object: m,
+        world_from_object: m.into(),
         span: Span::default(),
         motion: None,
     }
@@ -24,7 +24,7 @@ fn prim(geometry: Geometry, params: Vec<Param>, attrs: Attributes, m: Mat4) -> P
 
 fn param(name: &str, class: Class, ty: ParamType, data: &[f32]) -> Param {
     Param {
-        name: name.into(),
+        name: name.to_string().into(),
         decl: Decl {
             class,
             ty,
@@ -239,10 +239,8 @@ fn orientation_rules() {
     let outward =
         |g: &Grid| (0..g.len()).all(|k| g.ng[k].dot(g.p[k] - Vec3::new(0.0, 0.0, 10.0)) > 0.0);
     // ReverseOrientation turns the normals inward.
-    let a = Attributes {
-        reverse_orientation: true,
-        ..Default::default()
-    };
+    let mut a = Attributes::default();
+    a.reverse_orientation = true;
     let g = one(
         &prim(sphere(1.0, -1.0, 1.0, 360.0), vec![], a, Mat4::IDENTITY),
         cam,
@@ -431,11 +429,11 @@ fn dicing_rates_agree_on_the_surface() {
 
 #[test]
 fn quadric_texture_coordinates_and_primvars() {
-    let a = Attributes {
-        texture_coordinates: [0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 2.0, 3.0],
+    let mut a = Attributes {
         color: Vec3::new(0.5, 0.25, 1.0),
         ..Default::default()
     };
+    a.texture_coordinates = [0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 2.0, 3.0];
     let p = prim(
         Geometry::Cylinder {
             radius: 1.0,

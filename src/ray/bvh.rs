@@ -277,13 +277,15 @@ impl Bvh {
             let t0 = Vec3::from(n.min) * inv - oi;
             let t1 = Vec3::from(n.max) * inv - oi;
             let near = t0.min(t1).max_element().max(tmin);
-            let far = t0.max(t1).min_element().min(tmax);
+            // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
+            let far = (t0.max(t1).min_element() * 1.000_000_24).min(tmax);
             if near <= far {
                 near
             } else {
                 f32::INFINITY
             }
         };
+        let wt = WtRay::new(o, d);
         let mut stack = [0u32; 96];
         let mut sp = 0usize;
         if slab(&self.nodes[0], *tmax) == f32::INFINITY {
@@ -295,7 +297,7 @@ impl Bvh {
             if n.count > 0 {
                 let (s, e) = (n.first as usize, (n.first + n.count) as usize);
                 for q in &self.quads[s..e] {
-                    if let Some((t, a, b)) = intersect_quad(q, o, d, tmin, *tmax) {
+                    if let Some((t, a, b)) = intersect_quad_wt(q, &wt, tmin, *tmax) {
                         if on_hit(q, t, a, b, tmax) {
                             return;
                         }
@@ -342,54 +344,105 @@ impl Bvh {
     }
 }
 
-/// Möller–Trumbore on the quad's two triangles; returns (t, a, b).
-#[inline]
-fn intersect_quad(q: &Quad, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    let [v00, v10, v01, v11] = q.p;
-    let mut best: Option<(f32, f32, f32)> = None;
-    let mut tm = tmax;
-    // Triangle 1: v00, v10, v11 → P = v00 + b1 (v10 − v00) + b2 (v11 − v00): a = b1 + b2, b = b2.
-    if let Some((t, b1, b2)) = tri(v00, v10, v11, o, d, tmin, tm) {
-        tm = t;
-        best = Some((t, b1 + b2, b2));
+/// A ray prepared for the watertight test (Woop, Benthin & Wald 2013): the axis where the
+/// direction is largest becomes z, and a shear maps the ray onto the +z axis, so a triangle
+/// test reduces to 2D edge functions that neighbouring triangles evaluate identically along
+/// a shared edge (a ray can never slip between two triangles that share the edge's vertices).
+#[derive(Clone, Copy)]
+pub(crate) struct WtRay {
+    o: Vec3,
+    k: [usize; 3],
+    s: [f32; 3],
+}
+
+impl WtRay {
+    #[inline]
+    pub(crate) fn new(o: Vec3, d: Vec3) -> WtRay {
+        let a = d.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let dz = if d[kz] == 0.0 { 1e-30 } else { d[kz] };
+        WtRay {
+            o,
+            k: [kx, ky, kz],
+            s: [d[kx] / dz, d[ky] / dz, 1.0 / dz],
+        }
     }
-    // Triangle 2: v00, v11, v01 → a = b1, b = b1 + b2.
-    if let Some((t, b1, b2)) = tri(v00, v11, v01, o, d, tmin, tm) {
-        best = Some((t, b1, b1 + b2));
+
+    /// A vertex in the ray's sheared frame.
+    #[inline(always)]
+    fn xform(&self, v: Vec3) -> [f32; 3] {
+        let a = v - self.o;
+        let (ax, ay, az) = (a[self.k[0]], a[self.k[1]], a[self.k[2]]);
+        [ax - self.s[0] * az, ay - self.s[1] * az, self.s[2] * az]
+    }
+}
+
+/// The watertight test of the triangle (a b c) given in the ray's frame: (t, w1, w2), the
+/// weights of b and c.
+#[inline(always)]
+fn tri_wt(a: [f32; 3], b: [f32; 3], c: [f32; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let mut u = c[0] * b[1] - c[1] * b[0];
+    let mut v = a[0] * c[1] - a[1] * c[0];
+    let mut w = b[0] * a[1] - b[1] * a[0];
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // On an edge in single precision: decide in double, as every triangle sharing the
+        // edge will.
+        let f = |x: f32| f64::from(x);
+        u = (f(c[0]) * f(b[1]) - f(c[1]) * f(b[0])) as f32;
+        v = (f(a[0]) * f(c[1]) - f(a[1]) * f(c[0])) as f32;
+        w = (f(b[0]) * f(a[1]) - f(b[1]) * f(a[0])) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let tt = u * a[2] + v * b[2] + w * c[2];
+    let inv = 1.0 / det;
+    let t = tt * inv;
+    if !(t > tmin && t < tmax) {
+        return None;
+    }
+    Some((t, v * inv, w * inv))
+}
+
+/// The quad's two triangles `(v00 v10 v11)` and `(v00 v11 v01)`, watertight; returns
+/// (t, a, b).
+#[inline]
+fn intersect_quad_wt(q: &Quad, r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let [p00, p10, p01, p11] = q.p;
+    let (a, b, c, d) = (r.xform(p00), r.xform(p10), r.xform(p01), r.xform(p11));
+    let mut best = None;
+    let mut tm = tmax;
+    // Triangle 1: P = w0 v00 + w1 v10 + w2 v11: a = w1 + w2, b = w2.
+    if let Some((t, w1, w2)) = tri_wt(a, b, d, tmin, tm) {
+        tm = t;
+        best = Some((t, w1 + w2, w2));
+    }
+    // Triangle 2: P = w0 v00 + w1 v11 + w2 v01: a = w1, b = w1 + w2.
+    if let Some((t, w1, w2)) = tri_wt(a, d, c, tmin, tm) {
+        best = Some((t, w1, w1 + w2));
     }
     best
 }
 
-#[inline]
-fn tri(
-    p0: Vec3,
-    p1: Vec3,
-    p2: Vec3,
-    o: Vec3,
-    d: Vec3,
-    tmin: f32,
-    tmax: f32,
-) -> Option<(f32, f32, f32)> {
-    let e1 = p1 - p0;
-    let e2 = p2 - p0;
-    let pv = d.cross(e2);
-    let det = e1.dot(pv);
-    if det.abs() < 1e-30 {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let tv = o - p0;
-    let b1 = tv.dot(pv) * inv;
-    if !(0.0..=1.0).contains(&b1) {
-        return None;
-    }
-    let qv = tv.cross(e1);
-    let b2 = d.dot(qv) * inv;
-    if b2 < 0.0 || b1 + b2 > 1.0 {
-        return None;
-    }
-    let t = e2.dot(qv) * inv;
-    (t > tmin && t < tmax).then_some((t, b1, b2))
+/// [`intersect_quad_wt`] for a ray given by origin and direction.
+#[cfg(test)]
+fn intersect_quad(q: &Quad, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    intersect_quad_wt(q, &WtRay::new(o, d), tmin, tmax)
 }
 
 #[cfg(test)]

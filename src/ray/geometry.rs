@@ -44,6 +44,8 @@ pub struct RayGrid {
     pub trace: bool,
     /// Blocks shadow rays (`transmission`, `shadow("raytrace")`, `occlusion`).
     pub shadows: bool,
+    /// The area light this grid is the surface of (`Attributes::area_light`).
+    pub area_light: Option<usize>,
 }
 
 /// The ray-traceable scene.
@@ -53,6 +55,8 @@ pub struct RayScene {
     pub bvh: Bvh,
     /// Total micropolygons.
     pub micropolygons: usize,
+    /// Triangles added to close cracks between neighbouring grids (see [`fill_cracks`]).
+    pub crack_fills: usize,
     /// The bound of everything, camera space.
     pub bound: Option<Bound>,
 }
@@ -133,6 +137,7 @@ pub fn build(
     let mut out = RayScene::default();
     let mut quads = Vec::new();
     for (prim, surfs, (trace, shadows)) in all {
+        let first_grid = out.grids.len();
         let a = &scene.primitives[prim].attributes;
         let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
             a.shading_rate.clamp(0.05, 1e4)
@@ -203,8 +208,10 @@ pub fn build(
                 grid,
                 trace,
                 shadows,
+                area_light: a.area_light,
             });
         }
+        out.crack_fills += fill_cracks(&out.grids[first_grid..], first_grid, &mut quads);
     }
     out.bound = (!scene_bound.is_empty()).then_some(scene_bound);
     out.bvh = Bvh::build(quads);
@@ -303,4 +310,165 @@ impl RateModel {
         }
         Some((nu as usize, nv as usize))
     }
+}
+
+/// Closes the cracks between neighbouring grids of one primitive, which are diced at different
+/// rates: where a boundary vertex of one grid lies on (near) a boundary edge of another, the
+/// two grids' boundary polylines part, and a ray can slip between them (a speck of light
+/// inside a ray-traced shadow). For every boundary edge `a b` of every grid, the other grids'
+/// boundary vertices `m1 … mk` near it (within a tenth of its length, projecting inside it,
+/// with normals on the same side) are joined to it by the fan `(a m1 m2) … (a mk b)`, which
+/// covers the sliver between the edge and the neighbour's polyline. Done from both sides,
+/// this closes T-junctions and edges whose vertices interleave. Each fill is a quad whose
+/// second triangle is degenerate, belonging to the micropolygon along the edge (its hits
+/// shade with that micropolygon's values). Deterministic: candidates are sorted.
+/// `grids[k]` is ray grid `first + k`; returns the number of fills added.
+pub fn fill_cracks(grids: &[RayGrid], first: usize, quads: &mut Vec<Quad>) -> usize {
+    use std::collections::HashMap;
+    if grids.len() < 2 {
+        return 0;
+    }
+    // Boundary sides of each grid: (grid, vertex indices along the side, quad index of each
+    // edge's micropolygon).
+    struct Side {
+        grid: usize,
+        verts: Vec<usize>,
+        quads: Vec<u32>,
+    }
+    let mut sides: Vec<Side> = Vec::new();
+    for (g, rg) in grids.iter().enumerate() {
+        let (nu, nv) = (rg.grid.nu, rg.grid.nv);
+        let qu = nu - 1;
+        let row = |j: usize| (0..nu).map(|i| j * nu + i).collect::<Vec<_>>();
+        let col = |i: usize| (0..nv).map(|j| j * nu + i).collect::<Vec<_>>();
+        sides.push(Side {
+            grid: g,
+            verts: row(0),
+            quads: (0..qu as u32).collect(),
+        });
+        sides.push(Side {
+            grid: g,
+            verts: row(nv - 1),
+            quads: (0..qu).map(|i| ((nv - 2) * qu + i) as u32).collect(),
+        });
+        sides.push(Side {
+            grid: g,
+            verts: col(0),
+            quads: (0..nv - 1).map(|j| (j * qu) as u32).collect(),
+        });
+        sides.push(Side {
+            grid: g,
+            verts: col(nu - 1),
+            quads: (0..nv - 1).map(|j| (j * qu + qu - 1) as u32).collect(),
+        });
+    }
+    // Every boundary vertex once: (grid, index) → position, normal.
+    let mut verts: Vec<(usize, usize)> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut total_len = 0f64;
+    let mut segs = 0usize;
+    for s in &sides {
+        for &v in &s.verts {
+            if seen.insert((s.grid, v)) {
+                verts.push((s.grid, v));
+            }
+        }
+        for w in s.verts.windows(2) {
+            let p = &grids[s.grid].grid.p;
+            total_len += f64::from((p[w[1]] - p[w[0]]).length());
+            segs += 1;
+        }
+    }
+    let cell = (2.0 * total_len / segs.max(1) as f64) as f32;
+    if !(cell > 0.0) || !cell.is_finite() {
+        return 0;
+    }
+    let key = |p: Vec3| {
+        let q = (p / cell).floor();
+        (q.x as i32, q.y as i32, q.z as i32)
+    };
+    let mut hash: HashMap<(i32, i32, i32), Vec<u32>> = HashMap::new();
+    for (k, &(g, v)) in verts.iter().enumerate() {
+        hash.entry(key(grids[g].grid.p[v]))
+            .or_default()
+            .push(k as u32);
+    }
+    let mut added = 0;
+    let mut near: Vec<(f32, u32)> = Vec::new();
+    for s in &sides {
+        let grid = &grids[s.grid].grid;
+        for (e, w) in s.verts.windows(2).enumerate() {
+            let (a, b) = (grid.p[w[0]], grid.p[w[1]]);
+            let ab = b - a;
+            let len2 = ab.length_squared();
+            if !(len2 > 0.0) {
+                continue;
+            }
+            let len = len2.sqrt();
+            let eps = 0.1 * len;
+            let nrm = grid.n[w[0]] + grid.n[w[1]];
+            let (lo, hi) = (key(a.min(b) - eps), key(a.max(b) + eps));
+            let cells =
+                (hi.0 - lo.0 + 1) as i64 * (hi.1 - lo.1 + 1) as i64 * (hi.2 - lo.2 + 1) as i64;
+            if cells > 4096 {
+                continue;
+            }
+            near.clear();
+            for x in lo.0..=hi.0 {
+                for y in lo.1..=hi.1 {
+                    for z in lo.2..=hi.2 {
+                        let Some(list) = hash.get(&(x, y, z)) else {
+                            continue;
+                        };
+                        for &k in list {
+                            let (g, v) = verts[k as usize];
+                            if g == s.grid {
+                                continue;
+                            }
+                            let m = grids[g].grid.p[v];
+                            let t = (m - a).dot(ab) / len2;
+                            if !(0.0..=1.0).contains(&t) {
+                                continue;
+                            }
+                            let off = m - (a + ab * t);
+                            if off.length() > eps
+                                || (m - a).length() < 1e-4 * len
+                                || (m - b).length() < 1e-4 * len
+                                || grids[g].grid.n[v].dot(nrm) < 0.0
+                            {
+                                continue;
+                            }
+                            near.push((t, k));
+                        }
+                    }
+                }
+            }
+            if near.is_empty() {
+                continue;
+            }
+            near.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+            near.dedup_by(|x, y| {
+                let (gx, vx) = verts[x.1 as usize];
+                let (gy, vy) = verts[y.1 as usize];
+                grids[gx].grid.p[vx] == grids[gy].grid.p[vy]
+            });
+            let fan: Vec<Vec3> = near
+                .iter()
+                .map(|&(_, k)| {
+                    let (g, v) = verts[k as usize];
+                    grids[g].grid.p[v]
+                })
+                .chain(std::iter::once(b))
+                .collect();
+            for pair in fan.windows(2) {
+                quads.push(Quad {
+                    p: [a, pair[0], pair[1], pair[1]],
+                    grid: (first + s.grid) as u32,
+                    index: s.quads[e],
+                });
+                added += 1;
+            }
+        }
+    }
+    added
 }

@@ -9,8 +9,9 @@
 //! a thread or a bucket.
 //!
 //! Files: `bvh` (binned-SAH BVH over micropolygons), `geometry` (ray dicing, visibility
-//! attributes).
+//! attributes), `area` (area lights' geometry, sampled by area).
 
+pub mod area;
 pub mod bvh;
 pub mod geometry;
 
@@ -18,13 +19,16 @@ use std::sync::{Arc, OnceLock};
 
 use glam::Vec3;
 
+pub use area::{AreaSample, AreaShape};
 pub use bvh::{Bvh, Hit};
 pub use geometry::{RayGrid, RayScene};
 
-/// The frame's ray geometry, built on first use.
+/// The frame's ray geometry and area light shapes, each built on first use.
 #[derive(Default)]
 pub struct RayCache {
     cell: OnceLock<Arc<RayScene>>,
+    /// One entry per scene light: the sampled shape of an area light, None for other lights.
+    areas: OnceLock<Vec<Option<Arc<AreaShape>>>>,
 }
 
 impl RayCache {
@@ -36,6 +40,14 @@ impl RayCache {
     /// The ray scene if it was built.
     pub fn get(&self) -> Option<&Arc<RayScene>> {
         self.cell.get()
+    }
+    /// The shapes of the scene's area lights (indexed by light), built on first use
+    /// (sequentially, in light order).
+    pub fn areas(
+        &self,
+        build: impl FnOnce() -> Vec<Option<Arc<AreaShape>>>,
+    ) -> &[Option<Arc<AreaShape>>] {
+        self.areas.get_or_init(build)
     }
 }
 

@@ -10,6 +10,10 @@
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
 //!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
 //!   film, one writer) of row r runs alongside the hiding of row r + 1;
+//! * surfaces are made from the scene's primitives in parallel before the first row; those
+//!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
+//!   made again when their first row opens, so memory holds the scene and the open rows'
+//!   surfaces, not every primitive's surfaces at once (same surfaces, keys and picture);
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
@@ -74,19 +78,84 @@ pub fn render_frame(
     super::limits::apply_frame_limits(&mut options, diags);
     check_options(&options, diags);
     let camera = Camera::from_options(&options, scene.camera_from_world, &scene.coordinate_systems);
-    let mut surfaces = Vec::new();
-    for (i, prim) in scene.primitives.iter().enumerate() {
-        surfaces.push(super::motion::surfaces_over_shutter(
+    let raster_from_camera = camera.raster_from_camera();
+    let make = |i: usize, diags: &Diagnostics| {
+        super::motion::surfaces_over_shutter(
             i,
-            prim,
+            &scene.primitives[i],
             camera.camera_from_world,
             scene.camera_motion.as_deref(),
             options.shutter,
-            Some(camera.raster_from_camera()),
+            Some(raster_from_camera),
             diags,
-        ));
-    }
-    render_surfaces(scene, &options, &camera, surfaces, shader, opts, diags)
+        )
+    };
+    run_in_pool(opts, diags, || {
+        render_inner(
+            scene,
+            &options,
+            &camera,
+            Surfaces::Lazy(&make),
+            shader,
+            opts,
+            diags,
+        )
+    })
+}
+
+/// Makes the surfaces of primitive `i` (the same ones every time it is called), reporting
+/// problems to the sink given.
+type MakeSurfaces<'m> = dyn Fn(usize, &Diagnostics) -> Vec<Box<dyn Surface>> + Sync + 'm;
+
+/// Where a frame's surfaces come from.
+enum Surfaces<'m> {
+    /// Made by the caller: `v[i]` are the surfaces of primitive `i`.
+    Built(Vec<Vec<Box<dyn Surface>>>),
+    /// Made by the driver. A primitive cheap to make again (polygons, quadrics, patches,
+    /// points, curves) is made once to find the first bucket row it reaches, dropped, and made
+    /// again when that row opens: memory holds the scene, not every primitive's surfaces.
+    Lazy(&'m MakeSurfaces<'m>),
+}
+
+/// Whether the surfaces of `p` are cheap enough to make twice (see [`Surfaces::Lazy`]).
+fn remade_cheaply(p: &Primitive) -> bool {
+    use crate::scene::Geometry as G;
+    matches!(
+        &*p.geometry,
+        G::Polygons { .. }
+            | G::Sphere { .. }
+            | G::Cone { .. }
+            | G::Cylinder { .. }
+            | G::Hyperboloid { .. }
+            | G::Paraboloid { .. }
+            | G::Disk { .. }
+            | G::Torus { .. }
+            | G::PatchMesh { .. }
+            | G::NuPatch { .. }
+            | G::Points { .. }
+            | G::Curves { .. }
+    )
+}
+
+/// Primitives placed at a time, each chunk's diagnostics kept apart and reported in order.
+const PLACE_CHUNK: usize = 256;
+
+/// A primitive's surfaces, placed in the bucket rows they first reach.
+enum Placed {
+    /// Kept: each surface with its row (None: culled).
+    Works(Vec<(Option<usize>, Work)>),
+    /// Dropped, to be made again when row `first` opens (None: every surface culled).
+    Remade {
+        prim: usize,
+        first: Option<usize>,
+        surfaces: usize,
+        culled: usize,
+    },
+}
+
+/// The first surfaces of a primitive get this key (split children derive theirs from it).
+fn surface_key(prim: usize, j: usize) -> u64 {
+    mix64(mix64(prim as u64) ^ (j as u64).wrapping_mul(0x9E37_79B9))
 }
 
 /// The scene's options with the command-line overrides applied.
@@ -135,12 +204,12 @@ fn prim_info(
     if a.displacement_bound > 0.0 {
         let space = a.displacement_bound_space.as_str();
         let m = match space {
-            "object" => Some(camera.camera_from_world * prim.world_from_object),
+            "object" => Some(camera.camera_from_world * *prim.world_from_object),
             "shader" => a
                 .displacement
                 .as_ref()
                 .map(|d| camera.camera_from_world * d.world_from_shader)
-                .or(Some(camera.camera_from_world * prim.world_from_object)),
+                .or(Some(camera.camera_from_world * *prim.world_from_object)),
             other => camera.camera_from_space(other),
         };
         let m = m.unwrap_or_else(|| {
@@ -151,7 +220,7 @@ fn prim_info(
                 )
                 .label(prim.span, "this primitive"),
             );
-            camera.camera_from_world * prim.world_from_object
+            camera.camera_from_world * *prim.world_from_object
         });
         let scale = m
             .x_axis
@@ -239,12 +308,12 @@ fn estimate_displacement_bounds(
     scene: &Scene,
     camera: &Camera,
     view: &View,
-    surfaces: &[Vec<Box<dyn Surface>>],
+    surfaces: &[Option<Vec<Box<dyn Surface>>>],
     prims: &mut [PrimInfo],
     shader: &dyn GridShader,
 ) {
     let wanted: Vec<usize> = (0..prims.len().min(surfaces.len()))
-        .filter(|&i| prims[i].disp == 0.0 && scene.primitives[i].attributes.displacement.is_some())
+        .filter(|&i| needs_estimate(scene, prims, i))
         .collect();
     let found: Vec<(usize, f32)> = wanted
         .into_par_iter()
@@ -255,7 +324,7 @@ fn estimate_displacement_bounds(
                 &view.raster_from_camera,
                 prims[i].rate,
                 i,
-                &surfaces[i],
+                surfaces[i].as_deref().unwrap_or(&[]),
                 shader,
             );
             (i, d)
@@ -267,6 +336,11 @@ fn estimate_displacement_bounds(
             prims[i].disp_estimated = true;
         }
     }
+}
+
+/// A displaced primitive that declares no displacement bound.
+fn needs_estimate(scene: &Scene, prims: &[PrimInfo], i: usize) -> bool {
+    prims[i].disp == 0.0 && scene.primitives[i].attributes.displacement.is_some()
 }
 
 /// A surface waiting to be split or diced.
@@ -709,7 +783,25 @@ pub fn render_surfaces(
     opts: &RenderOptions,
     diags: &Diagnostics,
 ) -> Film {
-    let run = || render_inner(scene, options, camera, surfaces, shader, opts, diags);
+    run_in_pool(opts, diags, || {
+        render_inner(
+            scene,
+            options,
+            camera,
+            Surfaces::Built(surfaces),
+            shader,
+            opts,
+            diags,
+        )
+    })
+}
+
+/// Runs `run` on `opts.threads` threads (rayon's default pool for 0).
+fn run_in_pool<T: Send>(
+    opts: &RenderOptions,
+    diags: &Diagnostics,
+    run: impl FnOnce() -> T + Send,
+) -> T {
     if opts.threads > 0 {
         match rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
@@ -732,7 +824,7 @@ fn render_inner(
     scene: &Scene,
     options: &Options,
     camera: &Camera,
-    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    surfaces: Surfaces,
     shader: &dyn GridShader,
     opts: &RenderOptions,
     diags: &Diagnostics,
@@ -817,7 +909,20 @@ fn render_inner(
             ..prim_info(scene, camera, p, min_rate, diags)
         })
         .collect();
-    estimate_displacement_bounds(scene, camera, &view, &surfaces, &mut prims, shader);
+    let (mut built, make): (Vec<Option<Vec<Box<dyn Surface>>>>, Option<&MakeSurfaces>) =
+        match surfaces {
+            Surfaces::Built(v) => (v.into_iter().map(Some).collect(), None),
+            Surfaces::Lazy(m) => ((0..scene.primitives.len()).map(|_| None).collect(), Some(m)),
+        };
+    if let Some(m) = make {
+        // Displaced primitives needing an estimated bound keep their surfaces.
+        for i in 0..prims.len() {
+            if needs_estimate(scene, &prims, i) {
+                built[i] = Some(m(i, diags));
+            }
+        }
+    }
+    estimate_displacement_bounds(scene, camera, &view, &built, &mut prims, shader);
     let frame = Frame {
         scene,
         camera,
@@ -843,29 +948,78 @@ fn render_inner(
     let film_bytes = film.data.len() * std::mem::size_of::<f32>();
     stats.alloc(film_bytes);
 
-    // Place every surface in the first bucket row it reaches.
+    // Place every surface in the first bucket row it reaches (in parallel, diagnostics in
+    // primitive order); primitives cheap to make again keep only their first row.
     Stats::add(&stats.primitives, scene.primitives.len() as u64);
-    let mut initial = Vec::new();
-    for (i, list) in surfaces.into_iter().enumerate() {
-        for (j, surface) in list.into_iter().enumerate() {
-            initial.push(Work {
-                surface,
-                key: mix64(mix64(i as u64) ^ (j as u64).wrapping_mul(0x9E37_79B9)),
-                depth: 0,
-                eye_splits: 0,
-            });
-        }
-    }
-    Stats::add(&stats.surfaces, initial.len() as u64);
     let mut pending: Vec<Vec<Work>> = (0..buckets.rows).map(|_| Vec::new()).collect();
-    let placed: Vec<(Option<usize>, Work)> = initial
-        .into_par_iter()
-        .map(|w| (frame.place(&w, 0), w))
+    let mut pending_prims: Vec<Vec<u32>> = (0..buckets.rows).map(|_| Vec::new()).collect();
+    let placed: Vec<(Vec<Placed>, Vec<(Diag, usize)>)> = built
+        .par_chunks_mut(PLACE_CHUNK)
+        .enumerate()
+        .map(|(c, slots)| {
+            let local = Diagnostics::new();
+            let mut out = Vec::with_capacity(slots.len());
+            for (k, slot) in slots.iter_mut().enumerate() {
+                let i = c * PLACE_CHUNK + k;
+                let (list, remade) = match (slot.take(), make) {
+                    (Some(l), _) => (l, false),
+                    (None, Some(m)) => (m(i, &local), remade_cheaply(&scene.primitives[i])),
+                    (None, None) => (Vec::new(), false),
+                };
+                let works: Vec<(Option<usize>, Work)> = list
+                    .into_iter()
+                    .enumerate()
+                    .map(|(j, surface)| {
+                        let w = Work {
+                            surface,
+                            key: surface_key(i, j),
+                            depth: 0,
+                            eye_splits: 0,
+                        };
+                        (frame.place(&w, 0), w)
+                    })
+                    .collect();
+                out.push(if remade {
+                    Placed::Remade {
+                        prim: i,
+                        first: works.iter().filter_map(|(r, _)| *r).min(),
+                        surfaces: works.len(),
+                        culled: works.iter().filter(|(r, _)| r.is_none()).count(),
+                    }
+                } else {
+                    Placed::Works(works)
+                });
+            }
+            (out, local.take())
+        })
         .collect();
-    for (row, w) in placed {
-        match row {
-            Some(r) => pending[r].push(w),
-            None => Stats::add(&stats.culled, 1),
+    drop(built);
+    for (out, ds) in placed {
+        diags.absorb(ds);
+        for p in out {
+            match p {
+                Placed::Works(works) => {
+                    Stats::add(&stats.surfaces, works.len() as u64);
+                    for (row, w) in works {
+                        match row {
+                            Some(r) => pending[r].push(w),
+                            None => Stats::add(&stats.culled, 1),
+                        }
+                    }
+                }
+                Placed::Remade {
+                    prim,
+                    first,
+                    surfaces,
+                    culled,
+                } => {
+                    Stats::add(&stats.surfaces, surfaces as u64);
+                    Stats::add(&stats.culled, culled as u64);
+                    if let Some(r) = first {
+                        pending_prims[r].push(prim as u32);
+                    }
+                }
+            }
         }
     }
 
@@ -973,8 +1127,40 @@ fn render_inner(
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
     for row in 0..buckets.rows {
-        // Split, dice and shade everything that starts in this row.
+        // Split, dice and shade everything that starts in this row: the surfaces of the
+        // primitives first reaching it are made again (diagnostics were reported the first
+        // time), then everything is split, diced and shaded.
         let mut frontier = std::mem::take(&mut pending[row]);
+        let starting = std::mem::take(&mut pending_prims[row]);
+        if let (false, Some(m)) = (starting.is_empty(), make) {
+            let quiet = Diagnostics::new();
+            let made: Vec<Vec<(Option<usize>, Work)>> = starting
+                .into_par_iter()
+                .map(|i| {
+                    let i = i as usize;
+                    m(i, &quiet)
+                        .into_iter()
+                        .enumerate()
+                        .map(|(j, surface)| {
+                            let w = Work {
+                                surface,
+                                key: surface_key(i, j),
+                                depth: 0,
+                                eye_splits: 0,
+                            };
+                            (frame.place(&w, row), w)
+                        })
+                        .collect()
+                })
+                .collect();
+            for (r, w) in made.into_iter().flatten() {
+                match r {
+                    Some(r) if r == row => frontier.push(w),
+                    Some(r) => pending[r].push(w),
+                    None => {}
+                }
+            }
+        }
         while !frontier.is_empty() {
             let results: Vec<(Outcome, Vec<(usize, Work)>)> = frontier
                 .into_par_iter()
@@ -1139,7 +1325,7 @@ mod tests {
             geometry: Arc::new(Geometry::Points { npoints: 0 }),
             primvars: Arc::default(),
             attributes: Arc::new(attributes),
-            world_from_object: glam::Mat4::IDENTITY,
+            world_from_object: glam::Mat4::IDENTITY.into(),
             span: Default::default(),
             motion: None,
         }
@@ -1488,7 +1674,7 @@ mod tests {
 
     fn string_param(name: &str, value: &str) -> crate::scene::Param {
         crate::scene::Param {
-            name: name.into(),
+            name: name.to_string().into(),
             decl: crate::scene::Decl {
                 class: crate::scene::Class::Uniform,
                 ty: crate::scene::ParamType::String,

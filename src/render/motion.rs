@@ -28,7 +28,7 @@ fn primitive_at(prim: &Primitive, t: f32) -> Primitive {
     let mut p = prim.clone();
     p.motion = None;
     if let Some(m) = &prim.motion {
-        p.world_from_object = m.world_from_object_at(t);
+        p.world_from_object = m.world_from_object_at(t).into();
         if let Some((g, v)) = m.shape_at(t) {
             p.geometry = g;
             p.primvars = v;
@@ -83,10 +83,10 @@ pub fn surfaces_over_shutter(
         && keys.iter().any(|k| {
             k.prim.geometry != keys[0].prim.geometry || k.prim.primvars != keys[0].prim.primvars
         });
-    let m0 = keys[0].camera_from_world * keys[0].prim.world_from_object;
+    let m0 = keys[0].camera_from_world * *keys[0].prim.world_from_object;
     let rigid_still = keys
         .iter()
-        .all(|k| k.camera_from_world * k.prim.world_from_object == m0);
+        .all(|k| k.camera_from_world * *k.prim.world_from_object == m0);
     if !deforming && rigid_still {
         return crate::geom::surfaces_for(index, &keys[0].prim, keys[0].camera_from_world, diags);
     }

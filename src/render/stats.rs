@@ -87,13 +87,13 @@ impl fmt::Display for Stats {
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,
-            "  peak memory      {:>9.1} MiB (film, shaded grids and sample buffers)",
+            "  peak memory      {:>9.1} MiB (renderer: film, shaded grids and sample buffers)",
             g(&self.peak_bytes) as f64 / (1024.0 * 1024.0)
         )?;
         if let Some(rss) = peak_rss() {
             writeln!(
                 f,
-                "  peak resident    {:>9.1} MiB (whole process)",
+                "  peak resident    {:>9.1} MiB (whole process so far: scene, source text, film, buffers; VmHWM)",
                 rss as f64 / (1024.0 * 1024.0)
             )?;
         }

@@ -37,14 +37,15 @@ enum BuildError {
 /// Reads every request of `text` (file id `file`). Errors whose position is in `quiet`
 /// (sorted; placeholders where the binary decoder already reported a problem) are not
 /// reported again, but still resynchronise; a request whose name is there is dropped.
-pub(crate) fn parse_text(
+/// Each request goes to `sink` as soon as it is read (syntax errors are reported in between).
+pub(crate) fn parse_text_into(
     text: &str,
     file: u32,
     diags: &Diagnostics,
     quiet: &[usize],
-) -> Vec<Request> {
+    sink: &mut dyn FnMut(Request),
+) {
     let b = text.as_bytes();
-    let mut out = Vec::new();
     let mut pos = 0usize;
     let report = |d: Diag, at: usize| {
         if quiet.binary_search(&at).is_err() {
@@ -71,7 +72,7 @@ pub(crate) fn parse_text(
                     end = p.as_span().end();
                     match build(p, pos, file) {
                         Ok(r) if quiet.binary_search(&(r.span.start as usize)).is_ok() => {}
-                        Ok(r) => out.push(r),
+                        Ok(r) => sink(r),
                         Err(BuildError::Bad(d)) => diags.report(d),
                         Err(BuildError::BadToken { start, end, open }) => {
                             report(bad_array_token(b, file, start, end, open), start);
@@ -109,7 +110,7 @@ pub(crate) fn parse_text(
                     let e = r.as_span().end();
                     if let Ok(req) = build(r, pos, file) {
                         if quiet.binary_search(&(req.span.start as usize)).is_err() {
-                            out.push(req);
+                            sink(req);
                         }
                     }
                     pos += e.max(1);
@@ -133,7 +134,6 @@ pub(crate) fn parse_text(
             }
         }
     }
-    out
 }
 
 /// The next char boundary at or after `i`.
@@ -462,7 +462,8 @@ mod tests {
         let sm = SourceMap::new();
         let f = sm.add("t.rib", text);
         let d = Diagnostics::new();
-        let r = parse_text(text, f, &d, &[]);
+        let mut r = Vec::new();
+        parse_text_into(text, f, &d, &[], &mut |q| r.push(q));
         (r, d.take().into_iter().map(|x| x.0).collect())
     }
 

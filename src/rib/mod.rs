@@ -149,14 +149,39 @@ pub fn parse_bytes(
     sources: &SourceMap,
     diags: &Diagnostics,
 ) -> Vec<Request> {
-    let unzipped;
+    let mut out = Vec::new();
+    if let Some(src) = register(name, bytes.into(), sources, diags) {
+        src.parse(diags, &mut |r| out.push(r));
+    }
+    out
+}
+
+/// A RIB stream registered in the `SourceMap`, ready to be read.
+struct Registered {
+    text: std::sync::Arc<str>,
+    file: u32,
+    /// Positions where the binary decoder already reported a problem.
+    quiet: Vec<usize>,
+}
+
+impl Registered {
+    fn parse(&self, diags: &Diagnostics, sink: &mut dyn FnMut(Request)) {
+        ascii::parse_text_into(&self.text, self.file, diags, &self.quiet, sink);
+    }
+}
+
+/// Decompresses and decodes `bytes` (consumed, so a large file is not held twice while it is
+/// read) and registers the text. None when the gzip stream is broken (reported).
+fn register(
+    name: &str,
+    bytes: std::borrow::Cow<'_, [u8]>,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+) -> Option<Registered> {
     let mut data = bytes;
     if data.starts_with(&[0x1f, 0x8b]) {
-        match gunzip(data) {
-            Ok(v) => {
-                unzipped = v;
-                data = &unzipped;
-            }
+        match gunzip(&data) {
+            Ok(v) => data = v.into(),
             Err(e) => {
                 let file = sources.add(name, "");
                 diags.report(
@@ -166,17 +191,23 @@ pub fn parse_bytes(
                             "the file starts with the gzip magic bytes 1f 8b but is not valid gzip",
                         ),
                 );
-                return Vec::new();
+                return None;
             }
         }
     }
     if data.is_ascii() {
         // Pure ASCII: always valid UTF-8.
-        let text: std::sync::Arc<str> = String::from_utf8_lossy(data).into();
+        let text: std::sync::Arc<str> = String::from_utf8_lossy(&data).into();
+        drop(data);
         let file = sources.add(name, text.clone());
-        return ascii::parse_text(&text, file, diags, &[]);
+        return Some(Registered {
+            text,
+            file,
+            quiet: Vec::new(),
+        });
     }
-    let (decoded, issues) = binary::transcode(data);
+    let (decoded, issues) = binary::transcode(&data);
+    drop(data);
     let text: std::sync::Arc<str> = decoded.into();
     let file = sources.add(name, text.clone());
     let mut quiet = Vec::new();
@@ -199,7 +230,7 @@ pub fn parse_bytes(
         }
     }
     quiet.sort_unstable();
-    ascii::parse_text(&text, file, diags, &quiet)
+    Some(Registered { text, file, quiet })
 }
 
 fn gunzip(data: &[u8]) -> std::io::Result<Vec<u8>> {
@@ -214,6 +245,19 @@ pub fn read_path(
     sources: &SourceMap,
     diags: &Diagnostics,
 ) -> Result<Vec<Request>, Diag> {
+    let mut out = Vec::new();
+    read_path_into(path, sources, diags, &mut |r| out.push(r))?;
+    Ok(out)
+}
+
+/// [`read_path`], handing each request to `sink` as soon as it is read: the requests of a
+/// large file are never all in memory at once.
+pub fn read_path_into(
+    path: &std::path::Path,
+    sources: &SourceMap,
+    diags: &Diagnostics,
+    sink: &mut dyn FnMut(Request),
+) -> Result<(), Diag> {
     let bytes = if path.as_os_str() == "-" {
         let mut v = Vec::new();
         std::io::Read::read_to_end(&mut std::io::stdin(), &mut v)
@@ -223,10 +267,8 @@ pub fn read_path(
         std::fs::read(path)
             .map_err(|e| Diag::error("rib::io", format!("cannot read `{}`: {e}", path.display())))?
     };
-    Ok(parse_bytes(
-        &path.display().to_string(),
-        &bytes,
-        sources,
-        diags,
-    ))
+    if let Some(src) = register(&path.display().to_string(), bytes.into(), sources, diags) {
+        src.parse(diags, sink);
+    }
+    Ok(())
 }

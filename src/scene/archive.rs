@@ -16,11 +16,20 @@ use crate::rib::{Request, Value};
 use super::builder::Builder;
 use super::table::Call;
 
+/// An `ArchiveBegin` block being read: its requests so far.
+#[derive(Debug)]
+pub(super) struct Recording {
+    name: String,
+    open: Span,
+    /// `ArchiveBegin`s nested inside it and not yet closed.
+    depth: usize,
+    reqs: Vec<Request>,
+}
+
 impl Builder<'_> {
-    /// `reqs[start]` is `ArchiveBegin`: stores the requests up to the matching `ArchiveEnd`
-    /// under the archive's name and returns the index after it.
-    pub(super) fn record_archive(&mut self, reqs: &[Request], start: usize) -> usize {
-        let open = &reqs[start];
+    /// `open` is `ArchiveBegin`: the requests up to the matching `ArchiveEnd` are recorded
+    /// (see [`Builder::feed`]) and stored under the archive's name.
+    pub(super) fn begin_archive(&mut self, open: &Request) {
         let name = match open.args.first().map(|a| &a.value) {
             Some(Value::Str(s)) => s.clone(),
             _ => {
@@ -31,34 +40,52 @@ impl Builder<'_> {
                 String::new()
             }
         };
-        let mut depth = 0usize;
-        let mut end = None;
-        for (j, r) in reqs.iter().enumerate().skip(start + 1) {
-            match r.name.as_str() {
-                "ArchiveBegin" => depth += 1,
-                "ArchiveEnd" if depth == 0 => {
-                    end = Some(j);
-                    break;
+        self.recording = Some(Recording {
+            name,
+            open: open.span,
+            depth: 0,
+            reqs: Vec::new(),
+        });
+    }
+
+    /// Records `r` into the archive being defined; false when no archive is being defined.
+    pub(super) fn record(&mut self, r: &Request) -> bool {
+        let Some(rec) = self.recording.as_mut() else {
+            return false;
+        };
+        match r.name.as_str() {
+            "ArchiveBegin" => rec.depth += 1,
+            "ArchiveEnd" if rec.depth == 0 => {
+                if let Some(rec) = self.recording.take() {
+                    self.store_archive(rec);
                 }
-                "ArchiveEnd" => depth -= 1,
-                _ => {}
+                return true;
             }
+            "ArchiveEnd" => rec.depth -= 1,
+            _ => {}
         }
-        let stop = end.unwrap_or(reqs.len());
-        if end.is_none() {
+        rec.reqs.push(r.clone());
+        true
+    }
+
+    /// The input ended inside `ArchiveBegin`: reports it and keeps what was recorded.
+    pub(super) fn close_recording(&mut self) {
+        if let Some(rec) = self.recording.take() {
             let d = Diag::error(
                 "scene::nesting",
                 "`ArchiveBegin` is never closed by `ArchiveEnd`",
             )
-            .label(open.span, "opened here")
+            .label(rec.open, "opened here")
             .help("add `ArchiveEnd` after the archive's requests");
             self.report(d);
+            self.store_archive(rec);
         }
-        if !name.is_empty() {
-            self.archives
-                .insert(name, Arc::new(reqs[start + 1..stop].to_vec()));
+    }
+
+    fn store_archive(&mut self, rec: Recording) {
+        if !rec.name.is_empty() {
+            self.archives.insert(rec.name, Arc::new(rec.reqs));
         }
-        (stop + 1).min(reqs.len())
     }
 
     pub(super) fn archive_end_alone(&mut self, call: &Call<'_>) {

@@ -170,6 +170,13 @@ impl Builder<'_> {
             .get("light:shadows")
             .and_then(|p| p.data.strings().first().cloned())
             .is_some_and(|s| s.eq_ignore_ascii_case("on"));
+        let samples = self
+            .attrs()
+            .user
+            .get("light:nsamples")
+            .and_then(|p| p.data.floats().first().copied())
+            .filter(|n| n.is_finite() && *n >= 1.0)
+            .map_or(1, |n| n.min(4096.0) as u32);
         if self.world.is_none() {
             // RenderMan Companion style: a light before WorldBegin lives in camera space and
             // shines in every world of its frame (or of the whole file outside frames).
@@ -181,6 +188,7 @@ impl Builder<'_> {
                     handle,
                     area,
                     ray_shadows,
+                    samples,
                 },
                 in_frame,
             });
@@ -196,12 +204,17 @@ impl Builder<'_> {
             handle: handle.clone(),
             area,
             ray_shadows,
+            samples,
         });
         // A reused handle names the newest light.
         self.light_handles.insert(handle, idx);
         let a = self.attrs();
         if !a.lights_on.contains(&idx) {
             a.lights_on.push(idx);
+        }
+        if area {
+            // The geometry that follows in this attribute block is the light's surface.
+            a.area_light = Some(idx);
         }
     }
 

@@ -240,6 +240,12 @@ pub struct Builder<'a> {
     pub(super) program_replies: usize,
     /// DynamicLoad libraries loaded so far (or why they could not be).
     pub(super) libraries: super::ri_api::Libraries,
+    /// The last world_from_object given to a primitive, shared with the next when equal.
+    pub(super) last_ctm: Option<Arc<Mat4>>,
+    /// The `ArchiveBegin` block being recorded.
+    pub(super) recording: Option<super::archive::Recording>,
+    /// The last small geometry emitted, shared with the next primitive when equal.
+    pub(super) last_geometry: Option<Arc<Geometry>>,
 }
 
 /// A light declared before WorldBegin: added to every following world until its frame ends.
@@ -290,6 +296,9 @@ impl<'a> Builder<'a> {
             programs: Default::default(),
             program_replies: 0,
             libraries: Default::default(),
+            last_geometry: None,
+            recording: None,
+            last_ctm: None,
         }
     }
 
@@ -375,33 +384,48 @@ impl<'a> Builder<'a> {
     }
 
     /// Runs a request stream (the main file, an archive, or an inline archive).
+    /// Runs a list of requests (a file, an archive, a procedural's output). An `ArchiveBegin`
+    /// in it must end in it.
     pub fn run(&mut self, reqs: &[Request]) {
-        let mut i = 0;
-        while i < reqs.len() && !self.aborted {
-            let r = &reqs[i];
-            i += 1;
-            match r.name.as_str() {
-                "IfBegin" | "ElseIf" | "Else" | "IfEnd" => {
-                    self.conditional(r);
-                    continue;
-                }
-                _ => {}
+        let outer = self.recording.take();
+        for r in reqs {
+            if self.aborted {
+                break;
             }
-            if !self.conds.last().map_or(true, |c| c.active) {
-                continue;
-            }
-            if r.name == "ArchiveBegin" {
-                i = self.record_archive(reqs, i - 1);
-                continue;
-            }
-            if let Some(block) = self.motion_block.as_mut() {
-                if r.name != "MotionEnd" && r.name != "MotionBegin" {
-                    block.reqs.push(r.clone());
-                    continue;
-                }
-            }
-            self.dispatch(r);
+            self.feed(r);
         }
+        self.close_recording();
+        self.recording = outer;
+    }
+
+    /// Runs one request of a stream: the reader hands requests over as it parses them, so a
+    /// file's requests are never all in memory at once. Call [`Builder::finish`] after the
+    /// last one.
+    pub fn feed(&mut self, r: &Request) {
+        if self.aborted || self.record(r) {
+            return;
+        }
+        match r.name.as_str() {
+            "IfBegin" | "ElseIf" | "Else" | "IfEnd" => {
+                self.conditional(r);
+                return;
+            }
+            _ => {}
+        }
+        if !self.conds.last().map_or(true, |c| c.active) {
+            return;
+        }
+        if r.name == "ArchiveBegin" {
+            self.begin_archive(r);
+            return;
+        }
+        if let Some(block) = self.motion_block.as_mut() {
+            if r.name != "MotionEnd" && r.name != "MotionBegin" {
+                block.reqs.push(r.clone());
+                return;
+            }
+        }
+        self.dispatch(r);
     }
 
     /// Checks one request against the table and calls its handler.
@@ -459,6 +483,7 @@ impl<'a> Builder<'a> {
     /// Ends the stream: reports unclosed blocks (each at its opener) and closes an open world
     /// so its scene is still produced.
     pub fn finish(mut self) -> Vec<Scene> {
+        self.close_recording();
         self.close_programs();
         // After an abort nothing more is reported; an open world still yields its scene.
         if self.aborted {

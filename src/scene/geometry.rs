@@ -58,7 +58,35 @@ impl Builder<'_> {
         for d in ds {
             self.report(d);
         }
-        self.emit(call.full_span(), Arc::new(geom), Arc::new(pv));
+        let geom = self.shared_geometry(geom);
+        self.emit(call.full_span(), geom, Arc::new(pv));
+    }
+
+    /// The geometry as an `Arc`, the previous primitive's when they are equal and small (a
+    /// million `Polygon`s of four vertices share one `Polygons` topology).
+    fn shared_geometry(&mut self, geom: Geometry) -> Arc<Geometry> {
+        let small = match &geom {
+            Geometry::Polygons { verts, .. } => verts.len() <= 64,
+            Geometry::Sphere { .. }
+            | Geometry::Cone { .. }
+            | Geometry::Cylinder { .. }
+            | Geometry::Hyperboloid { .. }
+            | Geometry::Paraboloid { .. }
+            | Geometry::Disk { .. }
+            | Geometry::Torus { .. } => true,
+            _ => false,
+        };
+        if !small {
+            return Arc::new(geom);
+        }
+        if let Some(last) = &self.last_geometry {
+            if **last == geom {
+                return last.clone();
+            }
+        }
+        let g = Arc::new(geom);
+        self.last_geometry = Some(g.clone());
+        g
     }
 
     pub(super) fn emit(&mut self, span: Span, geometry: Arc<Geometry>, primvars: Arc<ParamList>) {
@@ -87,7 +115,14 @@ impl Builder<'_> {
             return;
         }
         let attributes = self.gs.attrs.clone();
-        let world_from_object = self.gs.ctm;
+        let world_from_object = match &self.last_ctm {
+            Some(m) if **m == self.gs.ctm => m.clone(),
+            _ => {
+                let m = Arc::new(self.gs.ctm);
+                self.last_ctm = Some(m.clone());
+                m
+            }
+        };
         let motion = self.primitive_motion(deform).map(Arc::new);
         if let Some(scene) = self.world.as_mut() {
             scene.primitives.push(Primitive {

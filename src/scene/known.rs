@@ -119,7 +119,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("render:patch_minlevel", "uniform integer", Ignored),
     ("render:use_shadingrate", "uniform integer", Ignored),
     ("light:shadows", "uniform string", Used),
-    ("light:nsamples", "uniform integer", Ignored),
+    ("light:nsamples", "uniform integer", Used),
     ("light:samplingstrategy", "uniform string", Ignored),
     ("light:emitphotons", "uniform string", Ignored),
     ("radiosity:averagecolor", "uniform color", Ignored),

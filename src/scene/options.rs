@@ -516,7 +516,7 @@ impl Builder<'_> {
             .as_ref()
             .map(|d| d.display().to_string())
             .unwrap_or_else(|| ".".into())];
-        let slot = match p.name.as_str() {
+        let slot = match &*p.name {
             "shader" => &mut self.option_paths.shader,
             "texture" => &mut self.option_paths.texture,
             "archive" => &mut self.option_paths.archive,

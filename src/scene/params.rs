@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use crate::diag::{did_you_mean, Diag, Span};
 use crate::rib::{Arg, Value};
 
-use super::types::{Class, Decl, Param, ParamData, ParamList, ParamType};
+use super::types::{param_name, Class, Decl, Param, ParamData, ParamList, ParamType};
 
 /// Parses a declaration: `"[class] type['[' n ']']"`, e.g. `"varying float[2]"`.
 pub fn parse_decl(text: &str) -> Result<Decl, String> {
@@ -427,7 +427,7 @@ pub fn parse_params(
             }
         };
         out.push(Param {
-            name: name.to_string(),
+            name: param_name(name),
             decl,
             data,
             span,

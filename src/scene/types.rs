@@ -100,10 +100,28 @@ impl ParamData {
 /// One entry of a parameter list, its declaration resolved.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Param {
-    pub name: String,
+    /// The name; the common primitive variable and shader parameter names are static
+    /// strings (no allocation per primitive), others are owned.
+    pub name: ParamName,
     pub decl: Decl,
     pub data: ParamData,
     pub span: Span,
+}
+
+/// A parameter's name (see [`Param::name`]).
+pub type ParamName = std::borrow::Cow<'static, str>;
+
+/// `name` as a [`ParamName`]: a static string when it is one of the common names.
+pub fn param_name(name: &str) -> ParamName {
+    const COMMON: [&str; 24] = [
+        "P", "Pw", "Pz", "N", "Np", "Cs", "Os", "s", "t", "st", "u", "v", "width",
+        "constantwidth", "Ka", "Kd", "Ks", "roughness", "specularcolor", "intensity",
+        "lightcolor", "from", "to", "texturename",
+    ];
+    match COMMON.iter().find(|c| **c == name) {
+        Some(c) => std::borrow::Cow::Borrowed(c),
+        None => std::borrow::Cow::Owned(name.to_string()),
+    }
 }
 
 /// A parameter list (shader parameters or primitive variables).
@@ -314,14 +332,53 @@ impl Basis {
 }
 
 /// Shading attributes (RISpec §4.2) in force for a primitive.
+///
+/// Memory: the attributes that scenes change from one primitive to the next (colour,
+/// opacity, surface and displacement shaders) are held here; every other attribute is in
+/// [`AttributeState`], shared by `Arc` and reached through `Deref` (`a.shading_rate`), copied
+/// only when one of them changes (`DerefMut`, copy on write). A million `Color`+`Polygon`
+/// pairs thus cost a million small structs, not a million copies of the whole state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Attributes {
     pub color: Vec3,
     pub opacity: Vec3,
-    /// s1 t1 s2 t2 s3 t3 s4 t4 for the parametric corners (0,0) (1,0) (0,1) (1,1).
-    pub texture_coordinates: [f32; 8],
     pub surface: Option<Arc<ShaderRef>>,
     pub displacement: Option<Arc<ShaderRef>>,
+    /// Everything else, shared (read through `Deref`, written through `DerefMut`).
+    pub state: Arc<AttributeState>,
+}
+
+impl std::ops::Deref for Attributes {
+    type Target = AttributeState;
+    fn deref(&self) -> &AttributeState {
+        &self.state
+    }
+}
+
+impl std::ops::DerefMut for Attributes {
+    /// Copies the shared state first when another primitive still holds it.
+    fn deref_mut(&mut self) -> &mut AttributeState {
+        Arc::make_mut(&mut self.state)
+    }
+}
+
+impl Attributes {
+    /// Attributes with these colour and opacity and every other attribute at its default.
+    pub fn with_color(color: Vec3, opacity: Vec3) -> Attributes {
+        Attributes {
+            color,
+            opacity,
+            ..Attributes::default()
+        }
+    }
+}
+
+/// The attributes other than colour, opacity and the surface and displacement shaders (see
+/// [`Attributes`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AttributeState {
+    /// s1 t1 s2 t2 s3 t3 s4 t4 for the parametric corners (0,0) (1,0) (0,1) (1,1).
+    pub texture_coordinates: [f32; 8],
     pub atmosphere: Option<Arc<ShaderRef>>,
     pub interior: Option<Arc<ShaderRef>>,
     pub exterior: Option<Arc<ShaderRef>>,
@@ -351,16 +408,31 @@ pub struct Attributes {
     /// The innermost CSG solid (an index into `Scene::solids`) this primitive belongs to;
     /// None outside boolean solids (a top-level `SolidBegin "primitive"` renders as is).
     pub solid: Option<u32>,
+    /// The area light (an index into `Scene::lights`) whose geometry this primitive is: set by
+    /// `AreaLightSource` for the rest of its attribute block (RISpec §4.2.3).
+    pub area_light: Option<usize>,
 }
 
 impl Default for Attributes {
     fn default() -> Attributes {
+        thread_local! {
+            /// One default state per thread, shared by every default `Attributes`.
+            static DEFAULT: Arc<AttributeState> = Arc::new(AttributeState::default());
+        }
         Attributes {
             color: Vec3::ONE,
             opacity: Vec3::ONE,
-            texture_coordinates: [0., 0., 1., 0., 0., 1., 1., 1.],
             surface: None,
             displacement: None,
+            state: DEFAULT.with(Arc::clone),
+        }
+    }
+}
+
+impl Default for AttributeState {
+    fn default() -> AttributeState {
+        AttributeState {
+            texture_coordinates: [0., 0., 1., 0., 0., 1., 1., 1.],
             atmosphere: None,
             interior: None,
             exterior: None,
@@ -381,6 +453,7 @@ impl Default for Attributes {
             user: HashMap::new(),
             geometric_approximation: HashMap::new(),
             solid: None,
+            area_light: None,
         }
     }
 }
@@ -414,6 +487,9 @@ pub struct Light {
     /// BMRT's `Attribute "light" "shadows" "on"` when the light was declared: the renderer
     /// traces a shadow ray for it at every lit point (whatever the light shader does).
     pub ray_shadows: bool,
+    /// `Attribute "light" "nsamples"` when the light was declared (BMRT): points sampled on an
+    /// area light's geometry per lit point (default 1).
+    pub samples: u32,
 }
 
 /// Geometry as given by the request, in object space. Angles are in degrees as in RIB.
@@ -540,7 +616,8 @@ pub struct Primitive {
     /// Primitive variables (P, N, Cs, s, t, user variables), counts validated.
     pub primvars: Arc<ParamList>,
     pub attributes: Arc<Attributes>,
-    pub world_from_object: Mat4,
+    /// Shared with the other primitives under the same transform (see [`Attributes`]).
+    pub world_from_object: Arc<Mat4>,
     pub span: Span,
     /// Motion blur: keys over time from `MotionBegin` blocks around the primitive's
     /// transform and/or the primitive itself (None for a still primitive). The fields above

@@ -14,32 +14,50 @@ use glam::{Mat4, Vec3};
 
 use crate::diag::{Diag, Diagnostics, Span};
 use crate::shade::ops;
+pub use crate::shade::value::Lanes;
 use crate::shade::value::*;
 use crate::sl::ir::*;
 
 /// The running mask: which points execute.
+///
+/// When few points run (at most one in [`SPARSE_DIVISOR`]), `idx` lists them and pointwise
+/// instructions compute just those (see [`Lanes`]); otherwise `idx` is empty and they compute
+/// every point. Whoever changes `bits` calls [`Mask::recount`].
 #[derive(Clone, Debug)]
 pub struct Mask {
     pub bits: Vec<bool>,
     pub count: usize,
+    idx: Vec<u32>,
 }
+
+/// A mask with at most one running point in this many runs its pointwise instructions over
+/// the running points only (a scalar loop over their indices costs about what a vectorised
+/// loop over four or five points does).
+pub const SPARSE_DIVISOR: usize = 4;
 
 impl Mask {
     pub fn all(n: usize) -> Mask {
         Mask {
             bits: vec![true; n],
             count: n,
+            idx: Vec::new(),
         }
     }
     pub fn none(n: usize) -> Mask {
         Mask {
             bits: vec![false; n],
             count: 0,
+            idx: Vec::new(),
         }
     }
     pub fn from_bits(bits: Vec<bool>) -> Mask {
-        let count = bits.iter().filter(|&&b| b).count();
-        Mask { bits, count }
+        let mut m = Mask {
+            bits,
+            count: 0,
+            idx: Vec::new(),
+        };
+        m.recount();
+        m
     }
     pub fn is_all(&self) -> bool {
         self.count == self.bits.len()
@@ -53,14 +71,44 @@ impl Mask {
         }
         self.recount();
     }
+    /// Counts the running points (and lists them when they are few).
     pub fn recount(&mut self) {
         self.count = self.bits.iter().filter(|&&b| b).count();
+        self.idx.clear();
+        if self.sparse() {
+            self.idx.extend(
+                self.bits
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &b)| b)
+                    .map(|(i, _)| i as u32),
+            );
+        }
     }
-    /// Becomes a copy of `other`, reusing this mask's buffer.
+    /// No point runs any more.
+    pub fn clear(&mut self) {
+        self.bits.iter_mut().for_each(|b| *b = false);
+        self.count = 0;
+        self.idx.clear();
+    }
+    /// Becomes a copy of `other`, reusing this mask's buffers.
     pub fn copy_from(&mut self, other: &Mask) {
         self.bits.clear();
         self.bits.extend_from_slice(&other.bits);
         self.count = other.count;
+        self.idx.clear();
+        self.idx.extend_from_slice(&other.idx);
+    }
+    fn sparse(&self) -> bool {
+        self.count * SPARSE_DIVISOR <= self.bits.len()
+    }
+    /// The points pointwise instructions compute under this mask.
+    pub fn lanes(&self) -> Lanes<'_> {
+        if self.sparse() && self.idx.len() == self.count {
+            Lanes::Some(&self.idx)
+        } else {
+            Lanes::All
+        }
     }
 }
 
@@ -249,6 +297,7 @@ pub struct Exec<'a> {
     pub loop_limit: u64,
     /// Spare mask buffers, so control flow allocates nothing per instruction.
     bits_pool: Vec<Vec<bool>>,
+    idx_pool: Vec<Vec<u32>>,
     /// Where `env.lights` were evaluated (the grid's P), and how to evaluate them elsewhere:
     /// `illuminance(pos)` at other positions (a volume shader marching a ray) runs the lights
     /// again, once over the whole grid. None: `env.lights` serve every position.
@@ -261,7 +310,42 @@ pub struct Exec<'a> {
     /// True inside `solar()` (a ray-traced shadow then looks along L to infinity rather than
     /// to the point `Ps − L`).
     pub in_solar: bool,
+    /// Whether pointwise instructions may compute just the running points when few run
+    /// (false: every instruction computes every point; same results, for tests).
+    pub sparse: bool,
+    /// Instructions run over the listed running points only, so far (for tests and stats).
+    pub sparse_ops: u64,
+    /// Whether loops marked compactable continue over just their running points once few
+    /// run (false: never; same results, for tests).
+    pub compact: bool,
+    /// Inside a compacted loop: the grid index of each point (see [`Exec::point_id`]).
+    point_ids: Option<Vec<u32>>,
+    /// Loops continued over their running points only, so far (for tests and stats).
+    pub compactions: u64,
 }
+
+/// A loop statement's code (see [`Instr::Loop`]).
+#[derive(Clone, Copy)]
+pub struct LoopCode<'a> {
+    cond_code: &'a [Instr],
+    cond: Reg,
+    body: &'a [Instr],
+    step: &'a [Instr],
+    span: Span,
+    compact: Option<&'a [Reg]>,
+}
+
+/// A compactable loop with at most `COMPACT_NUM / COMPACT_DEN` of its points running continues
+/// over just those points (see [`Exec::run_compacted`]): gathering costs about one or two
+/// iterations, and a march whose points leave at different steps runs for many more.
+pub const COMPACT_NUM: usize = 3;
+pub const COMPACT_DEN: usize = 4;
+
+/// Grids smaller than this never compact.
+pub const COMPACT_MIN: usize = 8;
+
+/// The default of [`Exec::compact`] for new executions (tests turn it off to compare).
+pub static COMPACT_LOOPS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
 
 /// Runs the grid's lights with the lit points at `ps`, for the lights flagged in `want` (by
 /// index into `env.lights`; None where not wanted or not runnable).
@@ -333,6 +417,9 @@ impl LightResult {
     }
 }
 
+/// The default of [`Exec::sparse`] for new executions (tests turn it off to compare).
+pub static SPARSE_LANES: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
 /// Default for [`Exec::loop_limit`]: far beyond any real shader's loop (a ray march at the
 /// smallest step real shaders use runs some ten thousand steps).
 pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
@@ -375,11 +462,17 @@ impl<'a> Exec<'a> {
             env,
             frames: Vec::new(),
             in_solar: false,
+            sparse: SPARSE_LANES.load(std::sync::atomic::Ordering::Relaxed),
+            sparse_ops: 0,
+            compact: COMPACT_LOOPS.load(std::sync::atomic::Ordering::Relaxed),
+            point_ids: None,
+            compactions: 0,
             light: None,
             current_light: None,
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
             bits_pool: Vec::new(),
+            idx_pool: Vec::new(),
             lights_at: None,
             relight: None,
             relit: None,
@@ -387,14 +480,18 @@ impl<'a> Exec<'a> {
         }
     }
 
-    /// A copy of `m` in a pooled buffer (give it back with [`Exec::release`]).
+    /// A copy of `m` in pooled buffers (give it back with [`Exec::release_mask`]).
     fn mask_like(&mut self, m: &Mask) -> Mask {
         let mut bits = self.bits_pool.pop().unwrap_or_default();
         bits.clear();
         bits.extend_from_slice(&m.bits);
+        let mut idx = self.idx_pool.pop().unwrap_or_default();
+        idx.clear();
+        idx.extend_from_slice(&m.idx);
         Mask {
             bits,
             count: m.count,
+            idx,
         }
     }
 
@@ -408,6 +505,11 @@ impl<'a> Exec<'a> {
 
     fn release(&mut self, bits: Vec<bool>) {
         self.bits_pool.push(bits);
+    }
+
+    fn release_mask(&mut self, m: Mask) {
+        self.bits_pool.push(m.bits);
+        self.idx_pool.push(m.idx);
     }
 
     fn push_frame(&mut self, kind: FrameKind) {
@@ -500,8 +602,7 @@ impl<'a> Exec<'a> {
             }
             k += 1;
         }
-        mask.bits.iter_mut().for_each(|b| *b = false);
-        mask.count = 0;
+        mask.clear();
     }
 
     fn instr(&mut self, ins: &'a Instr, mask: &mut Mask) {
@@ -545,8 +646,8 @@ impl<'a> Exec<'a> {
                         *m = tb || eb;
                     }
                     mask.recount();
-                    self.release(t.bits);
-                    self.release(e.bits);
+                    self.release_mask(t);
+                    self.release_mask(e);
                 }
             },
             Instr::Loop {
@@ -555,7 +656,19 @@ impl<'a> Exec<'a> {
                 body,
                 step,
                 span,
-            } => self.run_loop(cond_code, *cond, body, step, *span, mask),
+                compact,
+            } => self.run_loop(
+                LoopCode {
+                    cond_code,
+                    cond: *cond,
+                    body,
+                    step,
+                    span: *span,
+                    compact: compact.as_deref(),
+                },
+                mask,
+                0,
+            ),
             Instr::Break(k) => self.exit_to(*k as usize, None, mask),
             Instr::Continue(k) => {
                 let k = *k as usize;
@@ -563,10 +676,9 @@ impl<'a> Exec<'a> {
                 if k > 1 {
                     let mut m = self.mask_like(mask);
                     self.exit_to(k - 1, None, &mut m);
-                    self.release(m.bits);
+                    self.release_mask(m);
                 }
-                mask.bits.iter_mut().for_each(|b| *b = false);
-                mask.count = 0;
+                mask.clear();
             }
             Instr::Return => {
                 let levels = self
@@ -585,7 +697,7 @@ impl<'a> Exec<'a> {
                 self.push_frame(FrameKind::Function);
                 let mut m = self.mask_like(mask);
                 self.block(body, &mut m);
-                self.release(m.bits);
+                self.release_mask(m);
                 if let Some(f) = self.pop_frame() {
                     self.recycle_frame(f);
                 }
@@ -660,22 +772,37 @@ impl<'a> Exec<'a> {
 
     /// One loop statement: condition, body, step until no point is left, under the guard
     /// against loops that never end (see [`DEFAULT_LOOP_LIMIT`], [`FIRST_PROGRESS_CHECK`]).
-    fn run_loop(
-        &mut self,
-        cond_code: &'a [Instr],
-        cond: Reg,
-        body: &'a [Instr],
-        step: &'a [Instr],
-        span: Span,
-        mask: &mut Mask,
-    ) {
+    /// `done`: iterations this execution of the statement already ran (a compacted
+    /// continuation, see [`Exec::run_compacted`]).
+    fn run_loop(&mut self, code: LoopCode<'a>, mask: &mut Mask, done: u64) {
+        let LoopCode {
+            cond_code,
+            cond,
+            body,
+            step,
+            span,
+            compact,
+        } = code;
         self.push_frame(FrameKind::Loop);
         let mut live = self.mask_like(mask);
         let mut scratch = self.mask_like(mask);
         let total_limit = self.loop_limit.saturating_mul(64);
-        let mut count: u64 = 0;
+        let mut count: u64 = done;
         let mut snapshot: Option<(Vec<Slot>, Vec<bool>)> = None;
         loop {
+            if let Some(regs) = compact {
+                if self.compact
+                    && self.n >= COMPACT_MIN
+                    && live.count * COMPACT_DEN <= self.n * COMPACT_NUM
+                    && !live.is_none()
+                {
+                    // The points still looping continue in a grid of just them; every one
+                    // of them leaves the loop there.
+                    if self.run_compacted(code, regs, &live, count) {
+                        break;
+                    }
+                }
+            }
             self.iterations += 1;
             count += 1;
             if count > self.loop_limit || self.iterations > total_limit {
@@ -731,11 +858,149 @@ impl<'a> Exec<'a> {
         if let Some((regs, _)) = snapshot.take() {
             crate::shade::value::recycle(regs);
         }
-        self.release(live.bits);
-        self.release(scratch.bits);
+        self.release_mask(live);
+        self.release_mask(scratch);
         if let Some(f) = self.pop_frame() {
             mask.and_not(&f.outward);
             self.recycle_frame(f);
+        }
+    }
+
+    /// Runs the rest of a loop over the points of `live` only, gathered into a grid of just
+    /// them: the loop's varying registers are cut down to those points, the loop runs there
+    /// (at full vector width: no lanes of points that left are computed), and what it wrote
+    /// is put back at the points' places. Only loops marked by
+    /// [`Program::mark_compact_loops`] come here: everything in them is pointwise, and no
+    /// value a point left behind is read, so the results are those of running over the
+    /// whole grid. `random()` still sees each point's grid index ([`Exec::point_id`]).
+    /// Returns false (nothing done) when a register the loop names has an unexpected size.
+    fn run_compacted(&mut self, code: LoopCode<'a>, regs: &[Reg], live: &Mask, done: u64) -> bool {
+        let n = self.n;
+        let fits = regs.iter().all(|&r| match &self.regs[r as usize] {
+            Slot::VF(v) => v.len() == n,
+            Slot::VT(v) => v.len() == n,
+            Slot::VM(v) => v.len() == n,
+            _ => true,
+        });
+        if !fits {
+            return false;
+        }
+        let mut idx = self.idx_pool.pop().unwrap_or_default();
+        idx.clear();
+        idx.extend(
+            live.bits
+                .iter()
+                .enumerate()
+                .filter(|(_, &b)| b)
+                .map(|(i, _)| i as u32),
+        );
+        let m = idx.len();
+        self.compactions += 1;
+        // The loop's registers cut to the points; the whole-grid values set aside (uniform
+        // values are shared: they serve any grid size).
+        let mut saved: Vec<Slot> = Vec::with_capacity(regs.len());
+        for &r in regs {
+            let slot = &mut self.regs[r as usize];
+            let cut = match slot {
+                Slot::VF(v) => {
+                    let mut c = crate::shade::value::grid_vf(m);
+                    for (o, &i) in c.iter_mut().zip(&idx) {
+                        *o = v[i as usize];
+                    }
+                    Slot::VF(c)
+                }
+                Slot::VT(v) => {
+                    let mut c = crate::shade::value::grid_vt(m);
+                    for (o, &i) in c.iter_mut().zip(&idx) {
+                        *o = v[i as usize];
+                    }
+                    Slot::VT(c)
+                }
+                Slot::VM(v) => Slot::VM(idx.iter().map(|&i| v[i as usize]).collect()),
+                other => {
+                    saved.push(other.clone());
+                    continue;
+                }
+            };
+            saved.push(std::mem::replace(slot, cut));
+        }
+        let outer_ids = self.point_ids.take();
+        let ids: Vec<u32> = match &outer_ids {
+            Some(o) => idx.iter().map(|&i| o[i as usize]).collect(),
+            None => idx.clone(),
+        };
+        self.point_ids = Some(ids);
+        self.n = m;
+        let mut all = Mask::all(m);
+        self.run_loop(code, &mut all, done);
+        self.n = n;
+        self.point_ids = outer_ids;
+        // Put back what the loop wrote. A register that held one value for the whole grid
+        // before and varies now is spread over the grid first (the points that were not in
+        // the loop keep that value).
+        for (&r, old) in regs.iter().zip(saved) {
+            let new = std::mem::take(&mut self.regs[r as usize]);
+            self.regs[r as usize] = match new {
+                Slot::VF(c) => {
+                    let mut v = match old {
+                        Slot::VF(v) => v,
+                        s => match broadcast(&s, n) {
+                            Slot::VF(v) => v,
+                            _ => vec![0.0; n],
+                        },
+                    };
+                    for (&x, &i) in c.iter().zip(&idx) {
+                        v[i as usize] = x;
+                    }
+                    crate::shade::value::recycle([Slot::VF(c)]);
+                    Slot::VF(v)
+                }
+                Slot::VT(c) => {
+                    let mut v = match old {
+                        Slot::VT(v) => v,
+                        s => match broadcast(&s, n) {
+                            Slot::VT(v) => v,
+                            _ => vec![Vec3::ZERO; n],
+                        },
+                    };
+                    for (&x, &i) in c.iter().zip(&idx) {
+                        v[i as usize] = x;
+                    }
+                    crate::shade::value::recycle([Slot::VT(c)]);
+                    Slot::VT(v)
+                }
+                Slot::VM(c) => {
+                    let mut v = match old {
+                        Slot::VM(v) => v,
+                        s => match broadcast(&s, n) {
+                            Slot::VM(v) => v,
+                            _ => vec![Mat4::IDENTITY; n],
+                        },
+                    };
+                    for (&x, &i) in c.iter().zip(&idx) {
+                        v[i as usize] = x;
+                    }
+                    Slot::VM(v)
+                }
+                // A uniform result: what running over the whole grid leaves too.
+                s => {
+                    crate::shade::value::recycle([old]);
+                    s
+                }
+            };
+        }
+        idx.clear();
+        self.idx_pool.push(idx);
+        true
+    }
+
+    /// The grid index of point `i` of the grid being run (they differ inside a compacted
+    /// loop, see [`Exec::run_compacted`]).
+    #[inline]
+    pub fn point_id(&self, i: usize) -> u32 {
+        match &self.point_ids {
+            Some(ids) => ids[i],
+            None => i as u32,
         }
     }
 
@@ -822,18 +1087,7 @@ impl<'a> Exec<'a> {
                         v
                     }
                 };
-                if all {
-                    match a {
-                        F::U(x) => v.iter_mut().for_each(|o| *o = x),
-                        F::V(x) => v.copy_from_slice(x),
-                    }
-                } else {
-                    for i in 0..n {
-                        if mask.bits[i] {
-                            v[i] = a.at(i);
-                        }
-                    }
-                }
+                store_f(&mut v, a, mask);
                 out = Slot::VF(v);
             }
             Kind::Triple => {
@@ -843,18 +1097,7 @@ impl<'a> Exec<'a> {
                     Slot::T(x) => crate::shade::value::grid_vt_filled(n, x),
                     _ => crate::shade::value::grid_vt_filled(n, Vec3::ZERO),
                 };
-                if all {
-                    match a {
-                        T::U(x) => v.iter_mut().for_each(|o| *o = x),
-                        T::V(x) => v.copy_from_slice(x),
-                    }
-                } else {
-                    for i in 0..n {
-                        if mask.bits[i] {
-                            v[i] = a.at(i);
-                        }
-                    }
-                }
+                store_t(&mut v, a, mask);
                 out = Slot::VT(v);
             }
             Kind::Matrix => {
@@ -874,6 +1117,27 @@ impl<'a> Exec<'a> {
             Kind::Str => out = s.clone(),
         }
         self.regs[dst as usize] = out;
+    }
+
+    /// The points a pointwise instruction writing `dst` computes under `mask`.
+    #[inline]
+    pub fn lanes_for<'m>(&mut self, dst: Reg, mask: &'m Mask) -> Lanes<'m> {
+        if self.sparse
+            && !self
+                .prog
+                .full_width
+                .get(dst as usize)
+                .copied()
+                .unwrap_or(true)
+        {
+            let l = mask.lanes();
+            if let Lanes::Some(_) = l {
+                self.sparse_ops += 1;
+            }
+            l
+        } else {
+            Lanes::All
+        }
     }
 
     fn reg_of(&self, name: &str) -> Option<Reg> {
@@ -1011,7 +1275,7 @@ impl<'a> Exec<'a> {
                 any |= ok;
             }
             if !any {
-                self.release(m.bits);
+                self.release_mask(m);
                 continue;
             }
             m.recount();
@@ -1025,7 +1289,7 @@ impl<'a> Exec<'a> {
             self.current_light = Some(li);
             self.block(body, &mut m);
             self.current_light = None;
-            self.release(m.bits);
+            self.release_mask(m);
         }
         self.lights_in_use = outer;
     }
@@ -1216,8 +1480,130 @@ impl<'a> Exec<'a> {
         if !m.is_none() {
             self.block(body, &mut m);
         }
-        self.release(m.bits);
+        self.release_mask(m);
     }
+}
+
+/// `v = a` at the running points of `mask`: a copy when every point runs, the listed points
+/// when few do, otherwise a select over every point (as bit masks, which vectorise).
+#[inline]
+fn store_f(v: &mut [f32], a: F, mask: &Mask) {
+    let n = v.len();
+    if mask.is_all() {
+        match a {
+            Op::U(x) => v.fill(x),
+            Op::V(x) => v.copy_from_slice(&x[..n]),
+        }
+        return;
+    }
+    match (mask.lanes(), a) {
+        (Lanes::Some(idx), Op::U(x)) => {
+            for &i in idx {
+                v[i as usize] = x;
+            }
+        }
+        (Lanes::Some(idx), Op::V(x)) => {
+            for &i in idx {
+                v[i as usize] = x[i as usize];
+            }
+        }
+        (Lanes::All, a) => select_f(v, a, &mask.bits[..n]),
+    }
+}
+
+crate::shade::value::kernel! {
+/// `v[i] = a[i]` where `bits[i]`, branch-free.
+fn select_f<>(v: &mut [f32], a: F, bits: &[bool]) {
+    let sel = |o: f32, x: f32, m: bool| {
+        let k = 0u32.wrapping_sub(m as u32);
+        f32::from_bits((o.to_bits() & !k) | (x.to_bits() & k))
+    };
+    match a {
+        Op::U(x) => {
+            for (o, &m) in v.iter_mut().zip(bits) {
+                *o = sel(*o, x, m);
+            }
+        }
+        Op::V(x) => {
+            let x = &x[..v.len()];
+            for ((o, &m), &x) in v.iter_mut().zip(bits).zip(x) {
+                *o = sel(*o, x, m);
+            }
+        }
+    }
+}
+}
+
+/// [`store_f`] for triples.
+#[inline]
+fn store_t(v: &mut [Vec3], a: T, mask: &Mask) {
+    let n = v.len();
+    if mask.is_all() {
+        match a {
+            Op::U(x) => v.fill(x),
+            Op::V(x) => v.copy_from_slice(&x[..n]),
+        }
+        return;
+    }
+    match (mask.lanes(), a) {
+        (Lanes::Some(idx), Op::U(x)) => {
+            for &i in idx {
+                v[i as usize] = x;
+            }
+        }
+        (Lanes::Some(idx), Op::V(x)) => {
+            for &i in idx {
+                v[i as usize] = x[i as usize];
+            }
+        }
+        (Lanes::All, a) => select_t(v, a, &mask.bits[..n]),
+    }
+}
+
+crate::shade::value::kernel! {
+/// `v[i] = a[i]` where `bits[i]`, branch-free, on the flat components four points (twelve
+/// floats) at a time so the selects vectorise.
+fn select_t<>(v: &mut [Vec3], a: T, bits: &[bool]) {
+    let n = v.len();
+    let o = flat_mut(v);
+    let ones = |m: bool| 0u32.wrapping_sub(m as u32);
+    let (xu, xv) = match a {
+        Op::U(x) => (
+            [x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z],
+            None,
+        ),
+        Op::V(x) => ([0.0; 12], Some(flat(&x[..n]))),
+    };
+    let mut k = [0u32; 12];
+    let chunks = n / 4;
+    for c in 0..chunks {
+        for p in 0..4 {
+            let m = ones(bits[c * 4 + p]);
+            k[p * 3] = m;
+            k[p * 3 + 1] = m;
+            k[p * 3 + 2] = m;
+        }
+        let oo = &mut o[c * 12..c * 12 + 12];
+        let xx: &[f32; 12] = match xv {
+            Some(x) => x[c * 12..c * 12 + 12].try_into().unwrap_or(&xu),
+            None => &xu,
+        };
+        for j in 0..12 {
+            oo[j] = f32::from_bits((oo[j].to_bits() & !k[j]) | (xx[j].to_bits() & k[j]));
+        }
+    }
+    for i in chunks * 4..n {
+        if bits[i] {
+            let x = match xv {
+                Some(x) => Vec3::new(x[i * 3], x[i * 3 + 1], x[i * 3 + 2]),
+                None => Vec3::new(xu[0], xu[1], xu[2]),
+            };
+            o[i * 3] = x.x;
+            o[i * 3 + 1] = x.y;
+            o[i * 3 + 2] = x.z;
+        }
+    }
+}
 }
 
 /// Whether two register values are the same bit for bit (NaN equals NaN).

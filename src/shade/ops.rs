@@ -28,12 +28,28 @@ fn put(ex: &mut Exec, r: Reg, s: Slot) {
     ex.regs[r as usize] = s;
 }
 
+/// `a / b`, 0 where `b` is 0 (as a select, so loops of it vectorise).
 #[inline]
 fn safe_div(a: f32, b: f32) -> f32 {
+    let q = a / b;
     if b == 0.0 {
         0.0
     } else {
-        a / b
+        q
+    }
+}
+
+/// Whether a running point divides by zero.
+fn divides_by_zero(y: F, mask: &crate::shade::exec::Mask) -> bool {
+    match y {
+        F::U(v) => v == 0.0,
+        F::V(v) => match mask.lanes() {
+            Lanes::Some(idx) => idx.iter().any(|&i| v[i as usize] == 0.0),
+            Lanes::All => v
+                .iter()
+                .zip(&mask.bits)
+                .fold(false, |z, (&x, &m)| z | (m & (x == 0.0))),
+        },
     }
 }
 
@@ -51,11 +67,6 @@ fn deriv_weights(du_den: f32, dv_den: f32) -> (f32, f32) {
         }
     };
     (w(du_den), w(dv_den))
-}
-
-#[inline]
-fn safe_div3(a: Vec3, b: Vec3) -> Vec3 {
-    Vec3::new(safe_div(a.x, b.x), safe_div(a.y, b.y), safe_div(a.z, b.z))
 }
 
 #[inline]
@@ -81,8 +92,14 @@ fn normalize(v: Vec3) -> Vec3 {
 
 /// Runs one computation instruction.
 /// `mask` is the running mask: faults are only reported for points that are running.
+/// Pointwise instructions compute the points [`Exec::lanes_for`] gives (all of them, or just
+/// the running ones when few run); the others every point.
 pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
     let n = ex.n;
+    let lanes = match ins.pointwise_dst() {
+        Some(d) => ex.lanes_for(d, mask),
+        None => Lanes::All,
+    };
     match ins {
         Instr::Arith {
             op,
@@ -97,15 +114,12 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                 Kind::Float => {
                     let (x, y) = (ra.f(), rb.f());
                     match op {
-                        Arith::Add => zip_ff(&mut out, n, x, y, |a, b| a + b),
-                        Arith::Sub => zip_ff(&mut out, n, x, y, |a, b| a - b),
-                        Arith::Mul => zip_ff(&mut out, n, x, y, |a, b| a * b),
+                        Arith::Add => k2(&mut out, n, lanes, x, y, |a: f32, b: f32| a + b),
+                        Arith::Sub => k2(&mut out, n, lanes, x, y, |a: f32, b: f32| a - b),
+                        Arith::Mul => k2(&mut out, n, lanes, x, y, |a: f32, b: f32| a * b),
                         Arith::Div => {
-                            let zero = match y {
-                                F::U(v) => v == 0.0 && !mask.is_none(),
-                                F::V(v) => v.iter().zip(&mask.bits).any(|(&z, &m)| m && z == 0.0),
-                            };
-                            zip_ff(&mut out, n, x, y, safe_div);
+                            let zero = !mask.is_none() && divides_by_zero(y, mask);
+                            k2(&mut out, n, lanes, x, y, safe_div);
                             if zero {
                                 put(ex, *dst, out);
                                 ex.warn(ex.prog.span, "division by zero (result set to 0)");
@@ -117,10 +131,10 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                 Kind::Triple => {
                     let (x, y) = (ra.t(), rb.t());
                     match op {
-                        Arith::Add => zip_tt(&mut out, n, x, y, |a, b| a + b),
-                        Arith::Sub => zip_tt(&mut out, n, x, y, |a, b| a - b),
-                        Arith::Mul => zip_tt(&mut out, n, x, y, |a, b| a * b),
-                        Arith::Div => zip_tt(&mut out, n, x, y, safe_div3),
+                        Arith::Add => t2c(&mut out, n, lanes, x, y, |a, b| a + b),
+                        Arith::Sub => t2c(&mut out, n, lanes, x, y, |a, b| a - b),
+                        Arith::Mul => t2c(&mut out, n, lanes, x, y, |a, b| a * b),
+                        Arith::Div => t2c(&mut out, n, lanes, x, y, safe_div),
                     }
                 }
                 Kind::Matrix => {
@@ -142,8 +156,8 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             let mut out = take(ex, *dst);
             let ra = &ex.regs[*a as usize];
             match kind {
-                Kind::Float => map_ff(&mut out, n, ra.f(), |x| -x),
-                Kind::Triple => map_tt(&mut out, n, ra.t(), |x| -x),
+                Kind::Float => k1(&mut out, n, lanes, ra.f(), |x: f32| -x),
+                Kind::Triple => t1c(&mut out, n, lanes, ra.t(), |x| -x),
                 Kind::Matrix => {
                     let x = ra.m();
                     write_m(&mut out, n, x.is_varying(), |i| -x.at(i))
@@ -157,20 +171,20 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             let x = ex.regs[*a as usize].f();
             match to {
                 Kind::Matrix => write_m(&mut out, n, x.is_varying(), |i| Mat4::IDENTITY * x.at(i)),
-                _ => write_t(&mut out, n, x.is_varying(), |i| Vec3::splat(x.at(i))),
+                _ => k1(&mut out, n, lanes, x, Vec3::splat),
             }
             put(ex, *dst, out);
         }
         Instr::Dot { dst, a, b } => {
             let mut out = take(ex, *dst);
             let (x, y) = (ex.regs[*a as usize].t(), ex.regs[*b as usize].t());
-            zip_tt_f(&mut out, n, x, y, |a, b| a.dot(b));
+            k2(&mut out, n, lanes, x, y, |a: Vec3, b: Vec3| a.dot(b));
             put(ex, *dst, out);
         }
         Instr::Cross { dst, a, b } => {
             let mut out = take(ex, *dst);
             let (x, y) = (ex.regs[*a as usize].t(), ex.regs[*b as usize].t());
-            zip_tt(&mut out, n, x, y, |a, b| a.cross(b));
+            k2(&mut out, n, lanes, x, y, |a: Vec3, b: Vec3| a.cross(b));
             put(ex, *dst, out);
         }
         Instr::Compare {
@@ -182,56 +196,50 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
         } => {
             let mut out = take(ex, *dst);
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
-            let c = *op;
-            match kind {
-                Kind::Float => zip_ff(&mut out, n, ra.f(), rb.f(), |x, y| b2f(cmp_f(c, x, y))),
-                Kind::Triple => {
-                    let (x, y) = (ra.t(), rb.t());
-                    let eq = c == Cmp::Eq;
-                    write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| {
-                        b2f((x.at(i) == y.at(i)) == eq)
+            let (x, y) = (ra.f(), rb.f());
+            match (kind, op) {
+                (Kind::Float, Cmp::Eq) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x == y)),
+                (Kind::Float, Cmp::Ne) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x != y)),
+                (Kind::Float, Cmp::Lt) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x < y)),
+                (Kind::Float, Cmp::Le) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x <= y)),
+                (Kind::Float, Cmp::Gt) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x > y)),
+                (Kind::Float, Cmp::Ge) => k2(&mut out, n, lanes, x, y, |x, y| b2f(x >= y)),
+                (Kind::Triple, c) => {
+                    let eq = *c == Cmp::Eq;
+                    k2(&mut out, n, lanes, ra.t(), rb.t(), |x: Vec3, y: Vec3| {
+                        b2f((x == y) == eq)
                     })
                 }
-                Kind::Matrix => {
+                (Kind::Matrix, c) => {
                     let (x, y) = (ra.m(), rb.m());
-                    let eq = c == Cmp::Eq;
+                    let eq = *c == Cmp::Eq;
                     write_f(&mut out, n, x.is_varying() || y.is_varying(), |i| {
                         b2f((x.at(i) == y.at(i)) == eq)
                     })
                 }
-                Kind::Str => {
+                (Kind::Str, c) => {
                     let eq = ra.s() == rb.s();
-                    out = Slot::F(b2f(eq == (c == Cmp::Eq)));
+                    out = Slot::F(b2f(eq == (*c == Cmp::Eq)));
                 }
             }
             put(ex, *dst, out);
         }
         Instr::And { dst, a, b } => {
             let mut out = take(ex, *dst);
-            zip_ff(
-                &mut out,
-                n,
-                ex.regs[*a as usize].f(),
-                ex.regs[*b as usize].f(),
-                |x, y| b2f(x != 0.0 && y != 0.0),
-            );
+            let (x, y) = (ex.regs[*a as usize].f(), ex.regs[*b as usize].f());
+            k2(&mut out, n, lanes, x, y, |x, y| b2f(x != 0.0 && y != 0.0));
             put(ex, *dst, out);
         }
         Instr::Or { dst, a, b } => {
             let mut out = take(ex, *dst);
-            zip_ff(
-                &mut out,
-                n,
-                ex.regs[*a as usize].f(),
-                ex.regs[*b as usize].f(),
-                |x, y| b2f(x != 0.0 || y != 0.0),
-            );
+            let (x, y) = (ex.regs[*a as usize].f(), ex.regs[*b as usize].f());
+            k2(&mut out, n, lanes, x, y, |x, y| b2f(x != 0.0 || y != 0.0));
             put(ex, *dst, out);
         }
         Instr::Not { dst, a } => {
             let mut out = take(ex, *dst);
             let x = ex.regs[*a as usize].f();
-            write_f(&mut out, n, x.is_varying(), |i| b2f(x.at(i) == 0.0));
+            k1(&mut out, n, lanes, x, |x: f32| b2f(x == 0.0));
             put(ex, *dst, out);
         }
         Instr::Select {
@@ -246,26 +254,20 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
             let v = c.is_varying() || ra.is_varying() || rb.is_varying();
             match kind {
-                Kind::Float => {
-                    let (x, y) = (ra.f(), rb.f());
-                    write_f(&mut out, n, v, |i| {
-                        if c.at(i) != 0.0 {
-                            x.at(i)
-                        } else {
-                            y.at(i)
-                        }
-                    })
-                }
-                Kind::Triple => {
-                    let (x, y) = (ra.t(), rb.t());
-                    write_t(&mut out, n, v, |i| {
-                        if c.at(i) != 0.0 {
-                            x.at(i)
-                        } else {
-                            y.at(i)
-                        }
-                    })
-                }
+                Kind::Float => k3(&mut out, n, lanes, c, ra.f(), rb.f(), |c, x, y| {
+                    if c != 0.0 {
+                        x
+                    } else {
+                        y
+                    }
+                }),
+                Kind::Triple => k3(&mut out, n, lanes, c, ra.t(), rb.t(), |c, x, y| {
+                    if c != 0.0 {
+                        x
+                    } else {
+                        y
+                    }
+                }),
                 Kind::Matrix => {
                     let (x, y) = (ra.m(), rb.m());
                     write_m(&mut out, n, v, |i| {
@@ -293,8 +295,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                 ex.regs[*y as usize].f(),
                 ex.regs[*z as usize].f(),
             );
-            let v = a.is_varying() || b.is_varying() || c.is_varying();
-            write_t(&mut out, n, v, |i| Vec3::new(a.at(i), b.at(i), c.at(i)));
+            k3(&mut out, n, lanes, a, b, c, Vec3::new);
             put(ex, *dst, out);
         }
         Instr::MakeMatrix { dst, elems } => {
@@ -405,7 +406,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
         }
         Instr::Call { f, dst, args, span } => {
             if !rayops::call(ex, *f, *dst, args, *span, mask) {
-                call(ex, *f, *dst, args, *span)
+                call(ex, *f, *dst, args, *span, lanes)
             }
         }
         _ => {}
@@ -418,18 +419,6 @@ fn b2f(b: bool) -> f32 {
         1.0
     } else {
         0.0
-    }
-}
-
-#[inline]
-fn cmp_f(c: Cmp, x: f32, y: f32) -> bool {
-    match c {
-        Cmp::Eq => x == y,
-        Cmp::Ne => x != y,
-        Cmp::Lt => x < y,
-        Cmp::Le => x <= y,
-        Cmp::Gt => x > y,
-        Cmp::Ge => x >= y,
     }
 }
 
@@ -668,19 +657,27 @@ fn set_out(ex: &mut Exec, r: Reg, s: Slot) {
     };
 }
 
-fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span) {
+#[allow(clippy::too_many_arguments)]
+fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Span, lanes: Lanes) {
     use Builtin::*;
     let n = ex.n;
     let mut out = take(ex, dst);
     macro_rules! f1 {
         ($e:expr) => {{
             let a = arg(ex, args, 0).f();
-            map_ff(&mut out, n, a, $e);
+            k1(&mut out, n, lanes, a, $e);
         }};
     }
     macro_rules! f2 {
         ($e:expr) => {{
-            zip_ff(&mut out, n, arg(ex, args, 0).f(), arg(ex, args, 1).f(), $e);
+            k2(
+                &mut out,
+                n,
+                lanes,
+                arg(ex, args, 0).f(),
+                arg(ex, args, 1).f(),
+                $e,
+            );
         }};
     }
     macro_rules! f3 {
@@ -690,25 +687,19 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).f(),
                 arg(ex, args, 2).f(),
             );
-            let g = $e;
-            write_f(
-                &mut out,
-                n,
-                a.is_varying() || b.is_varying() || c.is_varying(),
-                |i| g(a.at(i), b.at(i), c.at(i)),
-            );
+            k3(&mut out, n, lanes, a, b, c, $e);
         }};
     }
     macro_rules! t1f {
         ($e:expr) => {{
             let a = arg(ex, args, 0).t();
-            map_tf(&mut out, n, a, $e);
+            k1(&mut out, n, lanes, a, $e);
         }};
     }
     macro_rules! t1t {
         ($e:expr) => {{
             let a = arg(ex, args, 0).t();
-            map_tt(&mut out, n, a, $e);
+            k1(&mut out, n, lanes, a, $e);
         }};
     }
     macro_rules! varying_any {
@@ -725,7 +716,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         Asin => f1!(|x: f32| x.clamp(-1.0, 1.0).asin()),
         Acos => f1!(|x: f32| x.clamp(-1.0, 1.0).acos()),
         Atan1 => f1!(|x: f32| x.atan()),
-        Atan2 => f2!(|y, x| y.atan2(x)),
+        Atan2 => f2!(|y: f32, x: f32| y.atan2(x)),
         Pow => f2!(|x: f32, y: f32| {
             let r = x.powf(y);
             if r.is_finite() {
@@ -760,10 +751,24 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         Ceil => f1!(|x: f32| x.ceil()),
         Round => f1!(|x: f32| x.round()),
         IsNan => f1!(|x: f32| b2f(x.is_nan())),
+        MinF | MaxF if args.len() == 2 => {
+            if f == MaxF {
+                f2!(|a: f32, b: f32| a.max(b))
+            } else {
+                f2!(|a: f32, b: f32| a.min(b))
+            }
+        }
+        MinF | MaxF if args.len() == 3 => {
+            if f == MaxF {
+                f3!(|a: f32, b: f32, c: f32| a.max(b).max(c))
+            } else {
+                f3!(|a: f32, b: f32, c: f32| a.min(b).min(c))
+            }
+        }
         MinF | MaxF => {
             let ops: Vec<F> = args.iter().map(|r| ex.regs[*r as usize].f()).collect();
             let mx = f == MaxF;
-            write_f(&mut out, n, varying_any!(), |i| {
+            write_f_l(&mut out, n, lanes, varying_any!(), |i| {
                 let mut r = ops[0].at(i);
                 for o in &ops[1..] {
                     r = if mx { r.max(o.at(i)) } else { r.min(o.at(i)) };
@@ -771,10 +776,18 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 r
             });
         }
+        MinT | MaxT if args.len() == 2 => {
+            let (a, b) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
+            if f == MaxT {
+                t2c(&mut out, n, lanes, a, b, f32::max)
+            } else {
+                t2c(&mut out, n, lanes, a, b, f32::min)
+            }
+        }
         MinT | MaxT => {
             let ops: Vec<T> = args.iter().map(|r| ex.regs[*r as usize].t()).collect();
             let mx = f == MaxT;
-            write_t(&mut out, n, varying_any!(), |i| {
+            write_t_l(&mut out, n, lanes, varying_any!(), |i| {
                 let mut r = ops[0].at(i);
                 for o in &ops[1..] {
                     r = if mx { r.max(o.at(i)) } else { r.min(o.at(i)) };
@@ -792,8 +805,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).t(),
                 arg(ex, args, 2).t(),
             );
-            write_t(&mut out, n, varying_any!(), |i| {
-                let (x, a, b) = (x.at(i), a.at(i), b.at(i));
+            k3(&mut out, n, lanes, x, a, b, |x: Vec3, a: Vec3, b: Vec3| {
                 Vec3::new(
                     clamp_like_c(x.x, a.x, b.x),
                     clamp_like_c(x.y, a.y, b.y),
@@ -808,8 +820,8 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).t(),
                 arg(ex, args, 2).f(),
             );
-            write_t(&mut out, n, varying_any!(), |i| {
-                a.at(i) * (1.0 - t.at(i)) + b.at(i) * t.at(i)
+            k3(&mut out, n, lanes, a, b, t, |a: Vec3, b: Vec3, t: f32| {
+                a * (1.0 - t) + b * t
             });
         }
         MixTT => {
@@ -818,8 +830,8 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 arg(ex, args, 1).t(),
                 arg(ex, args, 2).t(),
             );
-            write_t(&mut out, n, varying_any!(), |i| {
-                a.at(i) * (Vec3::ONE - t.at(i)) + b.at(i) * t.at(i)
+            k3(&mut out, n, lanes, a, b, t, |a: Vec3, b: Vec3, t: Vec3| {
+                a * (Vec3::ONE - t) + b * t
             });
         }
         Step => f2!(|e: f32, x: f32| b2f(x >= e)),
@@ -975,34 +987,34 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
         RandomF => {
             let seed = ex.env.seed;
             let base = random_site(ex, span);
-            out = Slot::VF((0..n).map(|i| pn_hash(seed, base, i as u32, 0)).collect());
+            let ex = &*ex;
+            write_f_l(&mut out, n, lanes, true, |i| {
+                pn_hash(seed, base, ex.point_id(i), 0)
+            });
         }
         RandomT => {
             let seed = ex.env.seed;
             let base = random_site(ex, span);
-            out = Slot::VT(
-                (0..n)
-                    .map(|i| {
-                        Vec3::new(
-                            pn_hash(seed, base, i as u32, 0),
-                            pn_hash(seed, base, i as u32, 1),
-                            pn_hash(seed, base, i as u32, 2),
-                        )
-                    })
-                    .collect(),
-            );
+            write_t_l(&mut out, n, lanes, true, |i| {
+                let i = ex.point_id(i);
+                Vec3::new(
+                    pn_hash(seed, base, i, 0),
+                    pn_hash(seed, base, i, 1),
+                    pn_hash(seed, base, i, 2),
+                )
+            });
         }
         NoiseF1 => f1!(pn::noise1),
         NoiseF2 => f2!(pn::noise2),
         NoiseF3 => {
             let a = arg(ex, args, 0).t();
-            match a {
-                T::V(p) => {
+            match (a, lanes) {
+                (T::V(p), Lanes::All) => {
                     let mut v = take_vf(&mut out, n);
                     pn::noise3_slice(p, &mut v);
                     out = Slot::VF(v);
                 }
-                T::U(p) => out = Slot::F(pn::noise3(p)),
+                _ => k1(&mut out, n, lanes, a, pn::noise3),
             }
         }
         NoiseF4 => {
@@ -2165,6 +2177,85 @@ fn unused() -> f32 {
 mod tests {
     use super::*;
 
+    /// Distance in units in the last place between two finite floats of the same sign.
+    fn ulps(a: f32, b: f32) -> u32 {
+        (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs() as u32
+    }
+
+    #[test]
+    fn exp_within_one_ulp_of_correctly_rounded_over_the_normal_range() {
+        // Every 101st float from the underflow threshold up to overflow, both signs.
+        let mut worst = 0;
+        let mut count = 0;
+        let mut check = |x: f32| {
+            let exact = (x as f64).exp() as f32;
+            let got = exp_f(x);
+            let u = ulps(got, exact);
+            assert!(u <= 1, "exp({x}) = {got:e}, correctly rounded {exact:e}");
+            // And within 1e-6 relative of libm's.
+            let libm = x.exp();
+            assert!(
+                ((got - libm) / libm).abs() <= 1e-6,
+                "exp({x}): {got:e} vs libm {libm:e}"
+            );
+            worst = worst.max(u);
+            count += 1;
+        };
+        let mut b = (-87.3365f32).to_bits();
+        while f32::from_bits(b) < -1e-6 {
+            check(f32::from_bits(b));
+            b -= 101;
+        }
+        let mut b = 1e-6f32.to_bits();
+        while f32::from_bits(b) < 88.72 {
+            check(f32::from_bits(b));
+            b += 101;
+        }
+        assert!(count > 4_000_000, "{count}");
+        assert!(worst <= 1);
+    }
+
+    #[test]
+    fn exp_special_values() {
+        assert_eq!(exp_f(0.0), 1.0);
+        assert_eq!(exp_f(-0.0), 1.0);
+        assert_eq!(exp_f(1.0), std::f32::consts::E);
+        assert!(exp_f(f32::NAN).is_nan());
+        assert_eq!(exp_f(f32::INFINITY), f32::INFINITY);
+        assert_eq!(exp_f(88.73), f32::INFINITY);
+        assert_eq!(exp_f(1e30), f32::INFINITY);
+        assert_eq!(exp_f(f32::NEG_INFINITY), 0.0);
+        assert_eq!(exp_f(-1e30), 0.0);
+        assert_eq!(exp_f(-88.0), 0.0);
+        assert_eq!(exp_f(-104.0), 0.0);
+        // The largest finite result and the smallest normal one are reached.
+        assert!(ulps(exp_f(88.722), (88.722f32 as f64).exp() as f32) <= 1);
+        assert!(exp_f(-87.3365) >= f32::MIN_POSITIVE);
+        // Never a subnormal.
+        let mut x = -90.0f32;
+        while x < -80.0 {
+            let y = exp_f(x);
+            assert!(y == 0.0 || y.is_normal(), "exp({x}) = {y:e}");
+            x += 1e-4;
+        }
+    }
+
+    #[test]
+    fn exp_over_a_slice_matches_point_by_point() {
+        // The loop the interpreter runs (vectorised) gives the scalar function's bits.
+        let xs: Vec<f32> = (0..4099).map(|i| -120.0 + i as f32 * 0.0517).collect();
+        let mut out = Slot::default();
+        k1(&mut out, xs.len(), Lanes::All, F::V(&xs), exp_f);
+        let Slot::VF(v) = out else { panic!("varying") };
+        for (x, y) in xs.iter().zip(&v) {
+            assert_eq!(
+                y.to_bits(),
+                std::hint::black_box(exp_f)(*x).to_bits(),
+                "{x}"
+            );
+        }
+    }
+
     #[test]
     fn fresnel_at_normal_incidence_is_004_for_glass() {
         let (kr, kt, _, _) = fresnel(
@@ -2303,16 +2394,50 @@ fn horizon_call(ex: &mut Exec, f: Builtin, args: &[Reg], span: crate::diag::Span
     })
 }
 
-/// `exp` for shaders: libm's `expf` takes a slow error-reporting path on underflow, which
-/// volume shaders hit at every step of a march (`exp(-falloff * height)` far from a
-/// surface). Below ln of the smallest subnormal the result is 0 anyway.
-#[inline]
-fn exp_f(x: f32) -> f32 {
-    if x < -104.0 {
+/// `exp` for shaders, branch-free so loops of it vectorise (libm's `expf` is a call per
+/// point, and takes a slow error-reporting path on underflow, which volume shaders hit at
+/// every step of a march: `exp(-falloff * height)` far from a surface).
+///
+/// Cody–Waite reduction `x = k·ln2 + r`, |r| ≤ ln2/2, a degree-7 Taylor polynomial for e^r,
+/// and the scale 2^k applied as two powers of two. Within 1 ulp of the correctly rounded
+/// result wherever that is a normal number (tests below); +∞ above ln(f32::MAX); NaN for
+/// NaN; 0 below −87.3365, where the result would be under 1.2e-38: no subnormal result is
+/// ever made (making one costs a slow microcode assist on x86, and the volume marches that
+/// call exp most are the ones that underflow).
+#[inline(always)]
+pub fn exp_f(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    // ln 2 split so that k·LN2_HI is exact for the k that occur.
+    const LN2_HI: f32 = 0.693_145_75;
+    const LN2_LO: f32 = 1.428_606_8e-6;
+    // 1.5·2^23: adding it rounds to an integer, held in the low mantissa bits.
+    const ROUND: f32 = 12_582_912.0;
+    // Just above ln(f32::MIN_POSITIVE) = −87.336544: from here up, e^x is normal.
+    const LOW: f32 = -87.3365;
+    let xc = x.clamp(LOW, 89.0);
+    let t = xc * LOG2E + ROUND;
+    let k = t - ROUND;
+    let ki = (t.to_bits() as i32).wrapping_sub(0x4B40_0000);
+    let r = xc - k * LN2_HI - k * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (0.166_666_67
+                    + r * (0.041_666_42
+                        + r * (0.008_333_452 + r * (0.001_394_376_3 + r * 0.000_198_527_62))))));
+    let k1 = ki >> 1;
+    let s1 = f32::from_bits(((k1 + 127) as u32) << 23);
+    // The flush to zero goes through the scale (not a select on the result), so the clamp
+    // above is kept for every point and no point's product is subnormal.
+    let s2 = if x < LOW {
         0.0
-    } else if x > 89.0 {
-        f32::INFINITY
     } else {
-        x.exp()
+        f32::from_bits(((ki - k1 + 127) as u32) << 23)
+    };
+    let y = p * s1 * s2;
+    if x.is_nan() {
+        x
+    } else {
+        y
     }
 }

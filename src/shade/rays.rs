@@ -35,6 +35,8 @@ pub struct Tracer<'a, 's> {
     pub scene: &'s Scene,
     pub camera: &'s Camera,
     pub depth: u32,
+    /// Rays pass through the surfaces of this area light (its own shadow rays).
+    pub skip_light: Option<usize>,
 }
 
 /// `Option "trace" "maxdepth"` (or BMRT's `"render" "max_raylevel"`).
@@ -284,6 +286,7 @@ impl RayTracer for Tracer<'_, '_> {
             return;
         }
         let bias = self.bias_for();
+        let skip = self.skip_light;
         for k in 0..from.len() {
             if !active.get(k).copied().unwrap_or(false) {
                 continue;
@@ -298,7 +301,7 @@ impl RayTracer for Tracer<'_, '_> {
             let tmax = 1.0 - bias / len;
             rs.bvh.each_hit(from[k], d, tmin, tmax, &mut |h| {
                 let rg = &rs.grids[h.grid as usize];
-                if !rg.shadows {
+                if !rg.shadows || (skip.is_some() && rg.area_light == skip) {
                     return false;
                 }
                 let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);

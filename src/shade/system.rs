@@ -102,6 +102,12 @@ fn uses_solar(instrs: &[Instr]) -> bool {
 
 /// A light of the primitive, ready to run over its grids.
 struct GridLight<'s> {
+    /// Index into `Scene::lights`.
+    index: usize,
+    /// An area light: its sampled shape and the samples per lit point (`Attribute "light"
+    /// "nsamples"`). Each sample is one light of the grid's list (illuminance runs its body
+    /// once per sample, with Cl divided by the count), as BMRT did.
+    area: Option<(Arc<crate::ray::AreaShape>, u32)>,
     shader: &'s ShaderRef,
     prog: Arc<Program>,
     bare_solar: bool,
@@ -112,6 +118,7 @@ struct GridLight<'s> {
 }
 
 /// Per-run facts shared by the programs of one grid.
+#[derive(Clone, Copy)]
 struct RunCtx<'s> {
     scene: &'s Scene,
     camera: &'s Camera,
@@ -125,6 +132,9 @@ struct RunCtx<'s> {
     /// The grid is a batch of ray hits: neighbouring points are unrelated, so derivatives
     /// across it read as zero.
     hits: bool,
+    /// The grid holds points sampled on this area light (a light shader's P, N, u, v, s, t
+    /// are the grid's, RISpec §15.2.2); rays it casts pass through the light's own surfaces.
+    area_light: Option<usize>,
 }
 
 impl<'a> ShadeSystem<'a> {
@@ -140,7 +150,7 @@ impl<'a> ShadeSystem<'a> {
     }
 
     fn program(&self, sref: &ShaderRef, kind: ShaderKind) -> Option<Arc<Program>> {
-        let given: Vec<&str> = sref.params.0.iter().map(|g| g.name.as_str()).collect();
+        let given: Vec<&str> = sref.params.0.iter().map(|g| &*g.name).collect();
         let p = self
             .library
             .get_for(&sref.name, &given, self.sources, self.diags)?;
@@ -283,11 +293,12 @@ impl<'a> ShadeSystem<'a> {
             scene,
             camera,
             attrs: &p.attributes,
-            camera_from_object: camera.camera_from_world * p.world_from_object,
+            camera_from_object: camera.camera_from_world * *p.world_from_object,
             seed: crate::pattern::hash::hash_u32(prim as u32 ^ 0x9e37_79b9),
             alpha: None,
             depth: 0,
             hits: false,
+            area_light: None,
         }
     }
 
@@ -338,6 +349,7 @@ impl<'a> ShadeSystem<'a> {
                 alpha: Some(&alpha),
                 depth: 0,
                 hits: false,
+                area_light: None,
             };
             if let Some(mut regs) =
                 self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None, None)
@@ -411,7 +423,7 @@ impl<'a> ShadeSystem<'a> {
                         name: "defaultsurface".into(),
                         params: Default::default(),
                         span: p.span,
-                        world_from_shader: p.world_from_object,
+                        world_from_shader: *p.world_from_object,
                     }),
                 ),
                 None => return,
@@ -559,10 +571,32 @@ impl<'a> ShadeSystem<'a> {
             .iter()
             .filter_map(|&li| {
                 let light = ctx.scene.lights.get(li)?;
-                let prog = self.program(&light.shader, ShaderKind::Light)?;
+                let mut prog = self.program(&light.shader, ShaderKind::Light)?;
+                let area = if light.area {
+                    self.area_shape(ctx, li).map(|shape| {
+                        // Shaders written for area lights read the light's surface point
+                        // and normal (P, N) only where BMRT is defined (PRMan had no area
+                        // lights): an area light runs the BMRT build of its shader.
+                        if let Some(p) = self.library.get_variant(
+                            &light.shader.name,
+                            "BMRT",
+                            &[("BMRT", "1")],
+                            self.sources,
+                        ) {
+                            if p.kind == ShaderKind::Light {
+                                prog = p;
+                            }
+                        }
+                        (shape, light.samples.max(1))
+                    })
+                } else {
+                    None
+                };
                 let bare_solar = uses_bare_solar(&prog.body);
                 let solar = uses_solar(&prog.body);
                 Some(GridLight {
+                    index: li,
+                    area,
                     shader: &light.shader,
                     prog,
                     bare_solar,
@@ -573,9 +607,44 @@ impl<'a> ShadeSystem<'a> {
             .collect()
     }
 
-    /// Runs `lights` over the grid: with the lit points at the grid's P, or at `ps`
-    /// (illuminance at other positions). With `want`, only the lights flagged there run; the
-    /// others are None.
+    /// The sampled shape of area light `li`; None (with a warning) when it has no geometry
+    /// that dices: it then shines as a point light from its origin.
+    fn area_shape(&self, ctx: &RunCtx, li: usize) -> Option<Arc<crate::ray::AreaShape>> {
+        let (scene, camera) = (ctx.scene, ctx.camera);
+        let shapes = self.rays.areas(|| {
+            scene
+                .lights
+                .iter()
+                .enumerate()
+                .map(|(k, l)| {
+                    l.area.then(|| {
+                        Arc::new(crate::ray::AreaShape::build(scene, camera, k, self.diags))
+                    })
+                })
+                .collect()
+        });
+        let shape = shapes.get(li)?.as_ref()?;
+        if shape.is_empty() {
+            let light = &scene.lights[li];
+            self.diags.report(
+                Diag::warning(
+                    "shade::area-light",
+                    format!(
+                        "area light `{}` ({}) has no geometry: it shines from its origin as a \
+                         point light",
+                        light.shader.name, light.handle
+                    ),
+                )
+                .label(light.shader.span, "this AreaLightSource")
+                .help(
+                    "put the light's surfaces after `AreaLightSource`, in the same attribute block",
+                ),
+            );
+            return None;
+        }
+        Some(shape.clone())
+    }
+
     /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
     /// those grid points only, as a grid of just them.
     fn relight(
@@ -592,21 +661,20 @@ impl<'a> ShadeSystem<'a> {
             Some(idx) => {
                 let sub = grid.subset(idx);
                 let sub_ctx = RunCtx {
-                    scene: ctx.scene,
-                    camera: ctx.camera,
-                    attrs: ctx.attrs,
-                    camera_from_object: ctx.camera_from_object,
-                    seed: ctx.seed,
                     alpha: None,
-                    depth: ctx.depth,
                     // Its neighbours are unrelated points: derivatives read zero.
                     hits: true,
+                    ..*ctx
                 };
                 self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want))
             }
         }
     }
 
+    /// Runs `lights` over the grid: with the lit points at the grid's P, or at `ps`
+    /// (illuminance at other positions). The result is flat: one entry per light, but
+    /// `samples` entries for an area light (see [`GridLight::area`]). With `want` (indexed
+    /// like the result), only the wanted entries run; the others are None.
     fn eval_lights(
         &self,
         grid: &Grid,
@@ -620,113 +688,181 @@ impl<'a> ShadeSystem<'a> {
         // The unit surface normal is needed only by solar() without an axis.
         let mut ns: Option<Arc<[Vec3]>> = None;
         let ps: Arc<[Vec3]> = ps.unwrap_or(&grid.p).into();
-        for (k, gl) in lights.iter().enumerate() {
-            if want.is_some_and(|w| !w.get(k).copied().unwrap_or(false)) {
-                out.push(None);
+        for gl in lights {
+            let count = gl.area.as_ref().map_or(1, |(_, s)| *s as usize);
+            let first = out.len();
+            let wanted = |k: usize| want.is_none_or(|w| w.get(k).copied().unwrap_or(false));
+            if !(first..first + count).any(wanted) {
+                out.extend((0..count).map(|_| None));
                 continue;
             }
-            let prog = &gl.prog;
             let ns = if gl.bare_solar {
                 ns.get_or_insert_with(|| grid.n.iter().map(|v| v.normalize_or_zero()).collect())
                     .clone()
             } else {
                 Arc::from([])
             };
-            let state = LightState {
-                ran: false,
-                lit: vec![false; n],
-                ps: ps.clone(),
-                ns,
-            };
-            let mut st = Some(state);
-            let Some(mut regs) =
-                self.run(prog, gl.shader, grid, ctx, &[], None, Some(&mut st), None)
-            else {
-                out.push(None);
+            let Some((shape, samples)) = &gl.area else {
+                out.push(self.eval_light(grid, ctx, gl, ps.clone(), ns));
                 continue;
             };
-            let state = st.unwrap_or_default();
-            let ambient = !state.ran;
-            let mut get = |name: &str, def: Vec3| -> Vec<Vec3> {
-                prog.global(name)
-                    .map(|g| own_vt(&mut regs[g.reg as usize], n))
-                    .unwrap_or_else(|| vec![def; n])
+            // An area light: one run over every (sample, point) pair, sample-major, with the
+            // light's P, N, u, v, s, t at a point of its surface sampled for that lit point.
+            let s = *samples as usize;
+            let m = n * s;
+            let mut lg = Grid::with_size(m, 1);
+            let salt = crate::pattern::hash::hash_u32(gl.index as u32 ^ 0xa7ea_1165);
+            let seeds: Vec<u32> = ps
+                .iter()
+                .map(|&p| crate::ray::point_seed(p, salt))
+                .collect();
+            for k in 0..s {
+                for i in 0..n {
+                    let (u1, u2) = crate::ray::stratified(seeds[i], k as u32, s as u32);
+                    let a = shape.sample(u1, u2);
+                    let j = k * n + i;
+                    lg.p[j] = a.p;
+                    lg.n[j] = a.n;
+                    lg.ng[j] = a.ng;
+                    lg.dpdu[j] = a.dpdu;
+                    lg.dpdv[j] = a.dpdv;
+                    lg.u[j] = a.u;
+                    lg.v[j] = a.v;
+                    lg.s[j] = a.s;
+                    lg.t[j] = a.t;
+                    lg.i[j] = grid.i.get(i).copied().unwrap_or_default();
+                }
+            }
+            let rep = |v: &[Vec3]| -> Arc<[Vec3]> {
+                if v.is_empty() {
+                    Arc::from([])
+                } else {
+                    (0..m).map(|j| v[j % n]).collect()
+                }
             };
-            let mut l: Vec<Vec3> = get("L", Vec3::ZERO);
-            // One pass: L points from the surface to the light, and is it the same everywhere?
-            let first = l.first().map(|&v| -v);
-            let mut same = true;
-            for v in l.iter_mut() {
-                *v = -*v;
-                same &= Some(*v) == first;
-            }
-            let l_uniform = if same { first } else { None };
-            let mut cl = get("Cl", Vec3::ZERO);
-            let ol = get("Ol", Vec3::ONE);
-            let lit = if ambient { vec![true; n] } else { state.lit };
-            if gl.ray_shadows && !ambient {
-                // The segment from each lit point to the light (along L to infinity for
-                // distant lights, whose L is the same everywhere).
-                let tracer = crate::shade::rays::Tracer {
-                    sys: self,
-                    scene: ctx.scene,
-                    camera: ctx.camera,
-                    depth: ctx.depth,
-                };
-                let to: Vec<Vec3> = (0..n)
-                    .map(|i| {
-                        if gl.solar {
-                            ps[i] + l[i].normalize_or_zero() * 1.0e8
-                        } else {
-                            ps[i] + l[i]
-                        }
-                    })
-                    .collect();
-                let active: Vec<bool> = (0..n).map(|i| lit[i] && cl[i] != Vec3::ZERO).collect();
-                let mut t = vec![Vec3::ONE; n];
-                crate::shade::exec::RayTracer::transmission(&tracer, &ps[..], &to, &active, &mut t);
-                for (c, t) in cl.iter_mut().zip(&t) {
-                    *c *= *t;
+            let actx = RunCtx {
+                hits: true,
+                area_light: Some(gl.index),
+                ..*ctx
+            };
+            let Some(all) = self.eval_light(&lg, &actx, gl, rep(&ps), rep(&ns)) else {
+                out.extend((0..count).map(|_| None));
+                continue;
+            };
+            let weight = 1.0 / s as f32;
+            for k in 0..s {
+                if !wanted(first + k) {
+                    out.push(None);
+                    continue;
                 }
+                out.push(Some(split_light(&all, k * n, n, m, weight)));
             }
-            if !lit.iter().all(|&b| b) {
-                for (c, &on) in cl.iter_mut().zip(&lit) {
-                    if !on {
-                        *c = Vec3::ZERO;
-                    }
-                }
-            }
-            let mut category: Arc<str> = crate::shade::value::empty_str();
-            let mut nondiffuse = false;
-            let mut nonspecular = false;
-            let mut outputs = Vec::with_capacity(prog.params.len());
-            for par in &prog.params {
-                // The register file is discarded after the run: move the values out.
-                let slot = std::mem::take(&mut regs[par.reg as usize]);
-                match par.name.as_str() {
-                    "__category" => category = slot.s(),
-                    "__nondiffuse" => nondiffuse = slot.f().first() != 0.0,
-                    "__nonspecular" => nonspecular = slot.f().first() != 0.0,
-                    _ => {}
-                }
-                outputs.push(slot);
-            }
-            crate::shade::value::recycle(regs);
-            out.push(Some(LightResult {
-                l_uniform,
-                ambient,
-                lit,
-                l,
-                cl,
-                ol,
-                category,
-                nondiffuse,
-                nonspecular,
-                program: Some(prog.clone()),
-                outputs,
-            }));
+            all.recycle();
         }
         out
+    }
+
+    /// Runs one light over the grid's points lit at `ps`.
+    fn eval_light(
+        &self,
+        grid: &Grid,
+        ctx: &RunCtx,
+        gl: &GridLight,
+        ps: Arc<[Vec3]>,
+        ns: Arc<[Vec3]>,
+    ) -> Option<LightResult> {
+        let n = grid.len();
+        let prog = &gl.prog;
+        let state = LightState {
+            ran: false,
+            lit: vec![false; n],
+            ps: ps.clone(),
+            ns,
+        };
+        let mut st = Some(state);
+        let mut regs = self.run(prog, gl.shader, grid, ctx, &[], None, Some(&mut st), None)?;
+        let state = st.unwrap_or_default();
+        let ambient = !state.ran;
+        let mut get = |name: &str, def: Vec3| -> Vec<Vec3> {
+            prog.global(name)
+                .map(|g| own_vt(&mut regs[g.reg as usize], n))
+                .unwrap_or_else(|| vec![def; n])
+        };
+        let mut l: Vec<Vec3> = get("L", Vec3::ZERO);
+        // One pass: L points from the surface to the light, and is it the same everywhere?
+        let first = l.first().map(|&v| -v);
+        let mut same = true;
+        for v in l.iter_mut() {
+            *v = -*v;
+            same &= Some(*v) == first;
+        }
+        let l_uniform = if same { first } else { None };
+        let mut cl = get("Cl", Vec3::ZERO);
+        let ol = get("Ol", Vec3::ONE);
+        let lit = if ambient { vec![true; n] } else { state.lit };
+        if gl.ray_shadows && !ambient {
+            // The segment from each lit point to the light (along L to infinity for
+            // distant lights, whose L is the same everywhere). An area light's own surfaces
+            // do not shadow it.
+            let tracer = crate::shade::rays::Tracer {
+                sys: self,
+                scene: ctx.scene,
+                camera: ctx.camera,
+                depth: ctx.depth,
+                skip_light: gl.area.as_ref().map(|_| gl.index),
+            };
+            let to: Vec<Vec3> = (0..n)
+                .map(|i| {
+                    if gl.solar {
+                        ps[i] + l[i].normalize_or_zero() * 1.0e8
+                    } else {
+                        ps[i] + l[i]
+                    }
+                })
+                .collect();
+            let active: Vec<bool> = (0..n).map(|i| lit[i] && cl[i] != Vec3::ZERO).collect();
+            let mut t = vec![Vec3::ONE; n];
+            crate::shade::exec::RayTracer::transmission(&tracer, &ps[..], &to, &active, &mut t);
+            for (c, t) in cl.iter_mut().zip(&t) {
+                *c *= *t;
+            }
+        }
+        if !lit.iter().all(|&b| b) {
+            for (c, &on) in cl.iter_mut().zip(&lit) {
+                if !on {
+                    *c = Vec3::ZERO;
+                }
+            }
+        }
+        let mut category: Arc<str> = crate::shade::value::empty_str();
+        let mut nondiffuse = false;
+        let mut nonspecular = false;
+        let mut outputs = Vec::with_capacity(prog.params.len());
+        for par in &prog.params {
+            // The register file is discarded after the run: move the values out.
+            let slot = std::mem::take(&mut regs[par.reg as usize]);
+            match par.name.as_str() {
+                "__category" => category = slot.s(),
+                "__nondiffuse" => nondiffuse = slot.f().first() != 0.0,
+                "__nonspecular" => nonspecular = slot.f().first() != 0.0,
+                _ => {}
+            }
+            outputs.push(slot);
+        }
+        crate::shade::value::recycle(regs);
+        Some(LightResult {
+            l_uniform,
+            ambient,
+            lit,
+            l,
+            cl,
+            ol,
+            category,
+            nondiffuse,
+            nonspecular,
+            program: Some(prog.clone()),
+            outputs,
+        })
     }
 
     /// Binds and runs one program over the grid; returns its registers.
@@ -778,6 +914,7 @@ impl<'a> ShadeSystem<'a> {
             scene,
             camera,
             depth: ctx.depth,
+            skip_light: ctx.area_light,
         };
         // A grid of ray hits has no neighbours to differentiate across (0 × 0: every
         // derivative reads zero).
@@ -812,7 +949,7 @@ impl<'a> ShadeSystem<'a> {
         for g in &prog.globals {
             let v = match g.name {
                 "P" => {
-                    if prog.kind == ShaderKind::Light {
+                    if prog.kind == ShaderKind::Light && ctx.area_light.is_none() {
                         Slot::T(camera_from_shader.transform_point3(Vec3::ZERO))
                     } else {
                         Slot::VT(grid.p.clone())
@@ -883,12 +1020,43 @@ impl<'a> ShadeSystem<'a> {
     }
 }
 
+/// Points `start..start + n` of an area light's run over `m` points (one sample for every lit
+/// point), with Cl scaled by `weight` (1 / samples).
+fn split_light(all: &LightResult, start: usize, n: usize, m: usize, weight: f32) -> LightResult {
+    let r = start..start + n;
+    let l = all.l[r.clone()].to_vec();
+    let l_uniform = l.first().copied().filter(|f| l.iter().all(|v| v == f));
+    let outputs = all
+        .outputs
+        .iter()
+        .map(|slot| match slot {
+            Slot::VF(v) if v.len() == m => Slot::VF(v[r.clone()].to_vec()),
+            Slot::VT(v) if v.len() == m => Slot::VT(v[r.clone()].to_vec()),
+            Slot::VM(v) if v.len() == m => Slot::VM(v[r.clone()].to_vec()),
+            other => other.clone(),
+        })
+        .collect();
+    LightResult {
+        ambient: all.ambient,
+        lit: all.lit[r.clone()].to_vec(),
+        l,
+        l_uniform,
+        cl: all.cl[r.clone()].iter().map(|c| *c * weight).collect(),
+        ol: all.ol[r].to_vec(),
+        category: all.category.clone(),
+        nondiffuse: all.nondiffuse,
+        nonspecular: all.nonspecular,
+        program: all.program.clone(),
+        outputs,
+    }
+}
+
 /// True when the eye is inside a sphere primitive (a sky dome around the camera).
 fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
     let crate::scene::Geometry::Sphere { radius, .. } = *prim.geometry else {
         return false;
     };
-    let object_from_camera = (camera.camera_from_world * prim.world_from_object).inverse();
+    let object_from_camera = (camera.camera_from_world * *prim.world_from_object).inverse();
     let eye = object_from_camera.transform_point3(Vec3::ZERO);
     eye.is_finite() && eye.length() < radius.abs()
 }

@@ -26,76 +26,101 @@ impl Default for Slot {
     }
 }
 
-/// A float operand.
+/// An operand: one value for the whole grid (`U`) or one per point (`V`).
 #[derive(Clone, Copy)]
-pub enum F<'a> {
-    U(f32),
-    V(&'a [f32]),
+pub enum Op<'a, X> {
+    U(X),
+    V(&'a [X]),
 }
 
-impl F<'_> {
+/// A float operand.
+pub type F<'a> = Op<'a, f32>;
+/// A triple operand.
+pub type T<'a> = Op<'a, Vec3>;
+/// A matrix operand.
+pub type M<'a> = Op<'a, Mat4>;
+
+impl<X: Copy + Default> Op<'_, X> {
     #[inline(always)]
-    pub fn at(&self, i: usize) -> f32 {
+    pub fn at(&self, i: usize) -> X {
         match self {
-            F::U(x) => *x,
-            F::V(v) => v[i],
+            Op::U(x) => *x,
+            Op::V(v) => v[i],
         }
     }
     pub fn is_varying(&self) -> bool {
-        matches!(self, F::V(_))
+        matches!(self, Op::V(_))
     }
     /// The value at the first point (for uniform uses of a varying value).
-    pub fn first(&self) -> f32 {
+    pub fn first(&self) -> X {
         match self {
-            F::U(x) => *x,
-            F::V(v) => v.first().copied().unwrap_or(0.0),
+            Op::U(x) => *x,
+            Op::V(v) => v.first().copied().unwrap_or_default(),
         }
     }
 }
 
-/// A triple operand.
-#[derive(Clone, Copy)]
-pub enum T<'a> {
-    U(Vec3),
-    V(&'a [Vec3]),
+/// The points an instruction computes: every point, or only those listed (the running
+/// points, ascending, when few of a grid's points run: a march whose points leave its loop at
+/// different steps). Points not listed keep the destination's earlier values from the same
+/// run (or zero), never values from another run.
+#[derive(Clone, Copy, Debug)]
+pub enum Lanes<'a> {
+    All,
+    Some(&'a [u32]),
 }
 
-impl T<'_> {
-    #[inline(always)]
-    pub fn at(&self, i: usize) -> Vec3 {
-        match self {
-            T::U(x) => *x,
-            T::V(v) => v[i],
-        }
+/// A value kind registers store per point: how it becomes a slot, and the buffer a write
+/// over some lanes goes into.
+pub trait Elem: Copy + Default + 'static {
+    fn uniform(x: Self) -> Slot;
+    fn varying(v: Vec<Self>) -> Slot;
+    /// The destination buffer for a write of `n` points over `lanes` (see [`out_vf`]).
+    fn out_buf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<Self>;
+}
+
+impl Elem for f32 {
+    fn uniform(x: f32) -> Slot {
+        Slot::F(x)
     }
-    pub fn is_varying(&self) -> bool {
-        matches!(self, T::V(_))
+    fn varying(v: Vec<f32>) -> Slot {
+        Slot::VF(v)
     }
-    pub fn first(&self) -> Vec3 {
-        match self {
-            T::U(x) => *x,
-            T::V(v) => v.first().copied().unwrap_or(Vec3::ZERO),
-        }
+    #[inline]
+    fn out_buf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<f32> {
+        out_vf(slot, n, lanes)
     }
 }
 
-/// A matrix operand.
-#[derive(Clone, Copy)]
-pub enum M<'a> {
-    U(Mat4),
-    V(&'a [Mat4]),
+impl Elem for Vec3 {
+    fn uniform(x: Vec3) -> Slot {
+        Slot::T(x)
+    }
+    fn varying(v: Vec<Vec3>) -> Slot {
+        Slot::VT(v)
+    }
+    #[inline]
+    fn out_buf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<Vec3> {
+        out_vt(slot, n, lanes)
+    }
 }
 
-impl M<'_> {
-    #[inline(always)]
-    pub fn at(&self, i: usize) -> Mat4 {
-        match self {
-            M::U(x) => *x,
-            M::V(v) => v[i],
-        }
+impl Elem for Mat4 {
+    fn uniform(x: Mat4) -> Slot {
+        Slot::M(Box::new(x))
     }
-    pub fn is_varying(&self) -> bool {
-        matches!(self, M::V(_))
+    fn varying(v: Vec<Mat4>) -> Slot {
+        Slot::VM(v)
+    }
+    fn out_buf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<Mat4> {
+        match (std::mem::take(slot), lanes) {
+            (Slot::VM(v), _) if v.len() == n => v,
+            (Slot::VM(mut v), Lanes::All) => {
+                v.resize(n, Mat4::IDENTITY);
+                v
+            }
+            _ => vec![Mat4::IDENTITY; n],
+        }
     }
 }
 
@@ -231,14 +256,323 @@ pub fn take_vm(slot: &mut Slot, n: usize) -> Vec<Mat4> {
     }
 }
 
+/// The float buffer a write of `n` points over `lanes` goes into: the slot's own when it has
+/// `n` values (points not written keep this run's earlier values); otherwise a pooled one,
+/// zero-filled unless every point is written (a pooled buffer's old contents depend on what
+/// ran before on this thread and must never show).
+pub fn out_vf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<f32> {
+    match (std::mem::take(slot), lanes) {
+        (Slot::VF(v), _) if v.len() == n => v,
+        (Slot::VF(mut v), Lanes::All) => {
+            v.resize(n, 0.0);
+            v
+        }
+        (_, Lanes::All) => grid_vf(n),
+        (_, Lanes::Some(_)) => {
+            let mut v = grid_vf(n);
+            v.fill(0.0);
+            v
+        }
+    }
+}
+
+/// [`out_vf`] for triples.
+pub fn out_vt(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<Vec3> {
+    match (std::mem::take(slot), lanes) {
+        (Slot::VT(v), _) if v.len() == n => v,
+        (Slot::VT(mut v), Lanes::All) => {
+            v.resize(n, Vec3::ZERO);
+            v
+        }
+        (_, Lanes::All) => grid_vt(n),
+        (_, Lanes::Some(_)) => grid_vt_filled(n, Vec3::ZERO),
+    }
+}
+
+// Triples as flat floats, so componentwise loops vectorise across points (glam's `Vec3` is
+// three `f32`s, `repr(C)`, no padding).
+const _: () = assert!(std::mem::size_of::<Vec3>() == 12 && std::mem::align_of::<Vec3>() == 4);
+
+/// The components of `v` in order (x0 y0 z0 x1 …).
+#[inline(always)]
+pub fn flat(v: &[Vec3]) -> &[f32] {
+    // SAFETY: Vec3 is repr(C) { x, y, z: f32 } with size 12 and align 4 (asserted above), so
+    // a slice of n of them is 3n contiguous, initialised f32s.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<f32>(), v.len() * 3) }
+}
+
+#[inline(always)]
+pub fn flat_mut(v: &mut [Vec3]) -> &mut [f32] {
+    // SAFETY: as for `flat`; the borrow is unique.
+    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<f32>(), v.len() * 3) }
+}
+
+/// Whether this CPU has AVX2 (detected once; the kernels below then run a copy compiled for
+/// it: eight points per vector instead of four, the same IEEE operations, so the same bits —
+/// no fused multiply-add is enabled).
+#[inline(always)]
+pub fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Defines `$name` (never inlined: each caller's closure gets its own small function, where
+/// the closure is inlined and the loop vectorised — inlined into the large instruction
+/// dispatch, the closures stayed calls per point) running `$body`, in a copy compiled for
+/// AVX2 when the CPU has it.
+macro_rules! kernel {
+    ($(#[$m:meta])* $vis:vis fn $name:ident <$($gen:ident $(: $bound:path)?),*> ($($arg:ident : $ty:ty),* $(,)?) $body:block) => {
+        $(#[$m])*
+        #[inline(never)]
+        $vis fn $name<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+            #[inline(always)]
+            fn body<$($gen $(: $bound)?),*>($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2")]
+            unsafe fn body_avx2<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+                body($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            if $crate::shade::value::has_avx2() {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                return unsafe { body_avx2($($arg),*) };
+            }
+            body($($arg),*)
+        }
+    };
+}
+pub(crate) use kernel;
+
+kernel! {
+    /// `o[i] = g(i)` over the lanes.
+    fn run<R: Copy, G: Fn(usize) -> R>(o: &mut [R], lanes: Lanes, g: G) {
+        match lanes {
+            Lanes::All => {
+                for (i, x) in o.iter_mut().enumerate() {
+                    *x = g(i);
+                }
+            }
+            Lanes::Some(idx) => {
+                for &i in idx {
+                    let i = i as usize;
+                    o[i] = g(i);
+                }
+            }
+        }
+    }
+}
+
+/// A varying operand cut to the grid size (so the loops index without bounds checks).
+#[inline(always)]
+fn cut<X>(v: &[X], n: usize) -> &[X] {
+    &v[..n]
+}
+
+/// Per-point function of one operand, specialised on its detail: uniform in, uniform out;
+/// otherwise a loop over the lanes with the operand as a plain slice.
+#[inline(always)]
+pub fn k1<A: Copy, R: Elem>(out: &mut Slot, n: usize, lanes: Lanes, a: Op<A>, f: impl Fn(A) -> R) {
+    match a {
+        Op::U(x) => *out = R::uniform(f(x)),
+        Op::V(x) => {
+            let mut v = R::out_buf(out, n, lanes);
+            let x = cut(x, n);
+            run(&mut v, lanes, |i| f(x[i]));
+            *out = R::varying(v);
+        }
+    }
+}
+
+/// Per-point function of two operands (see [`k1`]).
+#[inline(always)]
+pub fn k2<A: Copy, B: Copy, R: Elem>(
+    out: &mut Slot,
+    n: usize,
+    lanes: Lanes,
+    a: Op<A>,
+    b: Op<B>,
+    f: impl Fn(A, B) -> R,
+) {
+    if let (Op::U(x), Op::U(y)) = (a, b) {
+        *out = R::uniform(f(x, y));
+        return;
+    }
+    let mut v = R::out_buf(out, n, lanes);
+    match (a, b) {
+        (Op::V(x), Op::U(y)) => {
+            let x = cut(x, n);
+            run(&mut v, lanes, |i| f(x[i], y))
+        }
+        (Op::U(x), Op::V(y)) => {
+            let y = cut(y, n);
+            run(&mut v, lanes, |i| f(x, y[i]))
+        }
+        (Op::V(x), Op::V(y)) => {
+            let (x, y) = (cut(x, n), cut(y, n));
+            run(&mut v, lanes, |i| f(x[i], y[i]))
+        }
+        (Op::U(_), Op::U(_)) => {}
+    }
+    *out = R::varying(v);
+}
+
+/// Per-point function of three operands (see [`k1`]).
+#[inline(always)]
+pub fn k3<A: Copy, B: Copy, C: Copy, R: Elem>(
+    out: &mut Slot,
+    n: usize,
+    lanes: Lanes,
+    a: Op<A>,
+    b: Op<B>,
+    c: Op<C>,
+    f: impl Fn(A, B, C) -> R,
+) {
+    use Op::{U, V};
+    if let (U(x), U(y), U(z)) = (a, b, c) {
+        *out = R::uniform(f(x, y, z));
+        return;
+    }
+    let mut v = R::out_buf(out, n, lanes);
+    match (a, b, c) {
+        (V(x), U(y), U(z)) => {
+            let x = cut(x, n);
+            run(&mut v, lanes, |i| f(x[i], y, z))
+        }
+        (U(x), V(y), U(z)) => {
+            let y = cut(y, n);
+            run(&mut v, lanes, |i| f(x, y[i], z))
+        }
+        (U(x), U(y), V(z)) => {
+            let z = cut(z, n);
+            run(&mut v, lanes, |i| f(x, y, z[i]))
+        }
+        (V(x), V(y), U(z)) => {
+            let (x, y) = (cut(x, n), cut(y, n));
+            run(&mut v, lanes, |i| f(x[i], y[i], z))
+        }
+        (V(x), U(y), V(z)) => {
+            let (x, z) = (cut(x, n), cut(z, n));
+            run(&mut v, lanes, |i| f(x[i], y, z[i]))
+        }
+        (U(x), V(y), V(z)) => {
+            let (y, z) = (cut(y, n), cut(z, n));
+            run(&mut v, lanes, |i| f(x, y[i], z[i]))
+        }
+        (V(x), V(y), V(z)) => {
+            let (x, y, z) = (cut(x, n), cut(y, n), cut(z, n));
+            run(&mut v, lanes, |i| f(x[i], y[i], z[i]))
+        }
+        (U(_), U(_), U(_)) => {}
+    }
+    *out = R::varying(v);
+}
+
+/// Componentwise binary triple op `f` on each of x, y, z. Over every point the loops run on
+/// the flat components (they vectorise across points; glam's `Vec3` does not); over listed
+/// lanes point by point. Same `f` on the same components either way, so the same bits.
+#[inline(always)]
+pub fn t2c(out: &mut Slot, n: usize, lanes: Lanes, a: T, b: T, f: impl Fn(f32, f32) -> f32) {
+    let g = |x: Vec3, y: Vec3| Vec3::new(f(x.x, y.x), f(x.y, y.y), f(x.z, y.z));
+    let Lanes::All = lanes else {
+        return k2(out, n, lanes, a, b, g);
+    };
+    if let (Op::U(x), Op::U(y)) = (a, b) {
+        *out = Slot::T(g(x, y));
+        return;
+    }
+    let mut v = out_vt(out, n, lanes);
+    {
+        let o = flat_mut(&mut v);
+        let m = o.len();
+        match (a, b) {
+            (Op::V(x), Op::V(y)) => zip_flat(o, &flat(x)[..m], &flat(y)[..m], f),
+            (Op::V(x), Op::U(y)) => pattern(o, &flat(x)[..m], y, |p, q| f(p, q)),
+            (Op::U(x), Op::V(y)) => pattern(o, &flat(y)[..m], x, |p, q| f(q, p)),
+            (Op::U(_), Op::U(_)) => {}
+        }
+    }
+    *out = Slot::VT(v);
+}
+
+kernel! {
+    /// `o[k] = f(x[k], y[k])` (see [`run`]).
+    fn zip_flat<Fx: Fn(f32, f32) -> f32>(o: &mut [f32], x: &[f32], y: &[f32], f: Fx) {
+        let m = o.len();
+        let (x, y) = (&x[..m], &y[..m]);
+        for i in 0..m {
+            o[i] = f(x[i], y[i]);
+        }
+    }
+}
+
+kernel! {
+    /// `o[k] = f(x[k])` (see [`run`]).
+    fn map_flat<Fx: Fn(f32) -> f32>(o: &mut [f32], x: &[f32], f: Fx) {
+        for (o, &x) in o.iter_mut().zip(x) {
+            *o = f(x);
+        }
+    }
+}
+
+kernel! {
+    /// `o[k] = f(x[k], u[k % 3])` over flat triples: twelve floats (four points) at a time so
+    /// the repeating uniform pattern lines up with the vector lanes (see [`run`]).
+    fn pattern<Fx: Fn(f32, f32) -> f32>(o: &mut [f32], x: &[f32], u: Vec3, f: Fx) {
+        let p: [f32; 12] = [u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z, u.x, u.y, u.z];
+        let mut oc = o.chunks_exact_mut(12);
+        let mut xc = x.chunks_exact(12);
+        for (oo, xx) in (&mut oc).zip(&mut xc) {
+            for j in 0..12 {
+                oo[j] = f(xx[j], p[j]);
+            }
+        }
+        for (j, (oo, xx)) in oc
+            .into_remainder()
+            .iter_mut()
+            .zip(xc.remainder())
+            .enumerate()
+        {
+            *oo = f(*xx, p[j]);
+        }
+    }
+}
+
+/// Componentwise unary triple op (see [`t2c`]).
+#[inline(always)]
+pub fn t1c(out: &mut Slot, n: usize, lanes: Lanes, a: T, f: impl Fn(f32) -> f32) {
+    let g = |x: Vec3| Vec3::new(f(x.x), f(x.y), f(x.z));
+    match (a, lanes) {
+        (Op::V(x), Lanes::All) => {
+            let mut v = out_vt(out, n, lanes);
+            {
+                let o = flat_mut(&mut v);
+                let x = &flat(x)[..o.len()];
+                map_flat(o, x, f);
+            }
+            *out = Slot::VT(v);
+        }
+        _ => k1(out, n, lanes, a, g),
+    }
+}
+
 /// Writes a float result: uniform when `varying` is false (computed at point 0).
 #[inline]
 pub fn write_f(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> f32) {
+    write_f_l(out, n, Lanes::All, varying, f)
+}
+
+/// [`write_f`] over some lanes.
+#[inline]
+pub fn write_f_l(out: &mut Slot, n: usize, lanes: Lanes, varying: bool, f: impl Fn(usize) -> f32) {
     if varying {
-        let mut v = take_vf(out, n);
-        for (i, o) in v.iter_mut().enumerate() {
-            *o = f(i);
-        }
+        let mut v = out_vf(out, n, lanes);
+        run(&mut v, lanes, f);
         *out = Slot::VF(v);
     } else {
         *out = Slot::F(f(0));
@@ -247,11 +581,15 @@ pub fn write_f(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> f32
 
 #[inline]
 pub fn write_t(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> Vec3) {
+    write_t_l(out, n, Lanes::All, varying, f)
+}
+
+/// [`write_t`] over some lanes.
+#[inline]
+pub fn write_t_l(out: &mut Slot, n: usize, lanes: Lanes, varying: bool, f: impl Fn(usize) -> Vec3) {
     if varying {
-        let mut v = take_vt(out, n);
-        for (i, o) in v.iter_mut().enumerate() {
-            *o = f(i);
-        }
+        let mut v = out_vt(out, n, lanes);
+        run(&mut v, lanes, f);
         *out = Slot::VT(v);
     } else {
         *out = Slot::T(f(0));
@@ -274,107 +612,33 @@ pub fn write_m(out: &mut Slot, n: usize, varying: bool, f: impl Fn(usize) -> Mat
 /// Binary float op specialised on uniform/varying operands so the loops vectorise.
 #[inline]
 pub fn zip_ff(out: &mut Slot, n: usize, a: F, b: F, f: impl Fn(f32, f32) -> f32) {
-    match (a, b) {
-        (F::U(x), F::U(y)) => *out = Slot::F(f(x, y)),
-        (F::V(x), F::U(y)) => {
-            let mut v = take_vf(out, n);
-            for (o, &xi) in v.iter_mut().zip(x) {
-                *o = f(xi, y);
-            }
-            *out = Slot::VF(v);
-        }
-        (F::U(x), F::V(y)) => {
-            let mut v = take_vf(out, n);
-            for (o, &yi) in v.iter_mut().zip(y) {
-                *o = f(x, yi);
-            }
-            *out = Slot::VF(v);
-        }
-        (F::V(x), F::V(y)) => {
-            let mut v = take_vf(out, n);
-            for ((o, &xi), &yi) in v.iter_mut().zip(x).zip(y) {
-                *o = f(xi, yi);
-            }
-            *out = Slot::VF(v);
-        }
-    }
+    k2(out, n, Lanes::All, a, b, f)
 }
 
 #[inline]
 pub fn zip_tt(out: &mut Slot, n: usize, a: T, b: T, f: impl Fn(Vec3, Vec3) -> Vec3) {
-    match (a, b) {
-        (T::U(x), T::U(y)) => *out = Slot::T(f(x, y)),
-        (T::V(x), T::U(y)) => {
-            let mut v = take_vt(out, n);
-            for (o, &xi) in v.iter_mut().zip(x) {
-                *o = f(xi, y);
-            }
-            *out = Slot::VT(v);
-        }
-        (T::U(x), T::V(y)) => {
-            let mut v = take_vt(out, n);
-            for (o, &yi) in v.iter_mut().zip(y) {
-                *o = f(x, yi);
-            }
-            *out = Slot::VT(v);
-        }
-        (T::V(x), T::V(y)) => {
-            let mut v = take_vt(out, n);
-            for ((o, &xi), &yi) in v.iter_mut().zip(x).zip(y) {
-                *o = f(xi, yi);
-            }
-            *out = Slot::VT(v);
-        }
-    }
+    k2(out, n, Lanes::All, a, b, f)
 }
 
 #[inline]
 pub fn zip_tt_f(out: &mut Slot, n: usize, a: T, b: T, f: impl Fn(Vec3, Vec3) -> f32) {
-    let varying = a.is_varying() || b.is_varying();
-    write_f(out, n, varying, |i| f(a.at(i), b.at(i)));
+    k2(out, n, Lanes::All, a, b, f)
 }
 
 /// Unary maps specialised on uniform/varying so the varying loop runs over a slice.
 #[inline]
 pub fn map_ff(out: &mut Slot, n: usize, a: F, f: impl Fn(f32) -> f32) {
-    match a {
-        F::U(x) => *out = Slot::F(f(x)),
-        F::V(x) => {
-            let mut v = take_vf(out, n);
-            for (o, &xi) in v.iter_mut().zip(x) {
-                *o = f(xi);
-            }
-            *out = Slot::VF(v);
-        }
-    }
+    k1(out, n, Lanes::All, a, f)
 }
 
 #[inline]
 pub fn map_tt(out: &mut Slot, n: usize, a: T, f: impl Fn(Vec3) -> Vec3) {
-    match a {
-        T::U(x) => *out = Slot::T(f(x)),
-        T::V(x) => {
-            let mut v = take_vt(out, n);
-            for (o, &xi) in v.iter_mut().zip(x) {
-                *o = f(xi);
-            }
-            *out = Slot::VT(v);
-        }
-    }
+    k1(out, n, Lanes::All, a, f)
 }
 
 #[inline]
 pub fn map_tf(out: &mut Slot, n: usize, a: T, f: impl Fn(Vec3) -> f32) {
-    match a {
-        T::U(x) => *out = Slot::F(f(x)),
-        T::V(x) => {
-            let mut v = take_vf(out, n);
-            for (o, &xi) in v.iter_mut().zip(x) {
-                *o = f(xi);
-            }
-            *out = Slot::VF(v);
-        }
-    }
+    k1(out, n, Lanes::All, a, f)
 }
 
 /// The values of a triple operand at every point (a copy; uniform values repeated).

@@ -158,6 +158,90 @@ pub enum Builtin {
     HorizonHeight,
 }
 
+impl Builtin {
+    /// A function of its arguments' values at each point alone, writing only its result: it
+    /// may run on just the running points of a sparse mask (see `Instr::pointwise`).
+    /// Functions that read neighbours (derivatives, texture filter widths), read a varying
+    /// argument's first value, or write output arguments are not.
+    pub fn pointwise(self) -> bool {
+        matches!(
+            self,
+            Radians
+                | Degrees
+                | Sin
+                | Cos
+                | Tan
+                | Asin
+                | Acos
+                | Atan1
+                | Atan2
+                | Pow
+                | Exp
+                | Sqrt
+                | InvSqrt
+                | Log
+                | LogBase
+                | Mod
+                | Abs
+                | Sign
+                | Floor
+                | Ceil
+                | Round
+                | IsNan
+                | MinF
+                | MaxF
+                | MinT
+                | MaxT
+                | ClampF
+                | ClampT
+                | MixF
+                | MixT
+                | MixTT
+                | Step
+                | SmoothStep
+                | RandomF
+                | RandomT
+                | NoiseF1
+                | NoiseF2
+                | NoiseF3
+                | NoiseF4
+                | NoiseT1
+                | NoiseT2
+                | NoiseT3
+                | NoiseT4
+                | PNoiseF1
+                | PNoiseF2
+                | PNoiseF3
+                | PNoiseF4
+                | PNoiseT1
+                | PNoiseT2
+                | PNoiseT3
+                | PNoiseT4
+                | CellF1
+                | CellF2
+                | CellF3
+                | CellF4
+                | CellT1
+                | CellT2
+                | CellT3
+                | CellT4
+                | XComp
+                | YComp
+                | ZComp
+                | Length
+                | Normalize
+                | Distance
+                | PtLineD
+                | FaceForward2
+                | FaceForward3
+                | Reflect
+                | Refract
+                | Depth
+                | Comp
+        )
+    }
+}
+
 /// One overload of a built-in.
 #[derive(Clone, Copy, Debug)]
 pub struct Sig {

@@ -220,13 +220,15 @@ pub enum Instr {
         otherwise: Vec<Instr>,
     },
     /// `cond_code` computes `cond`; body; step. `span` is the loop statement (named by the
-    /// runaway-loop guard).
+    /// runaway-loop guard). `compact`: the registers the loop names, when it may run on its
+    /// running points gathered into a smaller grid (see [`Program::mark_compact_loops`]).
     Loop {
         cond_code: Vec<Instr>,
         cond: Reg,
         body: Vec<Instr>,
         step: Vec<Instr>,
         span: Span,
+        compact: Option<Vec<Reg>>,
     },
     Break(u32),
     Continue(u32),
@@ -305,6 +307,9 @@ pub struct Program {
     pub body: Vec<Instr>,
     /// Per register: a temporary whose one `Mov` may take its value (see [`Program::movable_temps`]).
     pub movable: Vec<bool>,
+    /// Per register: computed at every point even when few run (see
+    /// [`Program::full_width_regs`]); registers past the end count as true.
+    pub full_width: Vec<bool>,
     /// The light category (`__category` parameter default), for light shaders.
     pub span: Span,
 }
@@ -603,6 +608,68 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
     }
 }
 
+/// The registers loop `ins` names (sorted, once each) when it may run compacted (see
+/// [`Program::mark_compact_loops`]).
+fn compact_loop_regs(ins: &Instr, full: &[bool]) -> Option<Vec<Reg>> {
+    let Instr::Loop {
+        cond_code,
+        cond,
+        body,
+        step,
+        ..
+    } = ins
+    else {
+        return None;
+    };
+    /// `depth`: frames between this code and the compacted loop's own (1 in its blocks);
+    /// `in_fn`: inside an inlined function body that starts within the loop.
+    fn ok(code: &[Instr], depth: u32, in_fn: bool, full: &[bool], regs: &mut Vec<Reg>) -> bool {
+        for ins in code {
+            let fine = match ins {
+                Instr::Mov { .. } | Instr::If { .. } => true,
+                Instr::Loop {
+                    cond_code,
+                    body,
+                    step,
+                    ..
+                } => [cond_code, body, step]
+                    .iter()
+                    .all(|b| ok(b, depth + 1, in_fn, full, regs)),
+                Instr::Function { body } => ok(body, depth + 1, true, full, regs),
+                Instr::Break(k) | Instr::Continue(k) => *k <= depth,
+                Instr::Return => in_fn,
+                other => match other.pointwise_dst() {
+                    Some(d) => !full.get(d as usize).copied().unwrap_or(true),
+                    None => false,
+                },
+            };
+            if !fine {
+                return false;
+            }
+            if let Instr::If {
+                then, otherwise, ..
+            } = ins
+            {
+                if !ok(then, depth, in_fn, full, regs) || !ok(otherwise, depth, in_fn, full, regs) {
+                    return false;
+                }
+            }
+            instr_regs(ins, regs);
+        }
+        true
+    }
+    let mut regs = vec![*cond];
+    if ![cond_code, body, step]
+        .iter()
+        .all(|b| ok(b, 1, false, full, &mut regs))
+    {
+        return None;
+    }
+    regs.sort_unstable();
+    regs.dedup();
+    Some(regs)
+}
+
 fn nested(ins: &Instr) -> Vec<&[Instr]> {
     match ins {
         Instr::If {
@@ -625,7 +692,300 @@ fn nested(ins: &Instr) -> Vec<&[Instr]> {
     }
 }
 
+impl Instr {
+    /// A computation whose result at a point depends only on its operands at that point and
+    /// that writes only its destination: under a sparse running mask it may compute just the
+    /// running points (the others keep older values), unless its destination is
+    /// [`Program::full_width_regs`].
+    pub fn pointwise(&self) -> bool {
+        match self {
+            Instr::Copy { .. }
+            | Instr::Arith { .. }
+            | Instr::Neg { .. }
+            | Instr::Promote { .. }
+            | Instr::Dot { .. }
+            | Instr::Cross { .. }
+            | Instr::Compare { .. }
+            | Instr::And { .. }
+            | Instr::Or { .. }
+            | Instr::Not { .. }
+            | Instr::Select { .. }
+            | Instr::MakeTriple { .. } => true,
+            Instr::Call { f, .. } => f.pointwise(),
+            _ => false,
+        }
+    }
+
+    /// The destination of a pointwise instruction.
+    pub fn pointwise_dst(&self) -> Option<Reg> {
+        if !self.pointwise() {
+            return None;
+        }
+        match self {
+            Instr::Copy { dst, .. }
+            | Instr::Arith { dst, .. }
+            | Instr::Neg { dst, .. }
+            | Instr::Promote { dst, .. }
+            | Instr::Dot { dst, .. }
+            | Instr::Cross { dst, .. }
+            | Instr::Compare { dst, .. }
+            | Instr::And { dst, .. }
+            | Instr::Or { dst, .. }
+            | Instr::Not { dst, .. }
+            | Instr::Select { dst, .. }
+            | Instr::MakeTriple { dst, .. }
+            | Instr::Call { dst, .. } => Some(*dst),
+            _ => None,
+        }
+    }
+}
+
 impl Program {
+    /// Registers that must hold a value at every point, not only at the points running when
+    /// they were computed: what a sparse mask's pointwise instructions leave alone must never
+    /// be read. A register is full width when
+    /// - an instruction that is not pointwise reads it (derivatives read neighbours, many
+    ///   built-ins read a varying argument's first value, illuminance compares positions
+    ///   everywhere), other than a masked store (`Mov`, which reads running points) and the
+    ///   condition of an `if` or loop;
+    /// - it is read where its definition may not have run for the same points: before its
+    ///   definition in program order, or outside the block (and the blocks nested in it)
+    ///   where it is defined, or it is defined in two blocks;
+    /// - a pointwise instruction writes it and so does a masked store or another
+    ///   instruction (a variable, not a temporary);
+    /// - a pointwise instruction with a full-width destination reads it.
+    pub fn full_width_regs(&self) -> Vec<bool> {
+        let n = self.regs.len();
+        let mut full = vec![false; n];
+        // Pass 1: who writes what.
+        let mut pw_def = vec![false; n];
+        let mut other_def = vec![false; n];
+        fn writers(
+            code: &[Instr],
+            pw_def: &mut [bool],
+            other_def: &mut [bool],
+            regs: &mut Vec<Reg>,
+        ) {
+            for ins in code {
+                match ins.pointwise_dst() {
+                    Some(d) => {
+                        if let Some(x) = pw_def.get_mut(d as usize) {
+                            *x = true;
+                        }
+                    }
+                    None => match ins {
+                        Instr::Mov { dst, .. } => {
+                            if let Some(x) = other_def.get_mut(*dst as usize) {
+                                *x = true;
+                            }
+                        }
+                        Instr::If { .. }
+                        | Instr::Loop { .. }
+                        | Instr::Break(_)
+                        | Instr::Continue(_)
+                        | Instr::Return
+                        | Instr::Function { .. } => {}
+                        // Anything else may write any register it names.
+                        other => {
+                            regs.clear();
+                            instr_regs(other, regs);
+                            for &r in regs.iter() {
+                                if let Some(x) = other_def.get_mut(r as usize) {
+                                    *x = true;
+                                }
+                            }
+                        }
+                    },
+                }
+                for block in nested(ins) {
+                    writers(block, pw_def, other_def, regs);
+                }
+            }
+        }
+        let mut regs = Vec::new();
+        writers(&self.init, &mut pw_def, &mut other_def, &mut regs);
+        writers(&self.body, &mut pw_def, &mut other_def, &mut regs);
+        for r in 0..n {
+            if pw_def[r] && other_def[r] {
+                full[r] = true;
+            }
+        }
+        // Pass 2: reads, in program order, with the chain of enclosing blocks.
+        struct Walk<'f> {
+            full: &'f mut [bool],
+            pw_def: &'f [bool],
+            def_block: Vec<usize>,
+            stack: Vec<usize>,
+            blocks: usize,
+            regs: Vec<Reg>,
+        }
+        impl Walk<'_> {
+            fn read(&mut self, r: Reg) {
+                let r = r as usize;
+                if r >= self.full.len() || !self.pw_def[r] {
+                    return;
+                }
+                let b = self.def_block[r];
+                if b == usize::MAX || !self.stack.contains(&b) {
+                    self.full[r] = true;
+                }
+            }
+            fn block(&mut self, code: &[Instr], loop_cond: Option<Reg>) {
+                self.blocks += 1;
+                self.stack.push(self.blocks);
+                for ins in code {
+                    self.regs.clear();
+                    instr_regs(ins, &mut self.regs);
+                    let regs = std::mem::take(&mut self.regs);
+                    match ins.pointwise_dst() {
+                        Some(d) => {
+                            for &r in regs.iter().filter(|&&r| r != d) {
+                                self.read(r);
+                            }
+                            let me = *self.stack.last().unwrap_or(&0);
+                            if let Some(b) = self.def_block.get_mut(d as usize) {
+                                if *b != usize::MAX && *b != me {
+                                    self.full[d as usize] = true;
+                                }
+                                *b = me;
+                            }
+                        }
+                        None => match ins {
+                            Instr::Mov { src, .. } => self.read(*src),
+                            // The condition is read where it was computed (the loop's
+                            // condition code runs first in the loop), at running points.
+                            Instr::If { cond, .. } => self.read(*cond),
+                            Instr::Loop { .. } => {}
+                            _ => {
+                                for &r in &regs {
+                                    if let Some(x) = self.full.get_mut(r as usize) {
+                                        *x = true;
+                                    }
+                                }
+                            }
+                        },
+                    }
+                    self.regs = regs;
+                    match ins {
+                        Instr::Loop {
+                            cond_code,
+                            cond,
+                            body,
+                            step,
+                            ..
+                        } => {
+                            self.block(cond_code, Some(*cond));
+                            self.block(body, None);
+                            self.block(step, None);
+                        }
+                        _ => {
+                            for b in nested(ins) {
+                                self.block(b, None);
+                            }
+                        }
+                    }
+                }
+                if let Some(c) = loop_cond {
+                    self.read(c);
+                }
+                self.stack.pop();
+            }
+        }
+        let mut w = Walk {
+            full: &mut full,
+            pw_def: &pw_def,
+            def_block: vec![usize::MAX; n],
+            stack: Vec::new(),
+            blocks: 0,
+            regs: Vec::new(),
+        };
+        w.block(&self.init, None);
+        w.block(&self.body, None);
+        // Pass 3: a full-width result needs its operands at every point too.
+        fn close(code: &[Instr], full: &mut [bool], regs: &mut Vec<Reg>, changed: &mut bool) {
+            for ins in code {
+                if let Some(d) = ins.pointwise_dst() {
+                    if full.get(d as usize).copied().unwrap_or(false) {
+                        regs.clear();
+                        instr_regs(ins, regs);
+                        for &r in regs.iter() {
+                            if let Some(x) = full.get_mut(r as usize) {
+                                if !*x {
+                                    *x = true;
+                                    *changed = true;
+                                }
+                            }
+                        }
+                    }
+                }
+                for b in nested(ins) {
+                    close(b, full, regs, changed);
+                }
+            }
+        }
+        loop {
+            let mut changed = false;
+            close(&self.init, &mut full, &mut regs, &mut changed);
+            close(&self.body, &mut full, &mut regs, &mut changed);
+            if !changed {
+                break;
+            }
+        }
+        full
+    }
+
+    /// Marks the loops that may run compacted: once few of a grid's points are still in a
+    /// loop (a march whose points leave at different steps), the interpreter gathers the
+    /// registers the loop names at those points into a grid of just them, runs the rest of
+    /// the loop there at full vector width, and scatters the values back. A loop qualifies
+    /// when everything in it is a masked store, control flow, or a pointwise computation
+    /// (see [`Instr::pointwise`]) whose destination is not [`Program::full_width_regs`]
+    /// (so no value at a point that left the loop is ever read: the same results as running
+    /// over the whole grid), and no `break`, `continue` or `return` leaves it. Needs
+    /// `full_width` computed.
+    pub fn mark_compact_loops(&mut self) {
+        fn walk(code: &mut [Instr], full: &[bool]) {
+            for ins in code.iter_mut() {
+                let compact_regs = compact_loop_regs(ins, full);
+                match ins {
+                    Instr::Loop {
+                        cond_code,
+                        body,
+                        step,
+                        compact,
+                        ..
+                    } => {
+                        walk(cond_code, full);
+                        walk(body, full);
+                        walk(step, full);
+                        *compact = compact_regs;
+                    }
+                    Instr::If {
+                        then, otherwise, ..
+                    } => {
+                        walk(then, full);
+                        walk(otherwise, full);
+                    }
+                    Instr::Function { body }
+                    | Instr::Illuminance { body, .. }
+                    | Instr::Illuminate { body, .. }
+                    | Instr::Solar { body, .. } => walk(body, full),
+                    Instr::Gather {
+                        body, otherwise, ..
+                    } => {
+                        walk(body, full);
+                        walk(otherwise, full);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let full = std::mem::take(&mut self.full_width);
+        walk(&mut self.init, &full);
+        walk(&mut self.body, &full);
+        self.full_width = full;
+    }
+
     /// Registers whose value may be moved (not copied) into the destination of the one `Mov`
     /// that reads them: compiler temporaries named exactly twice in the whole program (their
     /// one definition and that `Mov`), defined by a computation rather than a move, and not

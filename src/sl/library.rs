@@ -219,6 +219,40 @@ impl ShaderLibrary {
         result
     }
 
+    /// The program for a shader name compiled with extra preprocessor `defines` (cached under
+    /// `name` and `tag`). Its compile diagnostics are not reported: the plain program
+    /// ([`ShaderLibrary::get`]) reports them; None when the variant does not compile.
+    pub fn get_variant(
+        &self,
+        name: &str,
+        tag: &str,
+        defines: &[(&str, &str)],
+        sources: &SourceMap,
+    ) -> Option<Arc<Program>> {
+        let key = format!("{name}\u{0}{tag}");
+        if let Some(p) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return p.clone();
+        }
+        let mut opts = self.opts.clone();
+        for (k, v) in defines {
+            opts.defines.push((k.to_string(), Some(v.to_string())));
+        }
+        let scratch = Diagnostics::new();
+        let result = self
+            .load_with(name, &opts, sources, &scratch)
+            .filter(|_| !scratch.has_errors());
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, result.clone());
+        result
+    }
+
     /// Where a shader name may come from, in search order: `stem.sl` in each search directory,
     /// as a path of its own, then the embedded standard library.
     fn candidates(name: &str, search: &[PathBuf]) -> (String, Vec<Candidate>) {
@@ -254,6 +288,7 @@ impl ShaderLibrary {
         c: &Candidate,
         base: &str,
         name: &str,
+        opts: &CompileOptions,
         sources: &SourceMap,
         diags: &Diagnostics,
     ) -> Option<Option<Arc<Program>>> {
@@ -266,7 +301,7 @@ impl ShaderLibrary {
                     Some(path),
                     sources,
                     diags,
-                    &self.opts,
+                    opts,
                 );
                 Some(pick(progs, base, name, diags))
             }
@@ -278,7 +313,7 @@ impl ShaderLibrary {
                     None,
                     sources,
                     diags,
-                    &self.opts,
+                    opts,
                 );
                 Some(pick(progs, base, name, diags))
             }
@@ -286,9 +321,19 @@ impl ShaderLibrary {
     }
 
     fn load(&self, name: &str, sources: &SourceMap, diags: &Diagnostics) -> Option<Arc<Program>> {
-        let (base, candidates) = Self::candidates(name, &self.opts.search_paths);
+        self.load_with(name, &self.opts, sources, diags)
+    }
+
+    fn load_with(
+        &self,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<Arc<Program>> {
+        let (base, candidates) = Self::candidates(name, &opts.search_paths);
         for c in &candidates {
-            if let Some(p) = self.compile_candidate(c, &base, name, sources, diags) {
+            if let Some(p) = self.compile_candidate(c, &base, name, opts, sources, diags) {
                 return p;
             }
         }
@@ -351,7 +396,7 @@ impl ShaderLibrary {
                 continue;
             }
             let quiet = Diagnostics::new();
-            let Some(Some(p)) = self.compile_candidate(c, &base, name, sources, &quiet) else {
+            let Some(Some(p)) = self.compile_candidate(c, &base, name, &self.opts, sources, &quiet) else {
                 continue;
             };
             if p.kind != first.kind || quiet.has_errors() {

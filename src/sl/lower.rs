@@ -574,9 +574,12 @@ impl<'a> Lowerer<'a> {
             init,
             body,
             movable: Vec::new(),
+            full_width: Vec::new(),
             span: def.span,
         };
         prog.movable = prog.movable_temps();
+        prog.full_width = prog.full_width_regs();
+        prog.mark_compact_loops();
         prog
     }
 
@@ -1182,6 +1185,7 @@ impl<'a> Lowerer<'a> {
             body: b,
             step: st,
             span,
+            compact: None,
         });
     }
 

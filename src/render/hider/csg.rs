@@ -212,11 +212,12 @@ mod tests {
             s.primitives.push(Primitive {
                 geometry: Arc::new(Geometry::Named { name: "x".into() }),
                 primvars: Arc::new(ParamList::default()),
-                attributes: Arc::new(Attributes {
-                    solid: Some(p),
-                    ..Attributes::default()
+                attributes: Arc::new({
+                    let mut a = Attributes::default();
+                    a.solid = Some(p);
+                    a
                 }),
-                world_from_object: glam::Mat4::IDENTITY,
+                world_from_object: glam::Mat4::IDENTITY.into(),
                 span: crate::diag::Span::new(0, 0, 0),
                 motion: None,
             });
