@@ -8,8 +8,9 @@
 //! * buckets are processed row by row: first every surface whose bound first reaches the row
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
-//!   film, one writer) of row r runs alongside the hiding of row r + 1;
+//!   needs are freed — memory holds only the grids overlapping the open rows. The surfaces
+//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; filtering (one
+//!   film, one writer) of row r − 1 follows the hiding of row r;
 //! * surfaces are made from the scene's primitives in parallel before the first row; those
 //!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
 //!   made again when their first row opens, so memory holds the scene and the open rows'
@@ -1122,14 +1123,14 @@ fn render_inner(
         }
         stats.time(Stage::Filter, t);
     };
-    let mut kept: Vec<Kept> = Vec::new();
-    // Hidden rows still needed by a row to filter, oldest first.
-    let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
-    let mut next_filter = 0usize;
-    for row in 0..buckets.rows {
-        // Split, dice and shade everything that starts in this row: the surfaces of the
-        // primitives first reaching it are made again (diagnostics were reported the first
-        // time), then everything is split, diced and shaded.
+    // Splits, dices and shades everything that starts in `row`: the surfaces of the
+    // primitives first reaching it are made again (diagnostics were reported the first
+    // time), then everything is split, diced and shaded. Returns the row's grids.
+    let process = |row: usize,
+                   pending: &mut [Vec<Work>],
+                   pending_prims: &mut [Vec<u32>]|
+     -> Vec<Kept> {
+        let mut kept = Vec::new();
         let mut frontier = std::mem::take(&mut pending[row]);
         let starting = std::mem::take(&mut pending_prims[row]);
         if let (false, Some(m)) = (starting.is_empty(), make) {
@@ -1194,6 +1195,17 @@ fn render_inner(
                 }
             }
         }
+        kept
+    };
+    let mut kept: Vec<Kept> = if buckets.rows > 0 {
+        process(0, &mut pending, &mut pending_prims)
+    } else {
+        Vec::new()
+    };
+    // Hidden rows still needed by a row to filter, oldest first.
+    let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
+    let mut next_filter = 0usize;
+    for row in 0..buckets.rows {
         // Hide this row's buckets in parallel (each prepared for the filter at once).
         let film_ref: &Film = &film;
         let hide_row = || -> Vec<Hidden> {
@@ -1250,7 +1262,16 @@ fn render_inner(
                 })
                 .collect()
         };
-        let bufs = hide_row();
+        // The next row's surfaces are split, diced and shaded alongside (they only add
+        // grids, which no bucket of this row needs), so neither runs alone on a few items.
+        let (bufs, next) = if row + 1 < buckets.rows {
+            rayon::join(hide_row, || {
+                process(row + 1, &mut pending, &mut pending_prims)
+            })
+        } else {
+            (hide_row(), Vec::new())
+        };
+        kept.extend(next);
         hidden.push_back((row, bufs));
         // Filter the rows whose neighbours are now all hidden, while their samples are
         // still in the caches.
