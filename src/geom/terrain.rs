@@ -57,8 +57,8 @@ pub(super) fn surfaces(
         diags.report(Diag::warning("geom::fractalterrain", msg).label(prim.span, "this terrain"));
     };
     for p in pv.iter() {
-        let known = KNOWN.contains(&&*p.name)
-            || matches!(p.decl.class, Class::Constant | Class::Uniform);
+        let known =
+            KNOWN.contains(&&*p.name) || matches!(p.decl.class, Class::Constant | Class::Uniform);
         if !known {
             warn(format!(
                 "parameter \"{}\" is not used by fractalterrain; ignored",
@@ -86,8 +86,7 @@ pub(super) fn surfaces(
     let mut list: Vec<Param> = pv
         .iter()
         .filter(|p| {
-            matches!(p.decl.class, Class::Constant | Class::Uniform)
-                && !KNOWN.contains(&&*p.name)
+            matches!(p.decl.class, Class::Constant | Class::Uniform) && !KNOWN.contains(&&*p.name)
         })
         .cloned()
         .collect();

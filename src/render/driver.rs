@@ -8,8 +8,9 @@
 //! * buckets are processed row by row: first every surface whose bound first reaches the row
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open row. Filtering (one
-//!   film, one writer) of row r runs alongside the hiding of row r + 1;
+//!   needs are freed — memory holds only the grids overlapping the open rows. The surfaces
+//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; filtering (one
+//!   film, one writer) of row r − 1 follows the hiding of row r;
 //! * surfaces are made from the scene's primitives in parallel before the first row; those
 //!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
 //!   made again when their first row opens, so memory holds the scene and the open rows'
@@ -106,6 +107,12 @@ pub fn render_frame(
 /// Makes the surfaces of primitive `i` (the same ones every time it is called), reporting
 /// problems to the sink given.
 type MakeSurfaces<'m> = dyn Fn(usize, &Diagnostics) -> Vec<Box<dyn Surface>> + Sync + 'm;
+
+/// The surfaces of one primitive.
+type SurfaceList = Vec<Box<dyn Surface>>;
+
+/// Diagnostics taken from a sink, with their counts.
+type Diags = Vec<(Diag, usize)>;
 
 /// Where a frame's surfaces come from.
 enum Surfaces<'m> {
@@ -308,7 +315,7 @@ fn estimate_displacement_bounds(
     scene: &Scene,
     camera: &Camera,
     view: &View,
-    surfaces: &[Option<Vec<Box<dyn Surface>>>],
+    surfaces: &[Option<SurfaceList>],
     prims: &mut [PrimInfo],
     shader: &dyn GridShader,
 ) {
@@ -909,16 +916,15 @@ fn render_inner(
             ..prim_info(scene, camera, p, min_rate, diags)
         })
         .collect();
-    let (mut built, make): (Vec<Option<Vec<Box<dyn Surface>>>>, Option<&MakeSurfaces>) =
-        match surfaces {
-            Surfaces::Built(v) => (v.into_iter().map(Some).collect(), None),
-            Surfaces::Lazy(m) => ((0..scene.primitives.len()).map(|_| None).collect(), Some(m)),
-        };
+    let (mut built, make): (Vec<Option<SurfaceList>>, Option<&MakeSurfaces>) = match surfaces {
+        Surfaces::Built(v) => (v.into_iter().map(Some).collect(), None),
+        Surfaces::Lazy(m) => ((0..scene.primitives.len()).map(|_| None).collect(), Some(m)),
+    };
     if let Some(m) = make {
         // Displaced primitives needing an estimated bound keep their surfaces.
-        for i in 0..prims.len() {
+        for (i, slot) in built.iter_mut().enumerate() {
             if needs_estimate(scene, &prims, i) {
-                built[i] = Some(m(i, diags));
+                *slot = Some(m(i, diags));
             }
         }
     }
@@ -953,7 +959,7 @@ fn render_inner(
     Stats::add(&stats.primitives, scene.primitives.len() as u64);
     let mut pending: Vec<Vec<Work>> = (0..buckets.rows).map(|_| Vec::new()).collect();
     let mut pending_prims: Vec<Vec<u32>> = (0..buckets.rows).map(|_| Vec::new()).collect();
-    let placed: Vec<(Vec<Placed>, Vec<(Diag, usize)>)> = built
+    let placed: Vec<(Vec<Placed>, Diags)> = built
         .par_chunks_mut(PLACE_CHUNK)
         .enumerate()
         .map(|(c, slots)| {
@@ -1122,78 +1128,87 @@ fn render_inner(
         }
         stats.time(Stage::Filter, t);
     };
-    let mut kept: Vec<Kept> = Vec::new();
+    // Splits, dices and shades everything that starts in `row`: the surfaces of the
+    // primitives first reaching it are made again (diagnostics were reported the first
+    // time), then everything is split, diced and shaded. Returns the row's grids.
+    let process =
+        |row: usize, pending: &mut [Vec<Work>], pending_prims: &mut [Vec<u32>]| -> Vec<Kept> {
+            let mut kept = Vec::new();
+            let mut frontier = std::mem::take(&mut pending[row]);
+            let starting = std::mem::take(&mut pending_prims[row]);
+            if let (false, Some(m)) = (starting.is_empty(), make) {
+                let quiet = Diagnostics::new();
+                let made: Vec<Vec<(Option<usize>, Work)>> = starting
+                    .into_par_iter()
+                    .map(|i| {
+                        let i = i as usize;
+                        m(i, &quiet)
+                            .into_iter()
+                            .enumerate()
+                            .map(|(j, surface)| {
+                                let w = Work {
+                                    surface,
+                                    key: surface_key(i, j),
+                                    depth: 0,
+                                    eye_splits: 0,
+                                };
+                                (frame.place(&w, row), w)
+                            })
+                            .collect()
+                    })
+                    .collect();
+                for (r, w) in made.into_iter().flatten() {
+                    match r {
+                        Some(r) if r == row => frontier.push(w),
+                        Some(r) => pending[r].push(w),
+                        None => {}
+                    }
+                }
+            }
+            while !frontier.is_empty() {
+                let results: Vec<(Outcome, Vec<(usize, Work)>)> = frontier
+                    .into_par_iter()
+                    .map(|w| frame.step(w, row))
+                    .collect();
+                frontier = Vec::new();
+                for (outcome, children) in results {
+                    for (r, w) in children {
+                        if r == row {
+                            frontier.push(w);
+                        } else {
+                            pending[r].push(w);
+                        }
+                    }
+                    match outcome {
+                        Outcome::Grid(g) => {
+                            let b = g.bound;
+                            let (Some(rows), Some(cols)) =
+                                (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
+                            else {
+                                continue;
+                            };
+                            stats.alloc(g.bytes());
+                            kept.push(Kept {
+                                grid: g,
+                                rows: (rows.0.max(row), rows.1.max(row)),
+                                cols,
+                            });
+                        }
+                        Outcome::Nothing => {}
+                    }
+                }
+            }
+            kept
+        };
+    let mut kept: Vec<Kept> = if buckets.rows > 0 {
+        process(0, &mut pending, &mut pending_prims)
+    } else {
+        Vec::new()
+    };
     // Hidden rows still needed by a row to filter, oldest first.
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
     for row in 0..buckets.rows {
-        // Split, dice and shade everything that starts in this row: the surfaces of the
-        // primitives first reaching it are made again (diagnostics were reported the first
-        // time), then everything is split, diced and shaded.
-        let mut frontier = std::mem::take(&mut pending[row]);
-        let starting = std::mem::take(&mut pending_prims[row]);
-        if let (false, Some(m)) = (starting.is_empty(), make) {
-            let quiet = Diagnostics::new();
-            let made: Vec<Vec<(Option<usize>, Work)>> = starting
-                .into_par_iter()
-                .map(|i| {
-                    let i = i as usize;
-                    m(i, &quiet)
-                        .into_iter()
-                        .enumerate()
-                        .map(|(j, surface)| {
-                            let w = Work {
-                                surface,
-                                key: surface_key(i, j),
-                                depth: 0,
-                                eye_splits: 0,
-                            };
-                            (frame.place(&w, row), w)
-                        })
-                        .collect()
-                })
-                .collect();
-            for (r, w) in made.into_iter().flatten() {
-                match r {
-                    Some(r) if r == row => frontier.push(w),
-                    Some(r) => pending[r].push(w),
-                    None => {}
-                }
-            }
-        }
-        while !frontier.is_empty() {
-            let results: Vec<(Outcome, Vec<(usize, Work)>)> = frontier
-                .into_par_iter()
-                .map(|w| frame.step(w, row))
-                .collect();
-            frontier = Vec::new();
-            for (outcome, children) in results {
-                for (r, w) in children {
-                    if r == row {
-                        frontier.push(w);
-                    } else {
-                        pending[r].push(w);
-                    }
-                }
-                match outcome {
-                    Outcome::Grid(g) => {
-                        let b = g.bound;
-                        let (Some(rows), Some(cols)) =
-                            (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
-                        else {
-                            continue;
-                        };
-                        stats.alloc(g.bytes());
-                        kept.push(Kept {
-                            grid: g,
-                            rows: (rows.0.max(row), rows.1.max(row)),
-                            cols,
-                        });
-                    }
-                    Outcome::Nothing => {}
-                }
-            }
-        }
         // Hide this row's buckets in parallel (each prepared for the filter at once).
         let film_ref: &Film = &film;
         let hide_row = || -> Vec<Hidden> {
@@ -1250,7 +1265,16 @@ fn render_inner(
                 })
                 .collect()
         };
-        let bufs = hide_row();
+        // The next row's surfaces are split, diced and shaded alongside (they only add
+        // grids, which no bucket of this row needs), so neither runs alone on a few items.
+        let (bufs, next) = if row + 1 < buckets.rows {
+            rayon::join(hide_row, || {
+                process(row + 1, &mut pending, &mut pending_prims)
+            })
+        } else {
+            (hide_row(), Vec::new())
+        };
+        kept.extend(next);
         hidden.push_back((row, bufs));
         // Filter the rows whose neighbours are now all hidden, while their samples are
         // still in the caches.

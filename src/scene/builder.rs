@@ -1024,6 +1024,87 @@ mod tests {
             .collect()
     }
 
+    /// Feeds `text`'s requests one at a time, as `pipeline::load_scenes` streams a file.
+    fn streamed(text: &str, sm: &SourceMap, d: &Diagnostics) -> (Vec<Scene>, Vec<Request>) {
+        let reqs = crate::rib::parse_bytes("t.rib", text.as_bytes(), sm, d);
+        let ctx = BuildContext::new(sm, d);
+        let mut b = Builder::new(&ctx);
+        for r in &reqs {
+            b.feed(r);
+        }
+        (b.finish(), reqs)
+    }
+
+    #[test]
+    fn streamed_requests_build_the_same_scene_and_share_state() {
+        let text = r#"WorldBegin
+ArchiveBegin "quad"
+Polygon "P" [0 0 0 1 0 0 1 1 0 0 1 0]
+ArchiveEnd
+Color [1 0 0]
+ReadArchive "quad"
+Color [0 1 0]
+Polygon "P" [0 0 1 1 0 1 1 1 1 0 1 1]
+Sphere 1 -1 1 360
+Color [0 0 1]
+Sphere 1 -1 1 360
+WorldEnd
+"#;
+        let sm = SourceMap::new();
+        let d = Diagnostics::new();
+        let (s, reqs) = streamed(text, &sm, &d);
+        assert!(!d.has_errors(), "{:?}", d.snapshot());
+        let p = &s[0].primitives;
+        assert_eq!(p.len(), 4);
+        assert_eq!(p[0].attributes.color, Vec3::X);
+        assert_eq!(p[1].attributes.color, Vec3::Y);
+        assert_eq!(p[3].attributes.color, Vec3::Z);
+        // Colours differ, the rest of the attribute state is one; equal small geometry and
+        // equal transforms are shared.
+        assert!(Arc::ptr_eq(&p[0].attributes.state, &p[3].attributes.state));
+        assert!(Arc::ptr_eq(&p[0].geometry, &p[1].geometry));
+        assert!(Arc::ptr_eq(&p[2].geometry, &p[3].geometry));
+        assert!(Arc::ptr_eq(
+            &p[0].world_from_object,
+            &p[3].world_from_object
+        ));
+        assert_ne!(p[0].primvars, p[1].primvars);
+        // Building from the whole list gives the same primitives.
+        let d2 = Diagnostics::new();
+        let whole = build_scenes(reqs, &BuildContext::new(&sm, &d2));
+        assert_eq!(whole[0].primitives.len(), 4);
+        for (a, b) in whole[0].primitives.iter().zip(p) {
+            assert_eq!(a.geometry, b.geometry);
+            assert_eq!(a.attributes, b.attributes);
+            assert_eq!(a.primvars, b.primvars);
+            assert_eq!(a.world_from_object, b.world_from_object);
+        }
+    }
+
+    #[test]
+    fn a_streamed_archive_left_open_is_reported_at_the_end() {
+        let sm = SourceMap::new();
+        let d = Diagnostics::new();
+        let (_, _) = streamed("ArchiveBegin \"a\"\nSphere 1 -1 1 360\n", &sm, &d);
+        let all = d.snapshot();
+        assert!(
+            all.iter().any(|(x, _)| x.code == "scene::nesting"
+                && x.message.contains("`ArchiveBegin` is never closed")),
+            "{all:?}"
+        );
+    }
+
+    #[test]
+    fn setting_an_attribute_copies_the_shared_state_once() {
+        let mut a = Attributes::default();
+        let b = a.clone();
+        a.color = Vec3::X;
+        assert!(Arc::ptr_eq(&a.state, &b.state));
+        a.shading_rate = 4.0;
+        assert!(!Arc::ptr_eq(&a.state, &b.state));
+        assert_eq!((a.shading_rate, b.shading_rate), (4.0, 1.0));
+    }
+
     #[test]
     fn world_begin_saves_the_camera_and_resets_the_transform() {
         let sm = SourceMap::new();

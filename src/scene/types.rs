@@ -114,9 +114,30 @@ pub type ParamName = std::borrow::Cow<'static, str>;
 /// `name` as a [`ParamName`]: a static string when it is one of the common names.
 pub fn param_name(name: &str) -> ParamName {
     const COMMON: [&str; 24] = [
-        "P", "Pw", "Pz", "N", "Np", "Cs", "Os", "s", "t", "st", "u", "v", "width",
-        "constantwidth", "Ka", "Kd", "Ks", "roughness", "specularcolor", "intensity",
-        "lightcolor", "from", "to", "texturename",
+        "P",
+        "Pw",
+        "Pz",
+        "N",
+        "Np",
+        "Cs",
+        "Os",
+        "s",
+        "t",
+        "st",
+        "u",
+        "v",
+        "width",
+        "constantwidth",
+        "Ka",
+        "Kd",
+        "Ks",
+        "roughness",
+        "specularcolor",
+        "intensity",
+        "lightcolor",
+        "from",
+        "to",
+        "texturename",
     ];
     match COMMON.iter().find(|c| **c == name) {
         Some(c) => std::borrow::Cow::Borrowed(c),
