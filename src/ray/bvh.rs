@@ -430,7 +430,17 @@ impl Bvh {
         loop {
             let n = &self.nodes[cur as usize];
             let (mask, tnear) = slab4(n, neg, inv, oi, tmin, *tmax);
-            if mask != 0 {
+            if mask.is_power_of_two() {
+                // One child in reach (the common case deep in the tree): go straight to it.
+                let i = mask.trailing_zeros() as usize;
+                if n.count[i] == 0 {
+                    cur = n.child[i];
+                    continue;
+                }
+                if self.leaf(n.child[i], n.count[i], &wt, tmin, tmax, on_hit) {
+                    return;
+                }
+            } else if mask != 0 {
                 // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
                 // order as the numbers do) above the lane; misses sort last.
                 let mut key = [u64::MAX; 4];
@@ -495,20 +505,66 @@ impl Bvh {
 }
 
 /// Lane-wise minimum and maximum, written so they compile to `minps`/`maxps`.
+#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn vmin(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
     std::array::from_fn(|i| if a[i] < b[i] { a[i] } else { b[i] })
 }
+#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn vmax(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
     std::array::from_fn(|i| if a[i] > b[i] { a[i] } else { b[i] })
 }
+#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn vslab(p: &[f32; 4], inv: f32, oi: f32) -> [f32; 4] {
     std::array::from_fn(|i| p[i] * inv - oi)
 }
 
 /// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
+/// SSE (baseline on x86-64): the same operations in the same order as the portable form
+/// (`minps`/`maxps` return their second operand exactly where `vmin`/`vmax` do), so the
+/// same children are visited.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn slab4(
+    n: &Node4,
+    neg: [bool; 3],
+    inv: [f32; 3],
+    oi: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (u32, [f32; 4]) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] arrays of the node
+    // and the store writes a [f32; 4], all unaligned-safe.
+    unsafe {
+        let slab = |p: &[f32; 4], a: usize| {
+            _mm_sub_ps(
+                _mm_mul_ps(_mm_loadu_ps(p.as_ptr()), _mm_set1_ps(inv[a])),
+                _mm_set1_ps(oi[a]),
+            )
+        };
+        let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
+        let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+        let t0 = _mm_max_ps(
+            _mm_max_ps(slab(near(0), 0), slab(near(1), 1)),
+            _mm_max_ps(slab(near(2), 2), _mm_set1_ps(tmin)),
+        );
+        let f = _mm_min_ps(
+            _mm_min_ps(slab(far(0), 0), slab(far(1), 1)),
+            slab(far(2), 2),
+        );
+        let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
+        let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32;
+        let mut out = [0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), t0);
+        (mask, out)
+    }
+}
+
+/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
+#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn slab4(
     n: &Node4,
