@@ -54,6 +54,38 @@ WorldEnd
     }
 }
 
+#[test]
+fn trace_inside_arithmetic_is_a_colour() {
+    // `Kr * trace(P, R)`: the float sibling does not make trace() the grey float form (the
+    // gallery's mirror sphere reflected grey stripes when it did).
+    let rib = format!(
+        r#"Format 8 8 1
+Projection "orthographic"
+ScreenWindow -1 1 -1 1
+WorldBegin
+AttributeBegin
+  Surface "halfmirror"
+  {mirror}
+AttributeEnd
+AttributeBegin
+  Color [0.2 0.5 0.8]
+  Surface "constant"
+  {wall}
+AttributeEnd
+WorldEnd
+"#,
+        mirror = square(2.0, 5.0),
+        wall = square(10.0, -5.0)
+    );
+    let film = render_rib(&rib, &[shaders()]);
+    let rgb = film_rgb(&film);
+    for px in rgb.chunks_exact(3) {
+        for (c, want) in px.iter().zip([0.1f32, 0.25, 0.4]) {
+            assert!((c - want).abs() < 1e-6, "pixel {px:?}");
+        }
+    }
+}
+
 /// Renders with explicit thread/bucket settings; returns the RGB floats.
 fn render_with(rib: &str, threads: usize, bucket: u32) -> Vec<f32> {
     let opts = RenderOptions {

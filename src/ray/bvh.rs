@@ -3,17 +3,19 @@
 //! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid) with the grid and
 //! quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
-//! every hit) is the same whatever the thread count; nodes are 32 bytes, children are stored
-//! in pairs; a quad is intersected as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)`
-//! and reports bilinear-style coordinates `(a, b)` in `[0, 1]²` across the quad.
+//! every hit) is the same whatever the thread count; nodes are 4 wide (a binned-SAH binary
+//! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to four
+//! children, tested together); a quad is intersected, watertight, as the two triangles
+//! `(v00 v10 v11)` and `(v00 v11 v01)` and reports bilinear-style coordinates `(a, b)` in
+//! `[0, 1]²` across the quad.
 //!
 //! Why home-made rather than the `bvh` or `obvhs` crates: `bvh` is built on nalgebra (a
 //! second linear-algebra crate beside glam) and its traversal returns a `Vec` of every shape
 //! whose box the ray crosses (an allocation and no closest-hit pruning per ray); `obvhs` is
 //! glam-based and fast (CWBVH, PLOC) but young (three 0.x releases within a year, API changed
-//! each time) and brings its own dependency tree. A binned-SAH BVH2 with ordered traversal is
-//! ~300 lines, deterministic by construction and fast enough for the targets (see
-//! `benches/rays.rs`).
+//! each time) and brings its own dependency tree. A binned-SAH BVH4 with ordered traversal is
+//! ~500 lines, deterministic by construction, and its leaves hold micropolygons with the
+//! watertight test they need (see `benches/rays.rs` for its speed).
 
 use glam::Vec3;
 
@@ -27,15 +29,27 @@ pub struct Quad {
     pub index: u32,
 }
 
-#[derive(Clone, Copy, Debug, Default)]
-#[repr(C)]
-struct Node {
-    min: [f32; 3],
-    /// Leaf: first quad. Interior: index of the left child (the right one follows it).
-    first: u32,
-    max: [f32; 3],
-    /// Quads in a leaf; 0 for interior nodes.
-    count: u32,
+/// A 4-wide node: the boxes of up to four children side by side (lane `i` of each array),
+/// so one ray tests all four with the same few vector instructions.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Node4 {
+    /// Box corners per axis (x, y, z), per child lane. Empty lanes hold an inverted box.
+    lo: [[f32; 4]; 3],
+    hi: [[f32; 4]; 3],
+    /// Interior child: node index. Leaf child: its first quad.
+    child: [u32; 4],
+    /// Quads in a leaf child; 0 for an interior child (and an empty lane).
+    count: [u32; 4],
+}
+
+impl Node4 {
+    const EMPTY: Node4 = Node4 {
+        lo: [[f32::INFINITY; 4]; 3],
+        hi: [[f32::NEG_INFINITY; 4]; 3],
+        child: [0; 4],
+        count: [0; 4],
+    };
 }
 
 /// The closest intersection along a ray.
@@ -51,11 +65,13 @@ pub struct Hit {
 
 #[derive(Default, Debug)]
 pub struct Bvh {
-    nodes: Vec<Node>,
+    nodes: Vec<Node4>,
     pub quads: Vec<Quad>,
+    /// The root when the whole tree is one leaf (then `nodes` is empty): its quad count.
+    root_leaf: u32,
 }
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Aabb {
     min: Vec3,
     max: Vec3,
@@ -66,10 +82,17 @@ impl Aabb {
         min: Vec3::splat(f32::INFINITY),
         max: Vec3::splat(f32::NEG_INFINITY),
     };
+    #[inline]
     fn grow(&mut self, o: &Aabb) {
-        self.min = self.min.min(o.min);
-        self.max = self.max.max(o.max);
+        self.min = fmin3(self.min, o.min);
+        self.max = fmax3(self.max, o.max);
     }
+    #[inline]
+    fn grow_point(&mut self, p: Vec3) {
+        self.min = fmin3(self.min, p);
+        self.max = fmax3(self.max, p);
+    }
+    #[inline]
     fn area(&self) -> f32 {
         let d = self.max - self.min;
         if d.x < 0.0 {
@@ -79,12 +102,40 @@ impl Aabb {
     }
 }
 
-const BINS: usize = 12;
+/// Lane-wise minimum and maximum without `f32::min`'s NaN handling (boxes are finite), so
+/// they compile to single `minss`/`maxss` instructions.
+#[inline(always)]
+fn fmin3(a: Vec3, b: Vec3) -> Vec3 {
+    let m = |x: f32, y: f32| if x < y { x } else { y };
+    Vec3::new(m(a.x, b.x), m(a.y, b.y), m(a.z, b.z))
+}
+#[inline(always)]
+fn fmax3(a: Vec3, b: Vec3) -> Vec3 {
+    let m = |x: f32, y: f32| if x > y { x } else { y };
+    Vec3::new(m(a.x, b.x), m(a.y, b.y), m(a.z, b.z))
+}
+
+const BINS: usize = 16;
+/// Most quads in a leaf (more only where all centroids coincide).
 const MAX_LEAF: usize = 8;
+/// SAH cost of a node visit relative to one quad test.
+const TRAVERSAL_COST: f32 = 0.6;
+
+/// A node of the binary tree built first (then collapsed to 4-wide nodes).
+#[derive(Clone, Copy)]
+struct Node2 {
+    bb: Aabb,
+    /// Interior: left child (right = left + 1). Leaf: first quad.
+    first: u32,
+    /// Quads in a leaf; 0 for interior nodes.
+    count: u32,
+}
 
 impl Bvh {
-    /// Builds the tree (sequentially: see the module invariants).
-    pub fn build(mut quads: Vec<Quad>) -> Bvh {
+    /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
+    /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
+    /// alone (see the module invariants).
+    pub fn build(quads: Vec<Quad>) -> Bvh {
         let n = quads.len();
         if n == 0 {
             return Bvh::default();
@@ -98,120 +149,181 @@ impl Bvh {
             .collect();
         let cent: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
         let mut order: Vec<u32> = (0..n as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * n / 2 + 1);
-        nodes.push(Node::default());
-        // (node index, range start, range end)
+        let mut nodes: Vec<Node2> = Vec::with_capacity(2 * n / 3 + 1);
+        nodes.push(Node2 {
+            bb: Aabb::EMPTY,
+            first: 0,
+            count: 0,
+        });
         let mut stack = vec![(0usize, 0usize, n)];
         while let Some((ni, s, e)) = stack.pop() {
             let mut bb = Aabb::EMPTY;
             let mut cb = Aabb::EMPTY;
             for &k in &order[s..e] {
                 bb.grow(&boxes[k as usize]);
-                let c = cent[k as usize];
-                cb.grow(&Aabb { min: c, max: c });
+                cb.grow_point(cent[k as usize]);
             }
             let count = e - s;
-            let leaf = |nodes: &mut Vec<Node>| {
-                nodes[ni] = Node {
-                    min: bb.min.to_array(),
+            let make_leaf = |nodes: &mut Vec<Node2>| {
+                nodes[ni] = Node2 {
+                    bb,
                     first: s as u32,
-                    max: bb.max.to_array(),
                     count: count as u32,
                 };
             };
             if count <= 2 {
-                leaf(&mut nodes);
+                make_leaf(&mut nodes);
                 continue;
             }
+            // The best split over the three axes.
             let ext = cb.max - cb.min;
-            let axis = if ext.x >= ext.y && ext.x >= ext.z {
-                0
-            } else if ext.y >= ext.z {
-                1
-            } else {
-                2
-            };
-            let lo = cb.min[axis];
-            let span = ext[axis];
-            let mut mid = s + count / 2;
-            let mut split_ok = false;
-            if span > 0.0 && span.is_finite() {
-                let scale = BINS as f32 / span;
-                let bin_of =
-                    |k: u32| (((cent[k as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                let mut bins = [(Aabb::EMPTY, 0usize); BINS];
-                for &k in &order[s..e] {
-                    let b = &mut bins[bin_of(k)];
-                    b.0.grow(&boxes[k as usize]);
-                    b.1 += 1;
+            let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, last bin on the left)
+                                                            // One pass bins every item on the three axes (an axis of no extent puts every
+                                                            // item in its bin 0, where no split is possible).
+            let scales: [f32; 3] = std::array::from_fn(|a| {
+                if ext[a] > 0.0 && ext[a].is_finite() {
+                    BINS as f32 * (1.0 - 1e-6) / ext[a]
+                } else {
+                    0.0
                 }
-                // Sweep: cost of splitting after bin i.
+            });
+            let mut bins = [[(Aabb::EMPTY, 0u32); BINS]; 3];
+            for &k in &order[s..e] {
+                let c = cent[k as usize] - cb.min;
+                let bx = &boxes[k as usize];
+                for axis in 0..3 {
+                    let i = ((c[axis] * scales[axis]) as usize).min(BINS - 1);
+                    let bin = &mut bins[axis][i];
+                    bin.0.grow(bx);
+                    bin.1 += 1;
+                }
+            }
+            for axis in 0..3 {
+                if scales[axis] == 0.0 {
+                    continue;
+                }
+                let b = &bins[axis];
                 let mut right_area = [0f32; BINS];
-                let mut right_count = [0usize; BINS];
+                let mut right_count = [0u32; BINS];
                 let mut acc = Aabb::EMPTY;
                 let mut cnt = 0;
                 for i in (1..BINS).rev() {
-                    acc.grow(&bins[i].0);
-                    cnt += bins[i].1;
+                    acc.grow(&b[i].0);
+                    cnt += b[i].1;
                     right_area[i] = acc.area();
                     right_count[i] = cnt;
                 }
-                let mut best = (f32::INFINITY, 0usize);
                 let mut acc = Aabb::EMPTY;
                 let mut cnt = 0;
                 for i in 0..BINS - 1 {
-                    acc.grow(&bins[i].0);
-                    cnt += bins[i].1;
+                    acc.grow(&b[i].0);
+                    cnt += b[i].1;
                     if cnt == 0 || right_count[i + 1] == 0 {
                         continue;
                     }
                     let cost =
                         acc.area() * cnt as f32 + right_area[i + 1] * right_count[i + 1] as f32;
                     if cost < best.0 {
-                        best = (cost, i);
+                        best = (cost, axis, i);
                     }
                 }
-                let leaf_cost = bb.area() * count as f32;
-                let split_cost = 0.5 * bb.area() + best.0;
-                if best.0.is_finite() && (split_cost < leaf_cost || count > MAX_LEAF) {
-                    // Stable partition keeps the build independent of anything but the input.
-                    let (mut l, mut r): (Vec<u32>, Vec<u32>) =
-                        order[s..e].iter().partition(|&&k| bin_of(k) <= best.1);
-                    mid = s + l.len();
-                    l.append(&mut r);
-                    order[s..e].copy_from_slice(&l);
-                    split_ok = true;
-                } else if count <= MAX_LEAF {
-                    leaf(&mut nodes);
-                    continue;
-                }
             }
-            if !split_ok {
-                if count <= MAX_LEAF {
-                    leaf(&mut nodes);
-                    continue;
+            let area = bb.area().max(f32::MIN_POSITIVE);
+            let leaf_cost = count as f32;
+            let split_cost = TRAVERSAL_COST + best.0 / area;
+            let mid = if best.0.is_finite() && (split_cost < leaf_cost || count > MAX_LEAF) {
+                // In-place partition by the chosen bin (deterministic: depends only on the
+                // order so far).
+                let axis = best.1;
+                let (lo, scale) = (cb.min[axis], scales[axis]);
+                let left_of = |k: u32| {
+                    (((cent[k as usize][axis] - lo) * scale) as usize).min(BINS - 1) <= best.2
+                };
+                let (mut i, mut j) = (s, e);
+                while i < j {
+                    if left_of(order[i]) {
+                        i += 1;
+                    } else {
+                        j -= 1;
+                        order.swap(i, j);
+                    }
                 }
-                // All centroids coincide: split the range in half.
-                mid = s + count / 2;
-            }
+                i
+            } else if count <= MAX_LEAF {
+                make_leaf(&mut nodes);
+                continue;
+            } else {
+                // All centroids coincide: halve the range.
+                s + count / 2
+            };
             let left = nodes.len();
-            nodes.push(Node::default());
-            nodes.push(Node::default());
-            nodes[ni] = Node {
-                min: bb.min.to_array(),
+            let blank = Node2 {
+                bb: Aabb::EMPTY,
+                first: 0,
+                count: 0,
+            };
+            nodes.push(blank);
+            nodes.push(blank);
+            nodes[ni] = Node2 {
+                bb,
                 first: left as u32,
-                max: bb.max.to_array(),
                 count: 0,
             };
             stack.push((left + 1, mid, e));
             stack.push((left, s, mid));
         }
         let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
-        quads.clear();
-        Bvh {
-            nodes,
+        drop(quads);
+        let mut bvh = Bvh {
+            nodes: Vec::with_capacity(nodes.len() / 2 + 1),
             quads: sorted,
+            root_leaf: 0,
+        };
+        if nodes[0].count > 0 {
+            bvh.root_leaf = nodes[0].count;
+            return bvh;
         }
+        bvh.collapse(&nodes, 0);
+        bvh
+    }
+
+    /// Makes the 4-wide node for binary interior node `i` (children first-come first-placed:
+    /// the root is node 0); returns its index.
+    fn collapse(&mut self, nodes: &[Node2], i: usize) -> u32 {
+        // Open the interior child with the largest box until there are four.
+        let mut kids: Vec<usize> = vec![nodes[i].first as usize, nodes[i].first as usize + 1];
+        while kids.len() < 4 {
+            let pick = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, &k)| nodes[k].count == 0)
+                .max_by(|a, b| nodes[*a.1].bb.area().total_cmp(&nodes[*b.1].bb.area()));
+            let Some((pos, &k)) = pick else {
+                break;
+            };
+            let l = nodes[k].first as usize;
+            kids[pos] = l;
+            kids.insert(pos + 1, l + 1);
+        }
+        let me = self.nodes.len();
+        self.nodes.push(Node4::EMPTY);
+        let mut node = Node4::EMPTY;
+        for (lane, &k) in kids.iter().enumerate() {
+            let c = &nodes[k];
+            for axis in 0..3 {
+                node.lo[axis][lane] = c.bb.min[axis];
+                node.hi[axis][lane] = c.bb.max[axis];
+            }
+            if c.count > 0 {
+                node.child[lane] = c.first;
+                node.count[lane] = c.count;
+            } else {
+                node.child[lane] = self.collapse(nodes, k);
+                node.count[lane] = 0;
+            }
+        }
+        self.nodes[me] = node;
+        me as u32
     }
 
     pub fn is_empty(&self) -> bool {
@@ -222,17 +334,24 @@ impl Bvh {
     pub fn closest(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut tmax = tmax;
-        self.walk(o, d, tmin, &mut tmax, &mut |q, hit_t, a, b, tmax_ref| {
-            *tmax_ref = hit_t;
-            best = Some(Hit {
-                t: hit_t,
-                grid: q.grid,
-                index: q.index,
-                a,
-                b,
-            });
-            false
-        });
+        self.walk(
+            o,
+            d,
+            tmin,
+            &mut tmax,
+            true,
+            &mut |q, hit_t, a, b, tmax_ref| {
+                *tmax_ref = hit_t;
+                best = Some(Hit {
+                    t: hit_t,
+                    grid: q.grid,
+                    index: q.index,
+                    a,
+                    b,
+                });
+                false
+            },
+        );
         best
     }
 
@@ -240,7 +359,7 @@ impl Bvh {
     /// returns true.
     pub fn each_hit(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, f: &mut dyn FnMut(Hit) -> bool) {
         let mut tm = tmax;
-        self.walk(o, d, tmin, &mut tm, &mut |q, t, a, b, _| {
+        self.walk(o, d, tmin, &mut tm, false, &mut |q, t, a, b, _| {
             f(Hit {
                 t,
                 grid: q.grid,
@@ -251,17 +370,45 @@ impl Bvh {
         });
     }
 
-    /// Ordered traversal. `on_hit(quad, t, a, b, &mut tmax)` may shrink `tmax`; returning
-    /// true stops the walk.
+    /// Tests the quads of a leaf; true when `on_hit` asked to stop.
+    #[inline]
+    fn leaf(
+        &self,
+        first: u32,
+        count: u32,
+        wt: &WtRay,
+        tmin: f32,
+        tmax: &mut f32,
+        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+    ) -> bool {
+        let (s, e) = (first as usize, (first + count) as usize);
+        for q in &self.quads[s..e] {
+            if let Some((t, a, b)) = intersect_quad_wt(q, wt, tmin, *tmax) {
+                if on_hit(q, t, a, b, tmax) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
+    /// shrink `tmax`; returning true stops the walk.
     fn walk(
         &self,
         o: Vec3,
         d: Vec3,
         tmin: f32,
         tmax: &mut f32,
+        ordered: bool,
         on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
     ) {
+        if self.quads.is_empty() {
+            return;
+        }
+        let wt = WtRay::new(o, d);
         if self.nodes.is_empty() {
+            self.leaf(0, self.root_leaf, &wt, tmin, tmax, on_hit);
             return;
         }
         let safe = |x: f32| {
@@ -271,77 +418,179 @@ impl Bvh {
                 x
             }
         };
-        let inv = Vec3::new(1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z));
-        let oi = o * inv;
-        let slab = |n: &Node, tmax: f32| -> f32 {
-            let t0 = Vec3::from(n.min) * inv - oi;
-            let t1 = Vec3::from(n.max) * inv - oi;
-            let near = t0.min(t1).max_element().max(tmin);
-            // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
-            let far = (t0.max(t1).min_element() * 1.000_000_24).min(tmax);
-            if near <= far {
-                near
-            } else {
-                f32::INFINITY
-            }
-        };
-        let wt = WtRay::new(o, d);
-        let mut stack = [0u32; 96];
+        let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
+        let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
+        let neg = [inv[0] < 0.0, inv[1] < 0.0, inv[2] < 0.0];
+        // Pending children: (child, quad count (0: interior), entry distance). Deeper than
+        // the array (a degenerate tree), they spill to the heap.
+        let mut stack = [(0u32, 0u32, 0f32); 32];
+        let mut spill: Vec<(u32, u32, f32)> = Vec::new();
         let mut sp = 0usize;
-        if slab(&self.nodes[0], *tmax) == f32::INFINITY {
-            return;
-        }
         let mut cur = 0u32;
         loop {
             let n = &self.nodes[cur as usize];
-            if n.count > 0 {
-                let (s, e) = (n.first as usize, (n.first + n.count) as usize);
-                for q in &self.quads[s..e] {
-                    if let Some((t, a, b)) = intersect_quad_wt(q, &wt, tmin, *tmax) {
-                        if on_hit(q, t, a, b, tmax) {
-                            return;
-                        }
-                    }
+            let (mask, tnear) = slab4(n, neg, inv, oi, tmin, *tmax);
+            if mask.is_power_of_two() {
+                // One child in reach (the common case deep in the tree): go straight to it.
+                let i = mask.trailing_zeros() as usize;
+                if n.count[i] == 0 {
+                    cur = n.child[i];
+                    continue;
                 }
-            } else {
-                let (l, r) = (n.first, n.first + 1);
-                let tl = slab(&self.nodes[l as usize], *tmax);
-                let tr = slab(&self.nodes[r as usize], *tmax);
-                match (tl < f32::INFINITY, tr < f32::INFINITY) {
-                    (true, true) => {
-                        let (near, far) = if tl <= tr { (l, r) } else { (r, l) };
-                        if sp < stack.len() {
-                            stack[sp] = far;
-                            sp += 1;
-                        }
-                        cur = near;
-                        continue;
-                    }
-                    (true, false) => {
-                        cur = l;
-                        continue;
-                    }
-                    (false, true) => {
-                        cur = r;
-                        continue;
-                    }
-                    _ => {}
-                }
-            }
-            // Pop the next node still worth visiting.
-            loop {
-                if sp == 0 {
+                if self.leaf(n.child[i], n.count[i], &wt, tmin, tmax, on_hit) {
                     return;
                 }
-                sp -= 1;
-                let c = stack[sp];
-                if slab(&self.nodes[c as usize], *tmax) < f32::INFINITY {
-                    cur = c;
-                    break;
+            } else if mask != 0 {
+                // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
+                // order as the numbers do) above the lane; misses sort last.
+                let mut key = [u64::MAX; 4];
+                for i in 0..4 {
+                    if mask & (1 << i) != 0 {
+                        key[i] = (u64::from(tnear[i].to_bits()) << 2) | i as u64;
+                    }
                 }
+                if ordered {
+                    // A sorting network, nearest first.
+                    let cx = |key: &mut [u64; 4], a: usize, b: usize| {
+                        let (x, y) = (key[a], key[b]);
+                        key[a] = x.min(y);
+                        key[b] = x.max(y);
+                    };
+                    cx(&mut key, 0, 1);
+                    cx(&mut key, 2, 3);
+                    cx(&mut key, 0, 2);
+                    cx(&mut key, 1, 3);
+                    cx(&mut key, 1, 2);
+                }
+                // Push farthest first, so the nearest is popped first.
+                for &kk in key.iter().rev() {
+                    if kk == u64::MAX {
+                        continue;
+                    }
+                    let i = (kk & 3) as usize;
+                    let e = (n.child[i], n.count[i], tnear[i]);
+                    if sp < stack.len() {
+                        stack[sp] = e;
+                        sp += 1;
+                    } else {
+                        spill.push(e);
+                    }
+                }
+            }
+            // Pop: leaves are tested as they come; the first interior node still in reach
+            // is visited next.
+            loop {
+                let (c, count, t) = if let Some(e) = spill.pop() {
+                    e
+                } else if sp > 0 {
+                    sp -= 1;
+                    stack[sp]
+                } else {
+                    return;
+                };
+                if t > *tmax {
+                    continue;
+                }
+                if count > 0 {
+                    if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
+                        return;
+                    }
+                    continue;
+                }
+                cur = c;
+                break;
             }
         }
     }
+}
+
+/// Lane-wise minimum and maximum, written so they compile to `minps`/`maxps`.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn vmin(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    std::array::from_fn(|i| if a[i] < b[i] { a[i] } else { b[i] })
+}
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn vmax(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    std::array::from_fn(|i| if a[i] > b[i] { a[i] } else { b[i] })
+}
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn vslab(p: &[f32; 4], inv: f32, oi: f32) -> [f32; 4] {
+    std::array::from_fn(|i| p[i] * inv - oi)
+}
+
+/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
+/// SSE (baseline on x86-64): the same operations in the same order as the portable form
+/// (`minps`/`maxps` return their second operand exactly where `vmin`/`vmax` do), so the
+/// same children are visited.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn slab4(
+    n: &Node4,
+    neg: [bool; 3],
+    inv: [f32; 3],
+    oi: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (u32, [f32; 4]) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] arrays of the node
+    // and the store writes a [f32; 4], all unaligned-safe.
+    unsafe {
+        let slab = |p: &[f32; 4], a: usize| {
+            _mm_sub_ps(
+                _mm_mul_ps(_mm_loadu_ps(p.as_ptr()), _mm_set1_ps(inv[a])),
+                _mm_set1_ps(oi[a]),
+            )
+        };
+        let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
+        let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+        let t0 = _mm_max_ps(
+            _mm_max_ps(slab(near(0), 0), slab(near(1), 1)),
+            _mm_max_ps(slab(near(2), 2), _mm_set1_ps(tmin)),
+        );
+        let f = _mm_min_ps(
+            _mm_min_ps(slab(far(0), 0), slab(far(1), 1)),
+            slab(far(2), 2),
+        );
+        let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
+        let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32;
+        let mut out = [0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), t0);
+        (mask, out)
+    }
+}
+
+/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn slab4(
+    n: &Node4,
+    neg: [bool; 3],
+    inv: [f32; 3],
+    oi: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (u32, [f32; 4]) {
+    let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
+    let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+    let t0 = vmax(
+        vmax(vslab(near(0), inv[0], oi[0]), vslab(near(1), inv[1], oi[1])),
+        vmax(vslab(near(2), inv[2], oi[2]), [tmin; 4]),
+    );
+    let f = vmin(
+        vmin(vslab(far(0), inv[0], oi[0]), vslab(far(1), inv[1], oi[1])),
+        vslab(far(2), inv[2], oi[2]),
+    );
+    // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
+    let t1 = vmin(std::array::from_fn(|i| f[i] * 1.000_000_24), [tmax; 4]);
+    let mut mask = 0;
+    for i in 0..4 {
+        mask |= u32::from(t0[i] <= t1[i]) << i;
+    }
+    (mask, t0)
 }
 
 /// A ray prepared for the watertight test (Woop, Benthin & Wald 2013): the axis where the
@@ -351,8 +600,11 @@ impl Bvh {
 #[derive(Clone, Copy)]
 pub(crate) struct WtRay {
     o: Vec3,
-    k: [usize; 3],
-    s: [f32; 3],
+    /// Rows of the shear: a vertex `v` maps to `(rx·(v−o), ry·(v−o), rz·(v−o))`, i.e.
+    /// `(A[kx] − Sx A[kz], A[ky] − Sy A[kz], Sz A[kz])` with `A = v − o`.
+    rx: Vec3,
+    ry: Vec3,
+    rz: Vec3,
 }
 
 impl WtRay {
@@ -372,19 +624,25 @@ impl WtRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let dz = if d[kz] == 0.0 { 1e-30 } else { d[kz] };
-        WtRay {
-            o,
-            k: [kx, ky, kz],
-            s: [d[kx] / dz, d[ky] / dz, 1.0 / dz],
-        }
+        let (sx, sy, sz) = (d[kx] / dz, d[ky] / dz, 1.0 / dz);
+        let mut rx = Vec3::ZERO;
+        let mut ry = Vec3::ZERO;
+        let mut rz = Vec3::ZERO;
+        rx[kx] = 1.0;
+        rx[kz] = -sx;
+        ry[ky] = 1.0;
+        ry[kz] = -sy;
+        rz[kz] = sz;
+        WtRay { o, rx, ry, rz }
     }
 
-    /// A vertex in the ray's sheared frame.
+    /// A vertex in the ray's sheared frame. The zero entries of the rows add exact zeros, so
+    /// this is bit for bit `A[kx] − Sx A[kz]` (and so on): the same for every triangle
+    /// sharing the vertex.
     #[inline(always)]
     fn xform(&self, v: Vec3) -> [f32; 3] {
         let a = v - self.o;
-        let (ax, ay, az) = (a[self.k[0]], a[self.k[1]], a[self.k[2]]);
-        [ax - self.s[0] * az, ay - self.s[1] * az, self.s[2] * az]
+        [self.rx.dot(a), self.ry.dot(a), self.rz.dot(a)]
     }
 }
 

@@ -57,6 +57,10 @@ pub struct RayScene {
     pub micropolygons: usize,
     /// Triangles added to close cracks between neighbouring grids (see [`fill_cracks`]).
     pub crack_fills: usize,
+    /// Per primitive: the primitive whose shading context its hits are shaded in (itself, or
+    /// the first of the primitives that shade identically, so their hits share one grid; see
+    /// `shade::rays`). Empty: every primitive shades as itself.
+    pub shade_as: Vec<usize>,
     /// The bound of everything, camera space.
     pub bound: Option<Bound>,
 }

@@ -75,7 +75,8 @@ impl<'a> Tracer<'a, '_> {
         Some(sys.rays.get_or_build(|| {
             BUILDING.with(|b| b.set(true));
             let displace = |prim: usize, grid: &mut Grid| sys.displace(scene, camera, prim, grid);
-            let rs = crate::ray::geometry::build(scene, camera, &displace, sys.diags);
+            let mut rs = crate::ray::geometry::build(scene, camera, &displace, sys.diags);
+            rs.shade_as = shading_classes(sys, scene, &rs);
             BUILDING.with(|b| b.set(false));
             rs
         }))
@@ -84,6 +85,93 @@ impl<'a> Tracer<'a, '_> {
     fn bias_for(&self) -> f32 {
         bias(self.scene)
     }
+}
+
+/// For each primitive, the first primitive whose hits shade identically (see
+/// [`RayScene::shade_as`]): equal attributes (the same shaders and instance values, colour,
+/// lights…), the same primitive variables beside the standard ones (none varying by
+/// primitive), and surface and atmosphere shaders that never name "object" space — the one
+/// thing of a primitive's own (its transform) a shader could see. Hits on such primitives are
+/// gathered into one grid: a batch of rays over a field of separately placed copies of an
+/// object runs its shaders once instead of once per copy. Deterministic: classes are found
+/// in primitive order.
+fn shading_classes(sys: &ShadeSystem, scene: &Scene, rs: &RayScene) -> Vec<usize> {
+    use crate::sl::ir::Const;
+    use std::collections::HashMap;
+    let n = scene.primitives.len();
+    let mut shade_as: Vec<usize> = (0..n).collect();
+    // The primitive-variable layout and uniform values of each primitive's first grid.
+    let mut layout: Vec<Option<&[GridVar]>> = vec![None; n];
+    for rg in &rs.grids {
+        if layout[rg.prim].is_none() {
+            layout[rg.prim] = Some(&rg.grid.primvars);
+        }
+    }
+    let names_object = |sref: &crate::scene::ShaderRef, kind: crate::sl::ast::ShaderKind| {
+        let object = |s: &str| s.eq_ignore_ascii_case("object");
+        if sref
+            .params
+            .0
+            .iter()
+            .any(|p| p.data.strings().iter().any(|s| object(s)))
+        {
+            return true;
+        }
+        match sys.library.get(&sref.name, sys.sources, sys.diags) {
+            Some(prog) if prog.kind == kind => prog
+                .consts
+                .iter()
+                .any(|(_, c)| matches!(c, Const::S(s) if object(s))),
+            _ => true,
+        }
+    };
+    let same_vars = |a: &[GridVar], b: &[GridVar]| {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(x, y)| {
+                x.name == y.name
+                    && x.ty == y.ty
+                    && x.array_len == y.array_len
+                    && x.uniform == y.uniform
+                    && (!x.uniform || (x.floats == y.floats && x.strings == y.strings))
+            })
+    };
+    // Candidates by a cheap key: (surface name, colour, opacity).
+    let mut classes: HashMap<(String, [u32; 6]), Vec<usize>> = HashMap::new();
+    for prim in 0..n {
+        let Some(vars) = layout[prim] else {
+            continue;
+        };
+        let a = &scene.primitives[prim].attributes;
+        let Some(surface) = &a.surface else {
+            continue;
+        };
+        if names_object(surface, crate::sl::ast::ShaderKind::Surface)
+            || a.atmosphere
+                .as_ref()
+                .is_some_and(|s| names_object(s, crate::sl::ast::ShaderKind::Volume))
+        {
+            continue;
+        }
+        let (c, o) = (a.color.to_array(), a.opacity.to_array());
+        let key = (
+            surface.name.clone(),
+            [c[0], c[1], c[2], o[0], o[1], o[2]].map(f32::to_bits),
+        );
+        let reps = classes.entry(key).or_default();
+        let found = reps.iter().copied().find(|&r| {
+            let b = &scene.primitives[r].attributes;
+            (std::sync::Arc::ptr_eq(a, b) || **a == **b)
+                && layout[r].is_some_and(|w| same_vars(vars, w))
+        });
+        match found {
+            Some(r) => shade_as[prim] = r,
+            // Bounded search: a scene of many distinct materials of one name does not go
+            // quadratic (a primitive past the bound just shades as itself).
+            None if reps.len() < 64 => reps.push(prim),
+            None => {}
+        }
+    }
+    shade_as
 }
 
 /// Interpolates the per-vertex data of a ray grid at a hit.
@@ -122,14 +210,15 @@ struct PendingHit {
     i: Vec3,
 }
 
-/// Builds the grid of hits on one primitive (all `hits` come from grids of that primitive).
+/// Builds the grid of hits on one primitive, or on primitives that shade as one (all `hits`
+/// come from grids with the same primitive-variable layout, see [`shading_classes`]).
 fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
     let n = hits.len();
     let mut g = Grid::with_size(n, 1);
     let first = &rs.grids[hits[0].grid as usize].grid;
     g.du = first.du;
     g.dv = first.dv;
-    // Primitive variables: the first grid's layout (every grid of a primitive has the same).
+    // Primitive variables: the first grid's layout (every grid of the group has the same).
     let mut pv: Vec<GridVar> = first
         .primvars
         .iter()
@@ -248,13 +337,18 @@ impl RayTracer for Tracer<'_, '_> {
             if pending.is_empty() {
                 break;
             }
-            // Group by primitive, keeping ray order inside each group.
-            pending.sort_by_key(|h| (rs.grids[h.grid as usize].prim, h.ray));
+            // Group by the primitive whose context shades them, keeping ray order inside each
+            // group.
+            let shade_as = |h: &PendingHit| {
+                let prim = rs.grids[h.grid as usize].prim;
+                rs.shade_as.get(prim).copied().unwrap_or(prim)
+            };
+            pending.sort_by_key(|h| (shade_as(h), h.ray));
             let mut s = 0;
             while s < pending.len() {
-                let prim = rs.grids[pending[s].grid as usize].prim;
+                let prim = shade_as(&pending[s]);
                 let mut e = s + 1;
-                while e < pending.len() && rs.grids[pending[e].grid as usize].prim == prim {
+                while e < pending.len() && shade_as(&pending[e]) == prim {
                     e += 1;
                 }
                 let group = &pending[s..e];
@@ -307,7 +401,13 @@ impl RayTracer for Tracer<'_, '_> {
                 let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
                 let os = mix3(&rg.grid.os, &kk, &w).clamp(Vec3::ZERO, Vec3::ONE);
                 t *= Vec3::ONE - os;
-                t.max_element() <= 0.0
+                // An opaque blocker (its interpolated opacity within rounding of 1) ends the
+                // walk: nothing can pass.
+                if t.max_element() < 1e-6 {
+                    t = Vec3::ZERO;
+                    return true;
+                }
+                false
             });
             out[k] = t;
         }

@@ -1739,7 +1739,9 @@ impl<'a> Lowerer<'a> {
             _ => None,
         };
         let a = self.expr(lhs, sub_hint);
-        let b = self.expr(rhs, sub_hint.or(Some(a.ty)));
+        // A float sibling asks for nothing a missing hint does not (ambiguous calls default
+        // to float), except of trace(), which RISpec only has as a colour.
+        let b = self.expr(rhs, sub_hint.or(Some(a.ty).filter(|t| *t != BaseType::Float)));
         if a.array.is_some() || b.array.is_some() {
             return self.error(
                 Diag::error(
@@ -2421,7 +2423,15 @@ impl<'a> Lowerer<'a> {
             (Some(h), Some(r)) if h.is_triple() && r.is_triple() => score += 1,
             (Some(BaseType::Float), Some(r)) if r.is_triple() => score += 4,
             (Some(h), Some(BaseType::Float)) if h.is_triple() => score += 3,
-            (None, Some(r)) if r.is_triple() && matches!(s.ret, 'c' | 'p' | 'v') => score += 4,
+            // RISpec's trace() is a colour (the float form, its luminance, is an extension):
+            // without a hint it stays a colour.
+            (None, Some(r))
+                if r.is_triple()
+                    && matches!(s.ret, 'c' | 'p' | 'v')
+                    && !matches!(s.f, Builtin::Trace) =>
+            {
+                score += 4
+            }
             _ => {}
         }
         if (s.ret == 't' || s.ret == 'q') && tvar.is_none() {
