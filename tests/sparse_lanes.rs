@@ -451,3 +451,72 @@ WorldEnd
         "thread count changed the picture"
     );
 }
+
+/// Which loops may run compacted: pointwise code only; a derivative, an illuminance, an
+/// array element, or a `break` that leaves the loop keeps the loop over the whole grid.
+#[test]
+fn compactable_loops_are_the_pointwise_ones() {
+    use arbor::sl::ir::Instr;
+    fn loops(code: &[Instr], out: &mut Vec<bool>) {
+        for i in code {
+            match i {
+                Instr::Loop {
+                    cond_code,
+                    body,
+                    step,
+                    compact,
+                    ..
+                } => {
+                    out.push(compact.is_some());
+                    loops(cond_code, out);
+                    loops(body, out);
+                    loops(step, out);
+                }
+                Instr::If {
+                    then, otherwise, ..
+                } => {
+                    loops(then, out);
+                    loops(otherwise, out);
+                }
+                Instr::Function { body }
+                | Instr::Illuminance { body, .. }
+                | Instr::Illuminate { body, .. }
+                | Instr::Solar { body, .. } => loops(body, out),
+                _ => {}
+            }
+        }
+    }
+    let marks = |body: &str| {
+        let prog = compile(&format!(
+            "surface m() {{ float a = 0, i = 0; float arr[3] = {{1, 2, 3}}; color c = 0; {body} Ci = c + a; }}"
+        ));
+        let mut out = Vec::new();
+        loops(&prog.body, &mut out);
+        out
+    };
+    assert_eq!(
+        marks("while (i < s * 9) { i += 1; a += exp(-i) * noise(P * i); }"),
+        [true]
+    );
+    assert_eq!(
+        marks("while (i < s * 9) { i += 1; if (a > 3) break; a += sin(i); }"),
+        [true]
+    );
+    assert_eq!(
+        marks("while (i < s * 9) { i += 1; a += Du(a * i); }"),
+        [false]
+    );
+    assert_eq!(
+        marks("while (i < s * 9) { i += 1; illuminance(P) { c += Cl; } }"),
+        [false]
+    );
+    assert_eq!(
+        marks("while (i < s * 9) { i += 1; a += arr[mod(i, 3)]; }"),
+        [false]
+    );
+    // Nested pointwise loops: both.
+    assert_eq!(
+        marks("while (i < 4) { i += 1; float j = 0; while (j < t * 9) { j += 1; a += j; } }"),
+        [true, true]
+    );
+}

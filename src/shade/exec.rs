@@ -28,6 +28,18 @@ pub struct Mask {
     pub bits: Vec<bool>,
     pub count: usize,
     idx: Vec<u32>,
+    /// The bits as select masks for stores, made on first use after a change.
+    sel: std::cell::RefCell<SelMasks>,
+}
+
+/// A mask's bits as `u32` select masks (all ones where a point runs): one per point (floats)
+/// and one per component (triples as flat floats), so masked stores are plain vector selects.
+#[derive(Clone, Debug, Default)]
+struct SelMasks {
+    f_ok: bool,
+    t_ok: bool,
+    f: Vec<u32>,
+    t: Vec<u32>,
 }
 
 /// A mask with at most one running point in this many runs its pointwise instructions over
@@ -41,6 +53,7 @@ impl Mask {
             bits: vec![true; n],
             count: n,
             idx: Vec::new(),
+            sel: Default::default(),
         }
     }
     pub fn none(n: usize) -> Mask {
@@ -48,6 +61,7 @@ impl Mask {
             bits: vec![false; n],
             count: 0,
             idx: Vec::new(),
+            sel: Default::default(),
         }
     }
     pub fn from_bits(bits: Vec<bool>) -> Mask {
@@ -55,6 +69,7 @@ impl Mask {
             bits,
             count: 0,
             idx: Vec::new(),
+            sel: Default::default(),
         };
         m.recount();
         m
@@ -73,6 +88,7 @@ impl Mask {
     }
     /// Counts the running points (and lists them when they are few).
     pub fn recount(&mut self) {
+        self.changed();
         self.count = self.bits.iter().filter(|&&b| b).count();
         self.idx.clear();
         if self.sparse() {
@@ -87,17 +103,58 @@ impl Mask {
     }
     /// No point runs any more.
     pub fn clear(&mut self) {
+        self.changed();
         self.bits.iter_mut().for_each(|b| *b = false);
         self.count = 0;
         self.idx.clear();
     }
     /// Becomes a copy of `other`, reusing this mask's buffers.
     pub fn copy_from(&mut self, other: &Mask) {
+        // The select masks stay valid when the bits do not change (a loop's body and step
+        // usually run over the same points).
+        if self.bits != other.bits {
+            self.changed();
+        }
         self.bits.clear();
         self.bits.extend_from_slice(&other.bits);
         self.count = other.count;
         self.idx.clear();
         self.idx.extend_from_slice(&other.idx);
+    }
+    /// The select masks no longer match the bits.
+    fn changed(&mut self) {
+        let s = self.sel.get_mut();
+        s.f_ok = false;
+        s.t_ok = false;
+    }
+    /// One select mask per point (all ones where the point runs).
+    fn sel_f(&self) -> std::cell::Ref<'_, [u32]> {
+        {
+            let mut s = self.sel.borrow_mut();
+            if !s.f_ok {
+                let SelMasks { f, f_ok, .. } = &mut *s;
+                f.clear();
+                f.extend(self.bits.iter().map(|&b| 0u32.wrapping_sub(b as u32)));
+                *f_ok = true;
+            }
+        }
+        std::cell::Ref::map(self.sel.borrow(), |s| &s.f[..])
+    }
+    /// One select mask per component of a triple (three per point).
+    fn sel_t(&self) -> std::cell::Ref<'_, [u32]> {
+        {
+            let mut s = self.sel.borrow_mut();
+            if !s.t_ok {
+                let SelMasks { t, t_ok, .. } = &mut *s;
+                t.clear();
+                t.extend(self.bits.iter().flat_map(|&b| {
+                    let k = 0u32.wrapping_sub(b as u32);
+                    [k, k, k]
+                }));
+                *t_ok = true;
+            }
+        }
+        std::cell::Ref::map(self.sel.borrow(), |s| &s.t[..])
     }
     fn sparse(&self) -> bool {
         self.count * SPARSE_DIVISOR <= self.bits.len()
@@ -298,6 +355,7 @@ pub struct Exec<'a> {
     /// Spare mask buffers, so control flow allocates nothing per instruction.
     bits_pool: Vec<Vec<bool>>,
     idx_pool: Vec<Vec<u32>>,
+    sel_pool: Vec<SelMasks>,
     /// Where `env.lights` were evaluated (the grid's P), and how to evaluate them elsewhere:
     /// `illuminance(pos)` at other positions (a volume shader marching a ray) runs the lights
     /// again, once over the whole grid. None: `env.lights` serve every position.
@@ -473,6 +531,7 @@ impl<'a> Exec<'a> {
             loop_limit: DEFAULT_LOOP_LIMIT,
             bits_pool: Vec::new(),
             idx_pool: Vec::new(),
+            sel_pool: Vec::new(),
             lights_at: None,
             relight: None,
             relit: None,
@@ -488,10 +547,14 @@ impl<'a> Exec<'a> {
         let mut idx = self.idx_pool.pop().unwrap_or_default();
         idx.clear();
         idx.extend_from_slice(&m.idx);
+        let mut sel = self.sel_pool.pop().unwrap_or_default();
+        sel.f_ok = false;
+        sel.t_ok = false;
         Mask {
             bits,
             count: m.count,
             idx,
+            sel: std::cell::RefCell::new(sel),
         }
     }
 
@@ -510,6 +573,7 @@ impl<'a> Exec<'a> {
     fn release_mask(&mut self, m: Mask) {
         self.bits_pool.push(m.bits);
         self.idx_pool.push(m.idx);
+        self.sel_pool.push(m.sel.into_inner());
     }
 
     fn push_frame(&mut self, kind: FrameKind) {
@@ -1507,31 +1571,30 @@ fn store_f(v: &mut [f32], a: F, mask: &Mask) {
                 v[i as usize] = x[i as usize];
             }
         }
-        (Lanes::All, a) => select_f(v, a, &mask.bits[..n]),
+        (Lanes::All, a) => select_f(v, a, &mask.sel_f()[..n]),
     }
 }
 
 crate::shade::value::kernel! {
-/// `v[i] = a[i]` where `bits[i]`, branch-free.
-fn select_f<>(v: &mut [f32], a: F, bits: &[bool]) {
-    let sel = |o: f32, x: f32, m: bool| {
-        let k = 0u32.wrapping_sub(m as u32);
-        f32::from_bits((o.to_bits() & !k) | (x.to_bits() & k))
-    };
-    match a {
-        Op::U(x) => {
-            for (o, &m) in v.iter_mut().zip(bits) {
-                *o = sel(*o, x, m);
+    /// `v[i] = a[i]` where `k[i]` is all ones (a vector select).
+    fn select_f<>(v: &mut [f32], a: F, k: &[u32]) {
+        let n = v.len();
+        let k = &k[..n];
+        match a {
+            Op::U(x) => {
+                let x = x.to_bits();
+                for (o, &k) in v.iter_mut().zip(k) {
+                    *o = f32::from_bits((o.to_bits() & !k) | (x & k));
+                }
             }
-        }
-        Op::V(x) => {
-            let x = &x[..v.len()];
-            for ((o, &m), &x) in v.iter_mut().zip(bits).zip(x) {
-                *o = sel(*o, x, m);
+            Op::V(x) => {
+                let x = &x[..n];
+                for i in 0..n {
+                    v[i] = f32::from_bits((v[i].to_bits() & !k[i]) | (x[i].to_bits() & k[i]));
+                }
             }
         }
     }
-}
 }
 
 /// [`store_f`] for triples.
@@ -1556,54 +1619,45 @@ fn store_t(v: &mut [Vec3], a: T, mask: &Mask) {
                 v[i as usize] = x[i as usize];
             }
         }
-        (Lanes::All, a) => select_t(v, a, &mask.bits[..n]),
+        (Lanes::All, a) => select_t(v, a, &mask.sel_t()[..3 * n]),
     }
 }
 
 crate::shade::value::kernel! {
-/// `v[i] = a[i]` where `bits[i]`, branch-free, on the flat components four points (twelve
-/// floats) at a time so the selects vectorise.
-fn select_t<>(v: &mut [Vec3], a: T, bits: &[bool]) {
-    let n = v.len();
-    let o = flat_mut(v);
-    let ones = |m: bool| 0u32.wrapping_sub(m as u32);
-    let (xu, xv) = match a {
-        Op::U(x) => (
-            [x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z],
-            None,
-        ),
-        Op::V(x) => ([0.0; 12], Some(flat(&x[..n]))),
-    };
-    let mut k = [0u32; 12];
-    let chunks = n / 4;
-    for c in 0..chunks {
-        for p in 0..4 {
-            let m = ones(bits[c * 4 + p]);
-            k[p * 3] = m;
-            k[p * 3 + 1] = m;
-            k[p * 3 + 2] = m;
-        }
-        let oo = &mut o[c * 12..c * 12 + 12];
-        let xx: &[f32; 12] = match xv {
-            Some(x) => x[c * 12..c * 12 + 12].try_into().unwrap_or(&xu),
-            None => &xu,
-        };
-        for j in 0..12 {
-            oo[j] = f32::from_bits((oo[j].to_bits() & !k[j]) | (xx[j].to_bits() & k[j]));
-        }
-    }
-    for i in chunks * 4..n {
-        if bits[i] {
-            let x = match xv {
-                Some(x) => Vec3::new(x[i * 3], x[i * 3 + 1], x[i * 3 + 2]),
-                None => Vec3::new(xu[0], xu[1], xu[2]),
-            };
-            o[i * 3] = x.x;
-            o[i * 3 + 1] = x.y;
-            o[i * 3 + 2] = x.z;
+    /// `v[i] = a[i]` where `k` (one mask per component) is all ones: a vector select on
+    /// the flat components.
+    fn select_t<>(v: &mut [Vec3], a: T, k: &[u32]) {
+        let o = flat_mut(v);
+        let m = o.len();
+        let k = &k[..m];
+        let sel = |o: f32, x: f32, k: u32| f32::from_bits((o.to_bits() & !k) | (x.to_bits() & k));
+        match a {
+            Op::V(x) => {
+                let x = &flat(x)[..m];
+                for j in 0..m {
+                    o[j] = sel(o[j], x[j], k[j]);
+                }
+            }
+            Op::U(x) => {
+                let p = [x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z, x.x, x.y, x.z];
+                let mut oc = o.chunks_exact_mut(12);
+                let mut kc = k.chunks_exact(12);
+                for (oo, kk) in (&mut oc).zip(&mut kc) {
+                    for j in 0..12 {
+                        oo[j] = sel(oo[j], p[j], kk[j]);
+                    }
+                }
+                for (j, (oo, &kk)) in oc
+                    .into_remainder()
+                    .iter_mut()
+                    .zip(kc.remainder())
+                    .enumerate()
+                {
+                    *oo = sel(*oo, p[j], kk);
+                }
+            }
         }
     }
-}
 }
 
 /// Whether two register values are the same bit for bit (NaN equals NaN).

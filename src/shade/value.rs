@@ -361,17 +361,30 @@ kernel! {
             Lanes::Some(idx) => {
                 for &i in idx {
                     let i = i as usize;
-                    o[i] = g(i);
+                    // Bounds-checked before g runs (g may read its operands unchecked).
+                    let slot = &mut o[i];
+                    *slot = g(i);
                 }
             }
         }
     }
 }
 
-/// A varying operand cut to the grid size (so the loops index without bounds checks).
+/// A varying operand cut to the grid size.
 #[inline(always)]
 fn cut<X>(v: &[X], n: usize) -> &[X] {
     &v[..n]
+}
+
+/// `x[i]` without a bounds check, for the closures [`run`] calls: `run` calls them only with
+/// `i < o.len()` (its loop bound, or after indexing `o[i]`), and the callers below check
+/// that `o` and every operand hold `n` values first. (With the check, the loops over a
+/// closure's captured slice did not vectorise.)
+#[inline(always)]
+fn at<X: Copy>(x: &[X], i: usize) -> X {
+    debug_assert!(i < x.len());
+    // SAFETY: see above: i < o.len() == n == x.len().
+    unsafe { *x.get_unchecked(i) }
 }
 
 /// Per-point function of one operand, specialised on its detail: uniform in, uniform out;
@@ -382,8 +395,9 @@ pub fn k1<A: Copy, R: Elem>(out: &mut Slot, n: usize, lanes: Lanes, a: Op<A>, f:
         Op::U(x) => *out = R::uniform(f(x)),
         Op::V(x) => {
             let mut v = R::out_buf(out, n, lanes);
+            assert_eq!(v.len(), n);
             let x = cut(x, n);
-            run(&mut v, lanes, |i| f(x[i]));
+            run(&mut v, lanes, |i| f(at(x, i)));
             *out = R::varying(v);
         }
     }
@@ -404,18 +418,19 @@ pub fn k2<A: Copy, B: Copy, R: Elem>(
         return;
     }
     let mut v = R::out_buf(out, n, lanes);
+    assert_eq!(v.len(), n);
     match (a, b) {
         (Op::V(x), Op::U(y)) => {
             let x = cut(x, n);
-            run(&mut v, lanes, |i| f(x[i], y))
+            run(&mut v, lanes, |i| f(at(x, i), y))
         }
         (Op::U(x), Op::V(y)) => {
             let y = cut(y, n);
-            run(&mut v, lanes, |i| f(x, y[i]))
+            run(&mut v, lanes, |i| f(x, at(y, i)))
         }
         (Op::V(x), Op::V(y)) => {
             let (x, y) = (cut(x, n), cut(y, n));
-            run(&mut v, lanes, |i| f(x[i], y[i]))
+            run(&mut v, lanes, |i| f(at(x, i), at(y, i)))
         }
         (Op::U(_), Op::U(_)) => {}
     }
@@ -439,34 +454,35 @@ pub fn k3<A: Copy, B: Copy, C: Copy, R: Elem>(
         return;
     }
     let mut v = R::out_buf(out, n, lanes);
+    assert_eq!(v.len(), n);
     match (a, b, c) {
         (V(x), U(y), U(z)) => {
             let x = cut(x, n);
-            run(&mut v, lanes, |i| f(x[i], y, z))
+            run(&mut v, lanes, |i| f(at(x, i), y, z))
         }
         (U(x), V(y), U(z)) => {
             let y = cut(y, n);
-            run(&mut v, lanes, |i| f(x, y[i], z))
+            run(&mut v, lanes, |i| f(x, at(y, i), z))
         }
         (U(x), U(y), V(z)) => {
             let z = cut(z, n);
-            run(&mut v, lanes, |i| f(x, y, z[i]))
+            run(&mut v, lanes, |i| f(x, y, at(z, i)))
         }
         (V(x), V(y), U(z)) => {
             let (x, y) = (cut(x, n), cut(y, n));
-            run(&mut v, lanes, |i| f(x[i], y[i], z))
+            run(&mut v, lanes, |i| f(at(x, i), at(y, i), z))
         }
         (V(x), U(y), V(z)) => {
             let (x, z) = (cut(x, n), cut(z, n));
-            run(&mut v, lanes, |i| f(x[i], y, z[i]))
+            run(&mut v, lanes, |i| f(at(x, i), y, at(z, i)))
         }
         (U(x), V(y), V(z)) => {
             let (y, z) = (cut(y, n), cut(z, n));
-            run(&mut v, lanes, |i| f(x, y[i], z[i]))
+            run(&mut v, lanes, |i| f(x, at(y, i), at(z, i)))
         }
         (V(x), V(y), V(z)) => {
             let (x, y, z) = (cut(x, n), cut(y, n), cut(z, n));
-            run(&mut v, lanes, |i| f(x[i], y[i], z[i]))
+            run(&mut v, lanes, |i| f(at(x, i), at(y, i), at(z, i)))
         }
         (U(_), U(_), U(_)) => {}
     }
