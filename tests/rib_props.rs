@@ -22,7 +22,11 @@ fn value() -> impl Strategy<Value = Value> {
 
 fn request() -> impl Strategy<Value = Request> {
     (
-        "[A-Za-z_][A-Za-z0-9_]{0,12}",
+        // `nan`, `inf` and `infinity` (any case) are numbers in RIB (C's printf of values that
+        // are not finite), not request names.
+        "[A-Za-z_][A-Za-z0-9_]{0,12}".prop_filter("a number word", |n| {
+            !matches!(n.to_ascii_lowercase().as_str(), "nan" | "inf" | "infinity")
+        }),
         proptest::collection::vec(value(), 0..6),
     )
         .prop_map(|(name, vals)| Request {

@@ -390,7 +390,7 @@ pub struct LoopCode<'a> {
     body: &'a [Instr],
     step: &'a [Instr],
     span: Span,
-    compact: Option<&'a [Reg]>,
+    compact: Option<&'a [(Reg, CompactUse)]>,
 }
 
 /// A compactable loop with at most `COMPACT_NUM / COMPACT_DEN` of its points running continues
@@ -938,9 +938,15 @@ impl<'a> Exec<'a> {
     /// value a point left behind is read, so the results are those of running over the
     /// whole grid. `random()` still sees each point's grid index ([`Exec::point_id`]).
     /// Returns false (nothing done) when a register the loop names has an unexpected size.
-    fn run_compacted(&mut self, code: LoopCode<'a>, regs: &[Reg], live: &Mask, done: u64) -> bool {
+    fn run_compacted(
+        &mut self,
+        code: LoopCode<'a>,
+        regs: &[(Reg, CompactUse)],
+        live: &Mask,
+        done: u64,
+    ) -> bool {
         let n = self.n;
-        let fits = regs.iter().all(|&r| match &self.regs[r as usize] {
+        let fits = regs.iter().all(|&(r, _)| match &self.regs[r as usize] {
             Slot::VF(v) => v.len() == n,
             Slot::VT(v) => v.len() == n,
             Slot::VM(v) => v.len() == n,
@@ -961,27 +967,29 @@ impl<'a> Exec<'a> {
         let m = idx.len();
         self.compactions += 1;
         // The loop's registers cut to the points; the whole-grid values set aside (uniform
-        // values are shared: they serve any grid size).
+        // values are shared: they serve any grid size). Temporaries start empty: the loop
+        // computes them before reading them.
         let mut saved: Vec<Slot> = Vec::with_capacity(regs.len());
-        for &r in regs {
+        for &(r, u) in regs {
             let slot = &mut self.regs[r as usize];
-            let cut = match slot {
-                Slot::VF(v) => {
+            let cut = match (u, &*slot) {
+                (CompactUse::Temp, _) => Slot::F(0.0),
+                (_, Slot::VF(v)) => {
                     let mut c = crate::shade::value::grid_vf(m);
                     for (o, &i) in c.iter_mut().zip(&idx) {
                         *o = v[i as usize];
                     }
                     Slot::VF(c)
                 }
-                Slot::VT(v) => {
+                (_, Slot::VT(v)) => {
                     let mut c = crate::shade::value::grid_vt(m);
                     for (o, &i) in c.iter_mut().zip(&idx) {
                         *o = v[i as usize];
                     }
                     Slot::VT(c)
                 }
-                Slot::VM(v) => Slot::VM(idx.iter().map(|&i| v[i as usize]).collect()),
-                other => {
+                (_, Slot::VM(v)) => Slot::VM(idx.iter().map(|&i| v[i as usize]).collect()),
+                (_, other) => {
                     saved.push(other.clone());
                     continue;
                 }
@@ -999,11 +1007,17 @@ impl<'a> Exec<'a> {
         self.run_loop(code, &mut all, done);
         self.n = n;
         self.point_ids = outer_ids;
-        // Put back what the loop wrote. A register that held one value for the whole grid
+        // Put back what the loop stored. A register that held one value for the whole grid
         // before and varies now is spread over the grid first (the points that were not in
-        // the loop keep that value).
-        for (&r, old) in regs.iter().zip(saved) {
+        // the loop keep that value). Registers only read, and temporaries, get their
+        // whole-grid values back.
+        for (&(r, u), old) in regs.iter().zip(saved) {
             let new = std::mem::take(&mut self.regs[r as usize]);
+            if u != CompactUse::Stored {
+                crate::shade::value::recycle([new]);
+                self.regs[r as usize] = old;
+                continue;
+            }
             self.regs[r as usize] = match new {
                 Slot::VF(c) => {
                     let mut v = match old {

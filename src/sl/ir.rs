@@ -220,15 +220,16 @@ pub enum Instr {
         otherwise: Vec<Instr>,
     },
     /// `cond_code` computes `cond`; body; step. `span` is the loop statement (named by the
-    /// runaway-loop guard). `compact`: the registers the loop names, when it may run on its
-    /// running points gathered into a smaller grid (see [`Program::mark_compact_loops`]).
+    /// runaway-loop guard). `compact`: the registers the loop names and how it uses them,
+    /// when it may run on its running points gathered into a smaller grid (see
+    /// [`Program::mark_compact_loops`]).
     Loop {
         cond_code: Vec<Instr>,
         cond: Reg,
         body: Vec<Instr>,
         step: Vec<Instr>,
         span: Span,
-        compact: Option<Vec<Reg>>,
+        compact: Option<Vec<(Reg, CompactUse)>>,
     },
     Break(u32),
     Continue(u32),
@@ -608,9 +609,22 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
     }
 }
 
-/// The registers loop `ins` names (sorted, once each) when it may run compacted (see
-/// [`Program::mark_compact_loops`]).
-fn compact_loop_regs(ins: &Instr, full: &[bool]) -> Option<Vec<Reg>> {
+/// How a compacted loop uses a register it names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CompactUse {
+    /// Only read: gathered at the loop's points; the whole-grid value is put back after.
+    Read,
+    /// Stored to (a variable): gathered, and scattered back after the loop.
+    Stored,
+    /// A temporary a pointwise instruction in the loop computes: every read of it in the
+    /// loop follows its computation in the same iteration, and nothing after the loop reads
+    /// it (it is not full-width), so it is neither gathered nor scattered.
+    Temp,
+}
+
+/// The registers loop `ins` names (sorted, once each) and how, when it may run compacted
+/// (see [`Program::mark_compact_loops`]).
+fn compact_loop_regs(ins: &Instr, full: &[bool]) -> Option<Vec<(Reg, CompactUse)>> {
     let Instr::Loop {
         cond_code,
         cond,
@@ -667,7 +681,40 @@ fn compact_loop_regs(ins: &Instr, full: &[bool]) -> Option<Vec<Reg>> {
     }
     regs.sort_unstable();
     regs.dedup();
-    Some(regs)
+    // Which of them the loop stores to, and which it computes as temporaries.
+    fn writes(code: &[Instr], stored: &mut Vec<Reg>, temps: &mut Vec<Reg>) {
+        for ins in code {
+            match ins {
+                Instr::Mov { dst, .. } => stored.push(*dst),
+                other => {
+                    if let Some(d) = other.pointwise_dst() {
+                        temps.push(d);
+                    }
+                }
+            }
+            for b in nested(ins) {
+                writes(b, stored, temps);
+            }
+        }
+    }
+    let (mut stored, mut temps) = (Vec::new(), Vec::new());
+    for b in [cond_code, body, step] {
+        writes(b, &mut stored, &mut temps);
+    }
+    Some(
+        regs.into_iter()
+            .map(|r| {
+                let u = if stored.contains(&r) {
+                    CompactUse::Stored
+                } else if temps.contains(&r) {
+                    CompactUse::Temp
+                } else {
+                    CompactUse::Read
+                };
+                (r, u)
+            })
+            .collect(),
+    )
 }
 
 fn nested(ins: &Instr) -> Vec<&[Instr]> {
