@@ -1563,9 +1563,14 @@ impl<'a> Exec<'a> {
 }
 
 /// `v = a` at the running points of `mask`: a copy when every point runs, the listed points
-/// when few do, otherwise a select over every point (as bit masks, which vectorise).
+/// when few do, otherwise `select` over every point (as bit masks, which vectorise).
 #[inline]
-fn store_f(v: &mut [f32], a: F, mask: &Mask) {
+fn store<X: Copy>(
+    v: &mut [X],
+    a: Op<X>,
+    mask: &Mask,
+    select: impl FnOnce(&mut [X], Op<X>, &Mask),
+) {
     let n = v.len();
     if mask.is_all() {
         match a {
@@ -1585,8 +1590,17 @@ fn store_f(v: &mut [f32], a: F, mask: &Mask) {
                 v[i as usize] = x[i as usize];
             }
         }
-        (Lanes::All, a) => select_f(v, a, &mask.sel_f()[..n]),
+        (Lanes::All, a) => select(v, a, mask),
     }
+}
+
+/// [`store`] for floats.
+#[inline]
+fn store_f(v: &mut [f32], a: F, mask: &Mask) {
+    store(v, a, mask, |v, a, m| {
+        let n = v.len();
+        select_f(v, a, &m.sel_f()[..n])
+    })
 }
 
 crate::shade::value::kernel! {
@@ -1611,30 +1625,13 @@ crate::shade::value::kernel! {
     }
 }
 
-/// [`store_f`] for triples.
+/// [`store`] for triples.
 #[inline]
 fn store_t(v: &mut [Vec3], a: T, mask: &Mask) {
-    let n = v.len();
-    if mask.is_all() {
-        match a {
-            Op::U(x) => v.fill(x),
-            Op::V(x) => v.copy_from_slice(&x[..n]),
-        }
-        return;
-    }
-    match (mask.lanes(), a) {
-        (Lanes::Some(idx), Op::U(x)) => {
-            for &i in idx {
-                v[i as usize] = x;
-            }
-        }
-        (Lanes::Some(idx), Op::V(x)) => {
-            for &i in idx {
-                v[i as usize] = x[i as usize];
-            }
-        }
-        (Lanes::All, a) => select_t(v, a, &mask.sel_t()[..3 * n]),
-    }
+    store(v, a, mask, |v, a, m| {
+        let n = v.len();
+        select_t(v, a, &m.sel_t()[..3 * n])
+    })
 }
 
 crate::shade::value::kernel! {
