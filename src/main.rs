@@ -338,8 +338,8 @@ fn job_cmd(
         eprintln!("error: --tiles must be at least 1");
         return ExitCode::from(2);
     }
-    s.allow_programs = a.allow_programs
-        || std::env::var_os("ARBOR_ALLOW_PROGRAMS").is_some_and(|v| v == "1");
+    s.allow_programs =
+        a.allow_programs || std::env::var_os("ARBOR_ALLOW_PROGRAMS").is_some_and(|v| v == "1");
     s.program_timeout = a.program_timeout;
     if s.allow_programs {
         arbor::scene::ri_api::keep_exports();

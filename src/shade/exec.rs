@@ -1565,12 +1565,7 @@ impl<'a> Exec<'a> {
 /// `v = a` at the running points of `mask`: a copy when every point runs, the listed points
 /// when few do, otherwise `select` over every point (as bit masks, which vectorise).
 #[inline]
-fn store<X: Copy>(
-    v: &mut [X],
-    a: Op<X>,
-    mask: &Mask,
-    select: impl FnOnce(&mut [X], Op<X>, &Mask),
-) {
+fn store<X: Copy>(v: &mut [X], a: Op<X>, mask: &Mask, select: impl FnOnce(&mut [X], Op<X>, &Mask)) {
     let n = v.len();
     if mask.is_all() {
         match a {

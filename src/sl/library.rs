@@ -396,7 +396,8 @@ impl ShaderLibrary {
                 continue;
             }
             let quiet = Diagnostics::new();
-            let Some(Some(p)) = self.compile_candidate(c, &base, name, &self.opts, sources, &quiet) else {
+            let Some(Some(p)) = self.compile_candidate(c, &base, name, &self.opts, sources, &quiet)
+            else {
                 continue;
             };
             if p.kind != first.kind || quiet.has_errors() {

@@ -1741,7 +1741,10 @@ impl<'a> Lowerer<'a> {
         let a = self.expr(lhs, sub_hint);
         // A float sibling asks for nothing a missing hint does not (ambiguous calls default
         // to float), except of trace(), which RISpec only has as a colour.
-        let b = self.expr(rhs, sub_hint.or(Some(a.ty).filter(|t| *t != BaseType::Float)));
+        let b = self.expr(
+            rhs,
+            sub_hint.or(Some(a.ty).filter(|t| *t != BaseType::Float)),
+        );
         if a.array.is_some() || b.array.is_some() {
             return self.error(
                 Diag::error(
