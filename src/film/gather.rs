@@ -265,8 +265,9 @@ pub fn prepare(buf: &SampleBuffer, ctx: &PrepareCtx) -> Prepared {
     p
 }
 
-/// A pixel's depth from its own samples' depths.
-fn own_depth(zs: impl Iterator<Item = f32>, df: DepthFilter) -> f32 {
+/// A pixel's depth from its own samples' depths (the scatter in [`super::resolve`] uses it
+/// too).
+pub(super) fn own_depth(zs: impl Iterator<Item = f32>, df: DepthFilter) -> f32 {
     match df {
         DepthFilter::Min => zs.fold(f32::INFINITY, f32::min),
         DepthFilter::Max => zs.fold(f32::NEG_INFINITY, f32::max),

@@ -606,23 +606,7 @@ fn own_depth(buf: &SampleBuffer, rx: usize, ry: usize, zc: usize, df: DepthFilte
     let Some(r) = own_samples(buf, rx, ry) else {
         return f32::INFINITY;
     };
-    let zs = r.map(|s| buf.values[s * buf.channels + zc]);
-    match df {
-        DepthFilter::Min => zs.fold(f32::INFINITY, f32::min),
-        DepthFilter::Max => zs.fold(f32::NEG_INFINITY, f32::max),
-        DepthFilter::Average => {
-            let (mut sum, mut n) = (0.0f64, 0usize);
-            for z in zs.filter(|z| z.is_finite()) {
-                sum += z as f64;
-                n += 1;
-            }
-            if n == 0 {
-                f32::INFINITY
-            } else {
-                (sum / n as f64) as f32
-            }
-        }
-    }
+    super::gather::own_depth(r.map(|s| buf.values[s * buf.channels + zc]), df)
 }
 
 #[cfg(test)]
