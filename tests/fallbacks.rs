@@ -1,6 +1,7 @@
 //! What arbor renders when a scene names something it cannot have, as the published scenes
 //! need: a missing texture map reads as white (Aqsis and Pixie do the same), and a missing
-//! surface shader is stood in for by `matte` (or `plastic`), so the scene keeps its lights.
+//! surface shader is stood in for by `matte` (or `plastic`, `metal`) when its name or its
+//! parameters say it is one, so the scene keeps its lights, and by `defaultsurface` otherwise.
 
 mod common;
 
@@ -105,6 +106,28 @@ fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
     assert!(centre > 200, "centre {centre}");
     assert_eq!(px[0], 0);
     assert_eq!(px[w * w - 1], 0);
+}
+
+/// A missing shader that nothing marks as a lit material (no diffuse or specular parameters,
+/// a name like `saturn3`) is a custom look: `defaultsurface` stands in (as in Aqsis and
+/// Pixie), so the object shows its colour seen face-on, not lit by a light the real shader may
+/// not have used.
+#[test]
+fn a_missing_custom_shader_shows_its_colour_face_on() {
+    let dir = common::scratch_dir("fallbacks_custom");
+    let out = dir.join("out.png").display().to_string();
+    // A strong light from the left would light matte's left half only.
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         LightSource \"distantlight\" 1 \"intensity\" 4 \"from\" [-1 0 0] \"to\" [0 0 0]\n\
+         Color [0.5 0.5 0.5]\nSurface \"saturn3\"\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let (log, px, w) = render(&dir, &rib, None);
+    assert!(log.contains("`defaultsurface` stands in"), "{log}");
+    // The plane faces the eye: Cs·(Ka + Kd·facing ratio) ≈ 0.5 across, whatever the light.
+    let centre = px[(w / 2) * w + w / 2];
+    assert!((118..=130).contains(&centre), "centre {centre}");
 }
 
 /// A sphere around the camera with a missing shader is a sky dome (star fields, skies emit

@@ -197,28 +197,34 @@ impl<'a> ShadeSystem<'a> {
         Some(p)
     }
 
-    /// A surface shader that could not be had (not found, or broken) is stood in for by the
-    /// standard `plastic` when its instance gives plastic's specular parameters, else `matte`,
-    /// with the parameters the two share (`Ka`, `Kd`, …): the scene keeps its lighting design
-    /// (a missing `RCMatte` under a spotlight still shows the spot) where `defaultsurface`
-    /// would light everything from the eye. A sphere around the camera is a sky dome, whose
-    /// shaders (star fields, skies) emit rather than reflect: `defaultsurface` (its colour,
-    /// seen face-on) stands in for those, as Aqsis and Pixie render every missing shader.
+    /// A surface shader that could not be had (not found, or broken) is stood in for by a
+    /// standard shader with the parameters the two share (`Ka`, `Kd`, …), chosen by what the
+    /// scene says of it: `plastic` when its instance gives plastic's specular parameters or its
+    /// name says plastic, `metal` when its name says metal, `matte` when its name says matte or
+    /// its instance gives diffuse weights (`Ka`, `Kd`). Those keep the scene's lighting design
+    /// (a missing `RCMatte` under a spotlight still shows the spot). Any other shader — a
+    /// custom look nothing hints at (`saturn3`, a star field) — and any sphere around the camera
+    /// (a sky dome, whose shaders emit rather than reflect) get `defaultsurface`, its colour
+    /// seen face-on, as Aqsis and Pixie render every missing shader: a stand-in lit from a
+    /// light the real shader may ignore looked further from the published pictures.
     fn stand_in_surface(
         &self,
         s: &Arc<ShaderRef>,
         prim: &Primitive,
         camera: &Camera,
     ) -> Option<(Arc<Program>, Arc<ShaderRef>)> {
-        let specular = ["Ks", "roughness", "specularcolor"]
-            .iter()
-            .any(|n| s.params.get(n).is_some());
+        let given = |names: &[&str]| names.iter().any(|n| s.params.get(n).is_some());
+        let lower = s.name.to_ascii_lowercase();
         let name = if encloses_eye(prim, camera) {
             "defaultsurface"
-        } else if specular {
+        } else if given(&["Ks", "roughness", "specularcolor"]) || lower.contains("plastic") {
             "plastic"
-        } else {
+        } else if lower.contains("metal") {
+            "metal"
+        } else if lower.contains("matte") || given(&["Ka", "Kd"]) {
             "matte"
+        } else {
+            "defaultsurface"
         };
         let prog = self.library.get(name, self.sources, self.diags)?;
         self.diags.report(
