@@ -347,6 +347,26 @@ fn prman_light_extensions_are_accepted_with_warnings() {
 }
 
 #[test]
+fn ps_in_a_surface_shader_reads_p_with_a_warning() {
+    // The RenderMan Companion's windowhighlight: `corner - Ps` for the point being shaded.
+    let (progs, diags) =
+        compile_text("surface t() { vector d = Ps - P; Ci = color(1 + length(d)); }");
+    assert_eq!(progs.len(), 1, "{diags:?}");
+    assert!(diags.iter().all(|d| !d.1), "{diags:?}");
+    assert_eq!(
+        diags
+            .iter()
+            .filter(|d| d.0 == "sl::extension" && d.2.contains("`Ps`"))
+            .count(),
+        1,
+        "{diags:?}"
+    );
+    let (bad, ci) = run(&progs[0]);
+    assert!(bad.is_empty(), "{bad:?}");
+    assert!(ci.iter().all(|c| *c == Vec3::ONE), "{ci:?}");
+}
+
+#[test]
 fn imager_surface_parameters_read_zero_with_a_warning() {
     // Aqsis' filmgrain imager reads s and t.
     let (progs, diags) =

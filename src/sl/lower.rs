@@ -1488,6 +1488,19 @@ impl<'a> Lowerer<'a> {
                 );
                 self.ident("N", span)
             }
+            None if name == "Ps"
+                && matches!(self.kind, ShaderKind::Surface | ShaderKind::Displacement) =>
+            {
+                // `Ps` is the light shader's name for the point being lit; published surface
+                // shaders (the RenderMan Companion's `windowhighlight`) use it for that point,
+                // which in a surface shader is `P`.
+                self.warn_extension(
+                    "Ps",
+                    span,
+                    "`Ps` is a light-shader variable (the point being lit); in a surface shader arbor reads `P`",
+                );
+                self.ident("P", span)
+            }
             None if self.kind == ShaderKind::Imager
                 && matches!(name, "s" | "t" | "u" | "v" | "du" | "dv") =>
             {
