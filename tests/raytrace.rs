@@ -54,6 +54,44 @@ WorldEnd
     }
 }
 
+/// RISpec §4.2.6: a traced ray's hit is filtered by the volume the ray crossed — the hit
+/// object's `Exterior` when the ray arrives from outside, its `Interior` when it leaves the
+/// object there. A window (`Ci = trace(P, I)`) looks at a white sphere: from outside (a small
+/// sphere behind the window) the exterior halves the white; from inside (a large sphere around
+/// the window) the interior quarters it.
+#[test]
+fn interior_and_exterior_filter_traced_rays_by_the_side_they_cross() {
+    for (sphere, want) in [
+        ("Translate 0 0 10 Sphere 3 -3 3 360", 0.5f32),
+        ("Sphere 20 -20 20 360", 0.25),
+    ] {
+        let rib = format!(
+            r#"Format 8 8 1
+Projection "orthographic"
+ScreenWindow -1 1 -1 1
+WorldBegin
+AttributeBegin
+  Surface "passthrough"
+  {window}
+AttributeEnd
+AttributeBegin
+  Color [1 1 1]
+  Surface "constant"
+  Exterior "halve"
+  Interior "quarter"
+  {sphere}
+AttributeEnd
+WorldEnd
+"#,
+            window = square(2.0, 5.0)
+        );
+        let film = render_rib(&rib, &[shaders()]);
+        for c in film_rgb(&film) {
+            assert!((c - want).abs() < 1e-5, "{sphere}: {c} against {want}");
+        }
+    }
+}
+
 #[test]
 fn trace_inside_arithmetic_is_a_colour() {
     // `Kr * trace(P, R)`: the float sibling does not make trace() the grey float form (the

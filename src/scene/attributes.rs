@@ -104,29 +104,15 @@ impl Builder<'_> {
         let s = self.shader_slot(call);
         self.attrs().atmosphere = s;
     }
+    /// Interior/Exterior volume shaders run on traced rays (see `shade::system::Medium`): a
+    /// ray's hit is filtered by the volume it crossed, the hit object's inside or outside.
     pub(super) fn interior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().interior = s;
-        self.warn_volume_not_run(call);
     }
     pub(super) fn exterior(&mut self, call: &Call<'_>) {
         let s = self.shader_slot(call);
         self.attrs().exterior = s;
-        self.warn_volume_not_run(call);
-    }
-
-    /// Interior/Exterior are stored (attribute() can see them) but never run: arbor traces no
-    /// rays through volumes.
-    fn warn_volume_not_run(&mut self, call: &Call<'_>) {
-        let d = Diag::warning(
-            "scene::unimplemented",
-            format!(
-                "`{}` volume shaders are recorded but not run (no ray tracing)",
-                call.name()
-            ),
-        )
-        .label(call.span(), "not run");
-        self.report(d);
     }
 
     fn add_light(&mut self, call: &Call<'_>, area: bool) {

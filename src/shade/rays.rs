@@ -14,7 +14,7 @@ use glam::Vec3;
 use crate::render::Camera;
 use crate::scene::{ParamData, Scene};
 use crate::shade::exec::RayTracer;
-use crate::shade::system::ShadeSystem;
+use crate::shade::system::{Medium, ShadeSystem};
 use crate::shade::{Grid, GridVar};
 
 use crate::ray::{RayGrid, RayScene};
@@ -208,6 +208,36 @@ struct PendingHit {
     p: Vec3,
     /// Incident vector (hit − origin).
     i: Vec3,
+    /// The space the ray crossed (picks the hit's volume shader).
+    medium: Medium,
+}
+
+/// The space a ray crossed to reach its hit: the inside of the hit object when the ray leaves
+/// it there (it runs along the outward geometric normal), else the outside. Only objects with
+/// an `Interior` or `Exterior` shader tell the two apart (the others keep one grid of hits).
+fn medium_of(
+    rs: &RayScene,
+    scene: &Scene,
+    grid: u32,
+    index: u32,
+    a: f32,
+    b: f32,
+    d: Vec3,
+) -> Medium {
+    let rg = &rs.grids[grid as usize];
+    let attrs = match scene.primitives.get(rg.prim) {
+        Some(p) => &p.attributes,
+        None => return Medium::Outside,
+    };
+    if attrs.interior.is_none() && attrs.exterior.is_none() {
+        return Medium::Outside;
+    }
+    let (k, w) = lerp_weights(rg, index, a, b);
+    if d.dot(mix3(&rg.grid.ng, &k, &w)) > 0.0 {
+        Medium::Inside
+    } else {
+        Medium::Outside
+    }
 }
 
 /// Builds the grid of hits on one primitive, or on primitives that shade as one (all `hits`
@@ -329,6 +359,7 @@ impl RayTracer for Tracer<'_, '_> {
                             b: h.b,
                             p,
                             i: p - org[k],
+                            medium: medium_of(&rs, self.scene, h.grid, h.index, h.a, h.b, d),
                         });
                     }
                     None => live[k] = false,
@@ -337,24 +368,33 @@ impl RayTracer for Tracer<'_, '_> {
             if pending.is_empty() {
                 break;
             }
-            // Group by the primitive whose context shades them, keeping ray order inside each
-            // group.
+            // Group by the primitive whose context shades them and the space the rays crossed,
+            // keeping ray order inside each group.
             let shade_as = |h: &PendingHit| {
                 let prim = rs.grids[h.grid as usize].prim;
-                rs.shade_as.get(prim).copied().unwrap_or(prim)
+                (
+                    rs.shade_as.get(prim).copied().unwrap_or(prim),
+                    h.medium == Medium::Inside,
+                )
             };
             pending.sort_by_key(|h| (shade_as(h), h.ray));
             let mut s = 0;
             while s < pending.len() {
-                let prim = shade_as(&pending[s]);
+                let key = shade_as(&pending[s]);
                 let mut e = s + 1;
-                while e < pending.len() && shade_as(&pending[e]) == prim {
+                while e < pending.len() && shade_as(&pending[e]) == key {
                     e += 1;
                 }
                 let group = &pending[s..e];
                 let mut g = hit_grid(&rs, group);
-                self.sys
-                    .shade_ray_hits(self.scene, self.camera, prim, &mut g, self.depth + 1);
+                self.sys.shade_ray_hits(
+                    self.scene,
+                    self.camera,
+                    key.0,
+                    &mut g,
+                    self.depth + 1,
+                    group[0].medium,
+                );
                 for (h, hit) in group.iter().enumerate() {
                     let k = hit.ray;
                     ci[k] += weight[k] * g.ci[h];

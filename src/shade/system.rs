@@ -135,6 +135,18 @@ struct RunCtx<'s> {
     /// The grid holds points sampled on this area light (a light shader's P, N, u, v, s, t
     /// are the grid's, RISpec §15.2.2); rays it casts pass through the light's own surfaces.
     area_light: Option<usize>,
+    /// The space the grid's incident rays crossed, which picks its volume shader.
+    medium: Medium,
+}
+
+/// The space a grid's incident rays crossed to reach it (RISpec §4.2.6 volume shaders): the
+/// camera's (the `Atmosphere`), or, for ray hits, the hit object's outside (its `Exterior`,
+/// else its `Atmosphere`) or its inside (its `Interior`: the ray left the object there).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Medium {
+    Camera,
+    Outside,
+    Inside,
 }
 
 impl<'a> ShadeSystem<'a> {
@@ -305,6 +317,7 @@ impl<'a> ShadeSystem<'a> {
             depth: 0,
             hits: false,
             area_light: None,
+            medium: Medium::Camera,
         }
     }
 
@@ -356,6 +369,7 @@ impl<'a> ShadeSystem<'a> {
                 depth: 0,
                 hits: false,
                 area_light: None,
+                medium: Medium::Camera,
             };
             if let Some(mut regs) =
                 self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None, None)
@@ -401,10 +415,12 @@ impl<'a> ShadeSystem<'a> {
         prim: usize,
         grid: &mut Grid,
         depth: u32,
+        medium: Medium,
     ) {
         let mut ctx = self.ctx(scene, camera, prim);
         ctx.depth = depth;
         ctx.hits = true;
+        ctx.medium = medium;
         self.shade_with(ctx, prim, grid)
     }
 
@@ -435,12 +451,15 @@ impl<'a> ShadeSystem<'a> {
                 None => return,
             },
         };
-        // Lights are evaluated once per grid, for the surface and the atmosphere alike.
-        let atmosphere = p
-            .attributes
-            .atmosphere
-            .clone()
-            .and_then(|a| self.program(&a, ShaderKind::Volume).map(|prog| (prog, a)));
+        // Lights are evaluated once per grid, for the surface and the volume alike.
+        let a = &p.attributes;
+        let volume = match ctx.medium {
+            Medium::Camera => a.atmosphere.clone(),
+            Medium::Outside => a.exterior.clone().or_else(|| a.atmosphere.clone()),
+            Medium::Inside => a.interior.clone(),
+        };
+        let atmosphere =
+            volume.and_then(|a| self.program(&a, ShaderKind::Volume).map(|prog| (prog, a)));
         let atmosphere_lights = atmosphere
             .as_ref()
             .is_some_and(|(a, _)| uses_lights(&a.body));
