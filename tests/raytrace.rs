@@ -370,6 +370,45 @@ WorldEnd
     );
 }
 
+/// indirectdiffuse() in a shader its own rays hit would recurse (samples to the power of the
+/// ray depth): past `"trace" "maxdiffusedepth"` (default 1, as PRMan) it casts nothing and
+/// reads black. Inside a closed box of `bounce` walls (0.5 glow + half the indirect light)
+/// the camera sees 0.75 with one bounce and 0.875 with two.
+#[test]
+fn indirectdiffuse_stops_at_the_diffuse_depth() {
+    let walls = [
+        "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
+        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
+        "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
+        "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
+        "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
+        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
+    ]
+    .join("\n");
+    for (option, want) in [
+        ("", 0.75f32),
+        ("Option \"trace\" \"maxdiffusedepth\" 2", 0.875),
+    ] {
+        let rib = format!(
+            r#"Format 4 4 1
+Projection "orthographic"
+ScreenWindow -1 1 -1 1
+{option}
+WorldBegin
+Surface "bounce"
+{walls}
+WorldEnd
+"#
+        );
+        let rgb = film_rgb(&render_rib(&rib, &[shaders()]));
+        assert!(
+            rgb.iter().all(|&v| (v - want).abs() < 1e-5),
+            "{option:?}: {:?} against {want}",
+            &rgb[..6]
+        );
+    }
+}
+
 /// Builds the ray geometry of a one-primitive world seen by a 60° perspective camera.
 fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
     use arbor::diag::{Diagnostics, SourceMap};

@@ -146,7 +146,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("trace:autobias", "uniform integer", Ignored),
     ("trace:displacements", "uniform integer", Ignored),
     ("trace:samplemotion", "uniform integer", Ignored),
-    ("trace:maxdiffusedepth", "uniform integer", Ignored),
+    ("trace:maxdiffusedepth", "uniform integer", Used),
     ("trace:maxspeculardepth", "uniform integer", Ignored),
     ("trace:importancethreshold", "uniform float", Ignored),
     ("shade:diffusehitmode", "uniform string", Ignored),

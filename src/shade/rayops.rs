@@ -13,7 +13,7 @@ use glam::Vec3;
 use super::{arg, put, vec_t};
 use crate::diag::Span;
 use crate::ray::{cone_dir, cosine_dir, point_seed, stratified};
-use crate::shade::exec::{Exec, Mask};
+use crate::shade::exec::{Exec, InfoValue, Mask};
 use crate::shade::value::Slot;
 use crate::sl::builtins::Builtin;
 use crate::sl::ir::{Kind, Reg};
@@ -286,6 +286,27 @@ fn transmit(
     acc
 }
 
+thread_local! {
+    /// indirectdiffuse() calls under way on this thread: hits its rays find are shaded on the
+    /// same thread, so this is the diffuse depth of the grid being shaded.
+    static DIFFUSE_DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// Diffuse bounces allowed: `Attribute`/`Option "trace" "maxdiffusedepth"`, else 1 (PRMan's
+/// default). Past it indirectdiffuse() casts no rays and reads black, so a diffuse shader
+/// seen by its own indirectdiffuse() rays does not recurse (samples to the power of the ray
+/// depth).
+fn max_diffuse_depth(ex: &Exec) -> u32 {
+    for which in ["attribute", "option"] {
+        if let Some(InfoValue::Floats(v)) = (ex.env.info)(which, "trace:maxdiffusedepth") {
+            if let Some(x) = v.first().filter(|x| x.is_finite() && **x >= 0.0) {
+                return (*x as u32).min(16);
+            }
+        }
+    }
+    1
+}
+
 /// occlusion (`occl` true: the blocked fraction) or indirectdiffuse (the mean Ci seen).
 #[allow(clippy::too_many_arguments)]
 fn hemisphere(
@@ -308,6 +329,21 @@ fn hemisphere(
             Slot::T(Vec3::ZERO)
         };
     };
+    let diffuse_depth = DIFFUSE_DEPTH.with(|d| d.get());
+    if !occl && diffuse_depth >= max_diffuse_depth(ex) {
+        return Slot::T(Vec3::ZERO);
+    }
+    // Restores the depth however this call ends.
+    struct Deeper(u32);
+    impl Drop for Deeper {
+        fn drop(&mut self) {
+            DIFFUSE_DEPTH.with(|d| d.set(self.0));
+        }
+    }
+    let _deeper = (!occl).then(|| {
+        DIFFUSE_DEPTH.with(|d| d.set(diffuse_depth + 1));
+        Deeper(diffuse_depth)
+    });
     let salt = span.start.wrapping_mul(0xc2b2_ae35) ^ if occl { 0x0cc } else { 0x1d1 };
     let units: Vec<Vec3> = nn.iter().map(|v| v.normalize_or_zero()).collect();
     let mut acc = vec![Vec3::ZERO; n];
