@@ -73,6 +73,35 @@ fn irradiance_on_the_axis_of_a_disk_light_is_the_closed_form() {
     }
 }
 
+/// The standard `arealight` is a Lambertian emitter (as BMRT rendered it): each sample's
+/// intensity is foreshortened by the cosine at the light, so on the axis of a disk of radius
+/// r at height h the mean over the surface is intensity / (h² + r²) — a point light's
+/// intensity / h² as the disk shrinks.
+#[test]
+fn the_standard_arealight_is_a_lambertian_emitter() {
+    for (r, h) in [(1.0f32, 1.0f32), (2.0, 1.5), (0.5, 3.0)] {
+        let (le, area) = (0.25f32, PI * r * r);
+        // arealight shines only to the side its normal faces: turn the disk to face the
+        // receiver.
+        let rib = disk_scene(r, h, le, 256, "", "")
+            .replace(
+                &format!("AreaLightSource \"lambertarea\" 1 \"intensity\" {le} \"area\" {area}"),
+                &format!("AreaLightSource \"arealight\" 1 \"intensity\" {le}"),
+            )
+            .replace(
+                &format!("Disk 0 {r} 360"),
+                &format!("Rotate 180 1 0 0\n  Disk 0 {r} 360"),
+            );
+        assert!(rib.contains("\"arealight\""), "{rib}");
+        let got = mean_red(&rib);
+        let want = le / (h * h + r * r);
+        assert!(
+            (got / want - 1.0).abs() < 0.01,
+            "r={r} h={h}: irradiance {got}, closed form {want}"
+        );
+    }
+}
+
 #[test]
 fn a_coaxial_occluder_casts_a_ray_traced_shadow_of_the_analytic_size() {
     // An opaque disk of radius ro halfway up blocks, from the axis point, exactly the part of

@@ -409,6 +409,44 @@ WorldEnd
     }
 }
 
+/// BMRT's radiosity (`Option "radiosity" "steps"` above 0) reaches shaders through ambient():
+/// one traced bounce of the light the other surfaces send. Inside a closed box of
+/// `glowambient` walls (0.5 glow + half of ambient()) every ray sees a wall lit only by the
+/// ambient light (0.5 + 0.5·0.2 = 0.6), so the camera sees 0.5 + 0.5·(0.2 + 0.6) = 0.9; without
+/// the option, 0.5 + 0.5·0.2 = 0.6. The lattice interpolation keeps a constant field exact.
+#[test]
+fn radiosity_adds_the_traced_bounce_to_ambient() {
+    let walls = [
+        "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
+        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
+        "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
+        "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
+        "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
+        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
+    ]
+    .join("\n");
+    for (option, want) in [("", 0.6f32), ("Option \"radiosity\" \"steps\" [10]", 0.9)] {
+        let rib = format!(
+            r#"Format 16 16 1
+Projection "orthographic"
+ScreenWindow -1 1 -1 1
+{option}
+WorldBegin
+LightSource "ambientlight" 1 "intensity" 0.2
+Surface "glowambient"
+{walls}
+WorldEnd
+"#
+        );
+        let rgb = film_rgb(&render_rib(&rib, &[shaders()]));
+        assert!(
+            rgb.iter().all(|&v| (v - want).abs() < 1e-5),
+            "{option:?}: {:?} against {want}",
+            &rgb[..6]
+        );
+    }
+}
+
 /// Builds the ray geometry of a one-primitive world seen by a 60° perspective camera.
 fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
     use arbor::diag::{Diagnostics, SourceMap};

@@ -76,7 +76,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("render:standardatmosphere", "uniform integer", Ignored),
     ("render:rendermode", "uniform string", Ignored),
     ("render:samplemotion", "uniform integer", Ignored),
-    ("radiosity:steps", "uniform integer", Ignored),
+    ("radiosity:steps", "uniform integer", Used),
     ("radiosity:minpatchsamples", "uniform integer", Ignored),
     ("shutter:offset", "uniform float", Ignored),
     ("shutter:clampmotion", "uniform integer", Ignored),
@@ -202,7 +202,8 @@ pub fn lookup(key: &str) -> Option<(&'static str, Use)> {
 pub fn why_ignored(category: &str) -> &'static str {
     match category {
         "render" | "light" => "a BMRT/PRMan rendering control (ray-traced shadows, true displacement, area-light sampling)",
-        "radiosity" | "photon" | "irradiance" => "global illumination, which arbor does not compute",
+        "radiosity" => "a BMRT radiosity meshing control (arbor traces the bounce instead)",
+        "photon" | "irradiance" => "global illumination, which arbor does not compute",
         "trace" | "visibility" | "shade" | "grouping" => "a ray-tracing control arbor does not use",
         "dice" | "limits" | "stitch" | "derivatives" | "cull" | "culling" | "sides" => {
             "a dicing or memory hint"

@@ -14,6 +14,7 @@ use super::{arg, put, vec_t};
 use crate::diag::Span;
 use crate::ray::{cone_dir, cosine_dir, point_seed, stratified};
 use crate::shade::exec::{Exec, InfoValue, Mask};
+use crate::shade::rays;
 use crate::shade::value::Slot;
 use crate::sl::builtins::Builtin;
 use crate::sl::ir::{Kind, Reg};
@@ -286,12 +287,6 @@ fn transmit(
     acc
 }
 
-thread_local! {
-    /// indirectdiffuse() calls under way on this thread: hits its rays find are shaded on the
-    /// same thread, so this is the diffuse depth of the grid being shaded.
-    static DIFFUSE_DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
-}
-
 /// Diffuse bounces allowed: `Attribute`/`Option "trace" "maxdiffusedepth"`, else 1 (PRMan's
 /// default). Past it indirectdiffuse() casts no rays and reads black, so a diffuse shader
 /// seen by its own indirectdiffuse() rays does not recurse (samples to the power of the ray
@@ -329,54 +324,30 @@ fn hemisphere(
             Slot::T(Vec3::ZERO)
         };
     };
-    let diffuse_depth = DIFFUSE_DEPTH.with(|d| d.get());
-    if !occl && diffuse_depth >= max_diffuse_depth(ex) {
-        return Slot::T(Vec3::ZERO);
-    }
-    // Restores the depth however this call ends.
-    struct Deeper(u32);
-    impl Drop for Deeper {
-        fn drop(&mut self) {
-            DIFFUSE_DEPTH.with(|d| d.set(self.0));
-        }
-    }
-    let _deeper = (!occl).then(|| {
-        DIFFUSE_DEPTH.with(|d| d.set(diffuse_depth + 1));
-        Deeper(diffuse_depth)
-    });
     let salt = span.start.wrapping_mul(0xc2b2_ae35) ^ if occl { 0x0cc } else { 0x1d1 };
     let units: Vec<Vec3> = nn.iter().map(|v| v.normalize_or_zero()).collect();
-    let mut acc = vec![Vec3::ZERO; n];
+    if !occl {
+        if rays::diffuse_depth() >= max_diffuse_depth(ex) {
+            return Slot::T(Vec3::ZERO);
+        }
+        let seen =
+            rays::mean_radiance(rt, p, &units, active, count, maxdist, cone, env_color, salt);
+        return Slot::VT(seen);
+    }
+    let mut acc = vec![0f32; n];
     let mut buf = vec![Vec3::ONE; n];
-    let mut dist = vec![0f32; n];
     for k in 0..count {
-        let dirs: Vec<Vec3> = (0..n)
+        let to: Vec<Vec3> = (0..n)
             .map(|i| {
                 let (u1, u2) = stratified(point_seed(p[i], salt), k, count);
-                cosine_dir(units[i], u1, u2, cone)
+                p[i] + cosine_dir(units[i], u1, u2, cone) * maxdist
             })
             .collect();
-        if occl {
-            let to: Vec<Vec3> = (0..n).map(|i| p[i] + dirs[i] * maxdist).collect();
-            rt.transmission(p, &to, active, &mut buf);
-            for (a, t) in acc.iter_mut().zip(&buf) {
-                a.x += 1.0 - lum(*t);
-            }
-        } else {
-            rt.trace(p, &dirs, active, &mut buf, &mut dist);
-            for i in 0..n {
-                acc[i] += if dist[i] <= maxdist {
-                    buf[i]
-                } else {
-                    env_color
-                };
-            }
+        rt.transmission(p, &to, active, &mut buf);
+        for (a, t) in acc.iter_mut().zip(&buf) {
+            *a += 1.0 - lum(*t);
         }
     }
     let inv = 1.0 / count as f32;
-    if occl {
-        Slot::VF(acc.iter().map(|a| a.x * inv).collect())
-    } else {
-        Slot::VT(acc.iter().map(|a| *a * inv).collect())
-    }
+    Slot::VF(acc.iter().map(|a| a * inv).collect())
 }

@@ -25,6 +25,10 @@ pub const DEFAULT_MAX_DEPTH: u32 = 10;
 const MAX_LAYERS: usize = 16;
 
 thread_local! {
+    /// Diffuse bounces under way on this thread ([`mean_radiance`] calls): hits its rays find
+    /// are shaded on the thread that traced them, so this is the diffuse depth of the grid
+    /// being shaded.
+    static DIFFUSE_DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
     /// Set while this thread builds the ray geometry (a displacement shader that casts rays
     /// then sees nothing instead of waiting for itself).
     static BUILDING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
@@ -481,4 +485,60 @@ pub fn closest_where(
 #[allow(dead_code)]
 fn param_str(d: &ParamData) -> Option<&str> {
     d.strings().first().map(String::as_str)
+}
+
+/// The diffuse depth of the grid this thread is shading (0: no diffuse bounce above it).
+pub fn diffuse_depth() -> u32 {
+    DIFFUSE_DEPTH.with(|d| d.get())
+}
+
+/// The mean radiance arriving at each active point `p` over the hemisphere (or the cone of
+/// half-angle `cone`) around unit normal `units`, cosine-weighted, from `count` stratified
+/// rays: the hits' shaded Ci, `env_color` past `maxdist` or on a miss. The hits are shaded
+/// one diffuse bounce deeper ([`diffuse_depth`]). `salt` decorrelates callers.
+#[allow(clippy::too_many_arguments)]
+pub fn mean_radiance(
+    rt: &dyn RayTracer,
+    p: &[Vec3],
+    units: &[Vec3],
+    active: &[bool],
+    count: u32,
+    maxdist: f32,
+    cone: f32,
+    env_color: Vec3,
+    salt: u32,
+) -> Vec<Vec3> {
+    use crate::ray::{cosine_dir, point_seed, stratified};
+    // Restores the depth however this call ends.
+    struct Deeper(u32);
+    impl Drop for Deeper {
+        fn drop(&mut self) {
+            DIFFUSE_DEPTH.with(|d| d.set(self.0));
+        }
+    }
+    let depth = diffuse_depth();
+    DIFFUSE_DEPTH.with(|d| d.set(depth + 1));
+    let _restore = Deeper(depth);
+    let n = p.len();
+    let mut acc = vec![Vec3::ZERO; n];
+    let mut buf = vec![Vec3::ONE; n];
+    let mut dist = vec![0f32; n];
+    for k in 0..count {
+        let dirs: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let (u1, u2) = stratified(point_seed(p[i], salt), k, count);
+                cosine_dir(units[i], u1, u2, cone)
+            })
+            .collect();
+        rt.trace(p, &dirs, active, &mut buf, &mut dist);
+        for i in 0..n {
+            acc[i] += if dist[i] <= maxdist {
+                buf[i]
+            } else {
+                env_color
+            };
+        }
+    }
+    let inv = 1.0 / count.max(1) as f32;
+    acc.iter().map(|a| *a * inv).collect()
 }

@@ -34,28 +34,69 @@ pub struct ShadeSystem<'a> {
     pub rays: crate::ray::RayCache,
 }
 
+/// Whether any instruction, at any depth of the program, passes `pred`.
+fn any_instr(instrs: &[Instr], pred: &dyn Fn(&Instr) -> bool) -> bool {
+    instrs.iter().any(|i| {
+        pred(i)
+            || match i {
+                Instr::If {
+                    then, otherwise, ..
+                } => any_instr(then, pred) || any_instr(otherwise, pred),
+                Instr::Loop {
+                    cond_code,
+                    body,
+                    step,
+                    ..
+                } => any_instr(cond_code, pred) || any_instr(body, pred) || any_instr(step, pred),
+                Instr::Function { body }
+                | Instr::Illuminate { body, .. }
+                | Instr::Solar { body, .. } => any_instr(body, pred),
+                Instr::Gather {
+                    body, otherwise, ..
+                } => any_instr(body, pred) || any_instr(otherwise, pred),
+                _ => false,
+            }
+    })
+}
+
 fn uses_lights(instrs: &[Instr]) -> bool {
     use crate::sl::builtins::Builtin::*;
-    instrs.iter().any(|i| match i {
+    any_instr(instrs, &|i| match i {
         Instr::Illuminance { .. } => true,
         Instr::Call { f, .. } => matches!(f, Ambient | Diffuse | Specular | Phong),
-        Instr::If {
-            then, otherwise, ..
-        } => uses_lights(then) || uses_lights(otherwise),
-        Instr::Loop {
-            cond_code,
-            body,
-            step,
-            ..
-        } => uses_lights(cond_code) || uses_lights(body) || uses_lights(step),
-        Instr::Function { body } | Instr::Illuminate { body, .. } | Instr::Solar { body, .. } => {
-            uses_lights(body)
-        }
-        Instr::Gather {
-            body, otherwise, ..
-        } => uses_lights(body) || uses_lights(otherwise),
         _ => false,
     })
+}
+
+fn calls_ambient(instrs: &[Instr]) -> bool {
+    any_instr(
+        instrs,
+        &|i| matches!(i, Instr::Call { f, .. } if *f == crate::sl::builtins::Builtin::Ambient),
+    )
+}
+
+/// Rays per point of the radiosity lattice (BMRT's `Option "radiosity"`, see
+/// [`ShadeSystem::radiosity_light`]).
+const RADIOSITY_SAMPLES: u32 = 256;
+/// The radiosity lattice takes every this many grid points along u and v (and the last).
+const RADIOSITY_STRIDE: usize = 4;
+
+/// BMRT's `Option "radiosity" "steps"` above 0: the scene asks for diffuse interreflection.
+fn radiosity_on(scene: &Scene) -> bool {
+    scene
+        .options
+        .user_floats("radiosity:steps")
+        .and_then(|v| v.first())
+        .is_some_and(|s| *s > 0.0)
+}
+
+/// Lattice indices along a grid side of `n` points: every [`RADIOSITY_STRIDE`]th and the last.
+fn lattice(n: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..n).step_by(RADIOSITY_STRIDE).collect();
+    if v.last() != Some(&(n.saturating_sub(1))) && n > 0 {
+        v.push(n - 1);
+    }
+    v
 }
 
 /// Whether a light program has a `solar()` without an axis (it lights along the normal).
@@ -474,14 +515,37 @@ impl<'a> ShadeSystem<'a> {
             .into_iter()
             .flatten()
             .collect();
+        // BMRT's radiosity reaches shaders through ambient(): an ambient light for the surface.
+        let mut surface_lights = lights;
+        let radiosity =
+            (ctx.depth == 0 && !ctx.hits && radiosity_on(scene) && calls_ambient(&prog.body))
+                .then(|| self.radiosity_light(grid, &ctx))
+                .flatten();
+        let with_radiosity = radiosity.is_some();
+        surface_lights.extend(radiosity);
         // illuminance() away from the grid's P runs the same lights again there.
         let surface_regs = {
             let g: &Grid = grid;
             let relight = |ps: &[Vec3], want: &[bool], idx: Option<&[usize]>| {
                 self.relight(g, &ctx, &grid_lights, ps, want, idx)
             };
-            self.run(&prog, &sref, g, &ctx, &lights, None, None, Some(&relight))
+            self.run(
+                &prog,
+                &sref,
+                g,
+                &ctx,
+                &surface_lights,
+                None,
+                None,
+                Some(&relight),
+            )
         };
+        if with_radiosity {
+            if let Some(r) = surface_lights.pop() {
+                r.recycle();
+            }
+        }
+        let lights = surface_lights;
         if let Some(mut regs) = surface_regs {
             let n = grid.len();
             if let Some(g) = prog.global("Ci") {
@@ -586,6 +650,83 @@ impl<'a> ShadeSystem<'a> {
                 ),
             ));
         }
+    }
+
+    /// BMRT's radiosity as its shaders see it: the diffuse light arriving from the scene's
+    /// other surfaces, returned by ambient() (so `matte` and `plastic` show it unchanged).
+    /// arbor traces one bounce of it — the surfaces the rays hit are shaded with their own
+    /// shaders and lights — at a lattice of the grid's points (every [`RADIOSITY_STRIDE`]th
+    /// along u and v, and the last) with [`RADIOSITY_SAMPLES`] cosine-distributed rays each
+    /// around the normal facing the eye, and interpolates bilinearly between them:
+    /// interreflected light varies slowly, and the lattice costs a sixteenth of the rays.
+    fn radiosity_light(&self, grid: &Grid, ctx: &RunCtx) -> Option<LightResult> {
+        let (nu, nv, n) = (grid.nu, grid.nv, grid.len());
+        if n == 0 || nu * nv != n || grid.i.len() != n {
+            return None;
+        }
+        let (us, vs) = (lattice(nu), lattice(nv));
+        let mut p = Vec::with_capacity(us.len() * vs.len());
+        let mut nf = Vec::with_capacity(us.len() * vs.len());
+        for &j in &vs {
+            for &i in &us {
+                let k = j * nu + i;
+                let nn = grid.n[k].normalize_or_zero();
+                p.push(grid.p[k]);
+                nf.push(if nn.dot(grid.i[k]) > 0.0 { -nn } else { nn });
+            }
+        }
+        let tracer = crate::shade::rays::Tracer {
+            sys: self,
+            scene: ctx.scene,
+            camera: ctx.camera,
+            depth: ctx.depth,
+            skip_light: None,
+        };
+        let active = vec![true; p.len()];
+        let seen = crate::shade::rays::mean_radiance(
+            &tracer,
+            &p,
+            &nf,
+            &active,
+            RADIOSITY_SAMPLES,
+            f32::INFINITY,
+            std::f32::consts::FRAC_PI_2,
+            Vec3::ZERO,
+            0x4ad1_0517,
+        );
+        // Where index x falls between lattice entries: (segment, weight of its far end).
+        let place = |lat: &[usize], x: usize| -> (usize, f32) {
+            let b = lat.partition_point(|&l| l <= x).saturating_sub(1);
+            if b + 1 >= lat.len() {
+                return (b, 0.0);
+            }
+            (b, (x - lat[b]) as f32 / (lat[b + 1] - lat[b]) as f32)
+        };
+        let w = us.len();
+        let at = |a: usize, b: usize| seen[b.min(vs.len() - 1) * w + a.min(w - 1)];
+        let mut cl = Vec::with_capacity(n);
+        for j in 0..nv {
+            let (b, fv) = place(&vs, j);
+            for i in 0..nu {
+                let (a, fu) = place(&us, i);
+                let top = at(a, b).lerp(at(a + 1, b), fu);
+                let bottom = at(a, b + 1).lerp(at(a + 1, b + 1), fu);
+                cl.push(top.lerp(bottom, fv));
+            }
+        }
+        Some(LightResult {
+            ambient: true,
+            lit: vec![true; n],
+            l: vec![Vec3::ZERO; n],
+            l_uniform: None,
+            cl,
+            ol: vec![Vec3::ONE; n],
+            category: Arc::from(""),
+            nondiffuse: false,
+            nonspecular: false,
+            program: None,
+            outputs: Vec::new(),
+        })
     }
 
     /// The primitive's lights that have a runnable program, in `lights_on` order, each with
