@@ -2,22 +2,25 @@
 //! separable filter reaching at most one pixel beyond a sample's own (half widths below 1.5:
 //! the default gaussian 2 × 2, box 1 × 1, triangle 2 × 2, …).
 //!
-//! Input: each bucket's [`SampleBuffer`], turned once — right after hiding, in parallel — into
-//! a [`Prepared`] bucket: per pixel, every sample's filter weights towards the pixel's own
-//! column and the columns either side (zero beyond the filter's reach), the same for rows, and
-//! its r g b a, as blocks of [`LANES`] floats (structure of arrays), plus the pixel's depth
-//! (its own samples through the depth filter) and the range of each channel. Output: a
-//! bucket's filtered pixels ([`gather_tile`]), each the weighted mean over the samples of its
-//! 3 × 3 neighbour pixels, which may belong to neighbouring buckets.
+//! Input: each bucket's samples, turned once — right after hiding, in parallel, while they are
+//! in the caches — into a [`Prepared`] bucket: per pixel, each sample's filter weights towards
+//! the 3 × 3 pixels around (three x weights times three y weights, zero beyond the filter's
+//! reach), and from them the pixel's *contributions*: Σ w·r, Σ w·g, Σ w·b, Σ w·a and Σ w over
+//! its samples towards each of the nine pixels; plus the pixel's depth (its own samples
+//! through the depth filter) and the range of each channel. Output: a bucket's filtered
+//! pixels ([`gather_tile`]), each the sum of what its 3 × 3 neighbour pixels (which may belong
+//! to neighbouring buckets) contribute to it, normalised — nine 8-float adds per pixel.
 //!
 //! Invariants: weights are those of the scatter in [`super::resolve`] (the same reach test and
-//! the same [`FilterTables`] lookups, bit for bit); sums are f32 over [`LANES`] lanes in a fixed
-//! order (neighbour by neighbour, then a fixed reduction tree), so a pixel never depends on the
-//! bucket layout or the thread; a channel whose values are equal over the whole neighbourhood
-//! is that value exactly (a constant image stays constant); a sample with a non-finite value
-//! is skipped where its weight is 0, as the scatter does; samples outside the image do not
-//! exist (the weights renormalise). Samples lie inside their own pixel (every hider keeps
-//! them there), so they reach at most one pixel either side.
+//! the same [`FilterTables`] lookups, bit for bit); sums are f32 in a fixed order (per pixel and
+//! target: lane by lane over the chunks of [`LANES`] samples, then a fixed reduction tree; the
+//! nine contributions in a fixed tree), so a pixel never depends on the bucket layout or the
+//! thread, and the vector and portable builds give the same bits (the scatter sums in f64: the
+//! two agree to float rounding). A channel whose values are equal over the whole
+//! neighbourhood is that value exactly (a constant image stays constant); a sample with a
+//! non-finite value is skipped where its weight is 0, as the scatter does; samples outside
+//! the image do not exist (the weights renormalise). Samples lie inside their own pixel (every
+//! hider keeps them there), so they reach at most one pixel either side.
 
 use super::filter::{Filter, FilterTables, Table1d};
 use super::resolve::{DepthFilter, Film, Tile};
@@ -27,8 +30,10 @@ use super::SampleBuffer;
 pub const LANES: usize = 8;
 /// Columns (rows) a sample can reach: its own and one either side.
 const TAPS: usize = 3;
-/// Blocks per pixel: x weights ×3, y weights ×3, r, g, b, a.
-const BLOCKS: usize = 2 * TAPS + 4;
+/// Sums a pixel contributes: r g b a w towards each of its 3 × 3 neighbours.
+const NSUMS: usize = 5 * TAPS * TAPS;
+/// [`NSUMS`] rounded up to whole vectors.
+const SUMS: usize = NSUMS.div_ceil(LANES) * LANES;
 
 /// Most samples per pixel the gather handles (eight chunks of [`LANES`]).
 pub const MAX_SPP: usize = 64;
@@ -53,6 +58,33 @@ pub fn applies(
         && hy < 1.5
 }
 
+/// What one pixel's samples give the filtered pixels around it (see the module comment).
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Debug)]
+struct Contrib {
+    /// Towards target t, the pixel at offset (t % 3 − 1, t / 3 − 1): Σ w·r, Σ w·g, Σ w·b,
+    /// Σ w·a, Σ w at 5·t … 5·t + 4; then zeros (an 8-float read at 5·t stays inside).
+    sums: [f32; SUMS],
+    /// The least r g b a over the samples, then the greatest ones negated (ranges combine
+    /// with one lane-wise min).
+    range: [f32; 8],
+    /// Depth from the pixel's own samples.
+    z: f32,
+    /// All ones when every r g b a of the samples is finite, else 0.
+    finite: u32,
+    _pad: [u32; 6],
+}
+
+/// A neighbour outside the image: contributes nothing and narrows no range.
+const ABSENT: Contrib = Contrib {
+    sums: [0.0; SUMS],
+    range: [f32::INFINITY; 8],
+    z: f32::INFINITY,
+    finite: !0,
+    _pad: [0; 6],
+};
+static ABSENT_PX: Contrib = ABSENT;
+
 /// A bucket's samples ready for [`gather_tile`] (see the module comment).
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
@@ -62,20 +94,16 @@ pub struct Prepared {
     pub width: usize,
     pub height: usize,
     spp: usize,
-    /// Samples per pixel rounded up to [`LANES`] (the extra lanes weigh 0).
+    /// Samples per pixel rounded up to [`LANES`].
     lanes: usize,
-    /// Per pixel, [`BLOCKS`] blocks of `lanes` floats.
-    data: Vec<f32>,
-    /// Per pixel: depth from its own samples.
-    z: Vec<f32>,
-    /// Per pixel: the least r g b a over its samples, then the greatest.
-    range: Vec<[f32; 8]>,
-    /// Per pixel: bit `8·block + chunk` set when weight block `block` (0–5) has a non-zero
-    /// weight in chunk `chunk`; bit 63 set when every r g b a is finite.
-    flags: Vec<u64>,
+    /// Per pixel, r g b a as blocks of `lanes` floats (padding lanes repeat sample 0).
+    rgba: Vec<f32>,
+    /// Per pixel, its contributions.
+    px: Vec<Contrib>,
+    /// Scratch for one pixel's weights: x towards columns q − 1, q, q + 1, then y, `lanes`
+    /// floats each.
+    w: Vec<f32>,
 }
-
-const FINITE: u64 = 1 << 63;
 
 /// What preparing a pixel needs from the frame: the filter's half widths and tables, the
 /// depth filter, the kernel build to run, and the storage of filtered buckets for reuse.
@@ -87,7 +115,8 @@ pub struct PrepareCtx<'a> {
     pairs: [Vec<[f32; 2]>; 2],
     df: DepthFilter,
     kernel: Kernel,
-    pool: std::sync::Mutex<Vec<Vec<f32>>>,
+    #[allow(clippy::type_complexity)]
+    pool: std::sync::Mutex<Vec<(Vec<f32>, Vec<Contrib>)>>,
 }
 
 impl<'a> PrepareCtx<'a> {
@@ -110,7 +139,7 @@ impl<'a> PrepareCtx<'a> {
     /// per bucket once the first rows are done).
     pub fn recycle(&self, p: Prepared) {
         if let Ok(mut pool) = self.pool.lock() {
-            pool.push(p.data);
+            pool.push((p.rgba, p.px));
         }
     }
 }
@@ -131,13 +160,14 @@ impl Prepared {
         assert!((1..=MAX_SPP).contains(&spp));
         let lanes = spp.div_ceil(LANES) * LANES;
         let npix = width * height;
-        let mut data = ctx
+        let (mut rgba, mut px) = ctx
             .pool
             .lock()
             .ok()
             .and_then(|mut p| p.pop())
             .unwrap_or_default();
-        data.resize(npix * BLOCKS * lanes, 0.0);
+        rgba.resize(npix * 4 * lanes, 0.0);
+        px.resize(npix, ABSENT);
         Prepared {
             x0,
             y0,
@@ -145,16 +175,15 @@ impl Prepared {
             height,
             spp,
             lanes,
-            data,
-            z: vec![f32::INFINITY; npix],
-            range: vec![[0f32; 8]; npix],
-            flags: vec![0; npix],
+            rgba,
+            px,
+            w: vec![0.0; 2 * TAPS * lanes],
         }
     }
 
     /// Heap size, for the peak-memory statistic.
     pub fn bytes(&self) -> usize {
-        self.data.len() * 4 + self.z.len() * (4 + 32 + 8)
+        (self.rgba.len() + self.w.len()) * 4 + self.px.len() * std::mem::size_of::<Contrib>()
     }
 
     /// Floats per block (samples per pixel rounded up to [`LANES`]).
@@ -162,23 +191,18 @@ impl Prepared {
         self.lanes
     }
 
-    #[inline]
-    fn block(&self, i: usize) -> &[f32] {
-        let n = BLOCKS * self.lanes;
-        &self.data[i * n..(i + 1) * n]
-    }
-
     /// The r g b a blocks of pixel `pix` (`4 × lanes` floats: r for samples 0…, then g, b,
     /// a), for the caller to fill before [`Prepared::finish_pixel`].
     #[inline]
     pub fn rgba_mut(&mut self, pix: usize) -> &mut [f32] {
-        let n = BLOCKS * self.lanes;
-        &mut self.data[pix * n + 2 * TAPS * self.lanes..(pix + 1) * n]
+        let n = 4 * self.lanes;
+        &mut self.rgba[pix * n..(pix + 1) * n]
     }
 
     /// Completes pixel `pix` (raster pixel (qx, qy)) once its r g b a are in place: the
     /// filter weights of its samples at `xs`, `ys` (`lanes` each; padding lanes NaN, which
-    /// reach nothing), its depth from `zs` (its samples' depths), its channel ranges.
+    /// reach nothing), its contributions, its depth from `zs` (its samples' depths), its
+    /// channel ranges.
     pub fn finish_pixel(
         &mut self,
         ctx: &PrepareCtx,
@@ -189,48 +213,33 @@ impl Prepared {
         zs: &[f32],
     ) {
         let (lanes, spp) = (self.lanes, self.spp);
-        let n = BLOCKS * lanes;
-        let blk = &mut self.data[pix * n..(pix + 1) * n];
-        let (w, rgba) = blk.split_at_mut(2 * TAPS * lanes);
-        let (wx, wy) = w.split_at_mut(TAPS * lanes);
-        let fx = ctx
-            .kernel
+        let rgba = &mut self.rgba[pix * 4 * lanes..(pix + 1) * 4 * lanes];
+        // Padding lanes repeat sample 0: no change to the range, and they weigh 0.
+        if spp < lanes {
+            for c in 0..4 {
+                let v = rgba[c * lanes];
+                rgba[c * lanes + spp..(c + 1) * lanes].fill(v);
+            }
+        }
+        let (wx, wy) = self.w.split_at_mut(TAPS * lanes);
+        ctx.kernel
             .weights(&xs[..lanes], qx, ctx.h.0, &ctx.t.x, &ctx.pairs[0], wx);
-        let fy = ctx
-            .kernel
+        ctx.kernel
             .weights(&ys[..lanes], qy, ctx.h.1, &ctx.t.y, &ctx.pairs[1], wy);
-        let mut flags = fx as u64 | (fy as u64) << (8 * TAPS);
-        // Padding lanes hold no sample.
-        for c in 0..4 {
-            rgba[c * lanes + spp..(c + 1) * lanes].fill(0.0);
+        let out = &mut self.px[pix];
+        if !ctx.kernel.contrib(wx, wy, rgba, lanes, out) {
+            // A sum is not finite: a value is not (or the sums overflow). Again, leaving out
+            // the products of weight 0, which must not poison the sums.
+            contrib_portable(wx, wy, rgba, lanes, true, out);
+            let finite = (0..4).all(|c| {
+                rgba[c * lanes..c * lanes + spp]
+                    .iter()
+                    .all(|v| v.is_finite())
+            });
+            out.finite = if finite { !0 } else { 0 };
         }
-        let (range, finite) = ctx.kernel.range(rgba, lanes, spp);
-        if finite {
-            flags |= FINITE;
-        }
-        self.flags[pix] = flags;
-        self.range[pix] = range;
-        self.z[pix] = own_depth(zs[..spp].iter().copied(), ctx.df);
+        out.z = own_depth(zs[..spp].iter().copied(), ctx.df);
     }
-}
-
-/// Per channel (r g b a) the least and greatest of the first `spp` values of each block,
-/// as [lo r, lo g, lo b, lo a, hi r, …], and whether every value is finite.
-fn range_portable(rgba: &[f32], lanes: usize, spp: usize) -> ([f32; 8], bool) {
-    let mut range = [0f32; 8];
-    let mut finite = true;
-    for c in 0..4 {
-        let v = &rgba[c * lanes..c * lanes + spp];
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for &x in v {
-            lo = lo.min(x);
-            hi = hi.max(x);
-            finite &= x.is_finite();
-        }
-        range[c] = lo;
-        range[4 + c] = hi;
-    }
-    (range, finite)
 }
 
 /// Prepares a bucket's r g b a z samples for [`gather_tile`] (see the module comment).
@@ -286,8 +295,8 @@ pub(super) fn own_depth(zs: impl Iterator<Item = f32>, df: DepthFilter) -> f32 {
     }
 }
 
-/// Which build of the two vectorised loops runs (both give the same bits: the same IEEE
-/// operations per lane, no fused multiply-adds).
+/// Which build of the vectorised loops runs (all give the same bits: the same IEEE
+/// operations per lane in the same order, no fused multiply-adds).
 #[derive(Clone, Copy, Debug)]
 enum Kernel {
     Portable,
@@ -307,7 +316,6 @@ impl Kernel {
     /// Weights of samples at coordinates `pos` (one axis; `lanes` of them) in pixel `q`
     /// towards the pixels q − 1, q, q + 1, into `out` (three blocks of `lanes`): the
     /// scatter's reach test `sx − h − 0.5 ≤ c ≤ sx + h − 0.5` and its lookup at c + 0.5 − sx.
-    /// Returns bit `8·o + chunk` set where block o has a non-zero weight in that chunk.
     fn weights(
         self,
         pos: &[f32],
@@ -316,7 +324,7 @@ impl Kernel {
         t: &Table1d,
         pairs: &[[f32; 2]],
         out: &mut [f32],
-    ) -> u32 {
+    ) {
         match self {
             Kernel::Portable => weights_portable(pos, q, h, t, out),
             // SAFETY: chosen only where the CPU has AVX2.
@@ -325,20 +333,26 @@ impl Kernel {
         }
     }
 
-    /// See [`range_portable`].
-    fn range(self, rgba: &[f32], lanes: usize, spp: usize) -> ([f32; 8], bool) {
+    /// See [`contrib_portable`] (without `skip_zero`).
+    fn contrib(
+        self,
+        wx: &[f32],
+        wy: &[f32],
+        rgba: &[f32],
+        lanes: usize,
+        out: &mut Contrib,
+    ) -> bool {
         match self {
-            Kernel::Portable => range_portable(rgba, lanes, spp),
+            Kernel::Portable => contrib_portable(wx, wy, rgba, lanes, false, out),
             // SAFETY: chosen only where the CPU has AVX2.
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => unsafe { avx2::range(rgba, lanes, spp) },
+            Kernel::Avx2 => unsafe { avx2::contrib(wx, wy, rgba, lanes, out) },
         }
     }
 }
 
-fn weights_portable(pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) -> u32 {
+fn weights_portable(pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) {
     let lanes = pos.len();
-    let mut flags = 0u32;
     let c = [(q - 1) as f32, q as f32, (q + 1) as f32];
     let mid = q as f32 + 0.5;
     for (s, &x) in pos.iter().enumerate() {
@@ -358,14 +372,93 @@ fn weights_portable(pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) -
             c.map(|c| t.at(c + 0.5 - x))
         };
         for o in 0..TAPS {
-            let w = if reached[o] { w[o] } else { 0.0 };
-            out[o * lanes + s] = w;
-            if w != 0.0 {
-                flags |= 1 << (8 * o + s / LANES);
+            out[o * lanes + s] = if reached[o] { w[o] } else { 0.0 };
+        }
+    }
+}
+
+/// `a < b ? a : b`, as the vector min instruction (the second operand when unordered).
+#[inline(always)]
+fn vmin(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `a > b ? a : b`, as the vector max instruction.
+#[inline(always)]
+fn vmax(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The 8 lanes combined as the vector builds combine them:
+/// op(op(op(v0, v2), op(v1, v3)), op(op(v4, v6), op(v5, v7))).
+#[inline(always)]
+fn reduce(v: [f32; LANES], op: impl Fn(f32, f32) -> f32) -> f32 {
+    op(
+        op(op(v[0], v[2]), op(v[1], v[3])),
+        op(op(v[4], v[6]), op(v[5], v[7])),
+    )
+}
+
+/// A pixel's contributions (see [`Contrib`]) from its samples' weights `wx`, `wy` (three
+/// blocks of `lanes` each, towards the columns and rows q − 1, q, q + 1) and values `rgba`
+/// (four blocks): per sum, lane by lane over the chunks (acc + w·v, w = wx·wy), then
+/// [`reduce`]; the ranges likewise with [`vmin`], [`vmax`]. With `skip_zero`, products of
+/// weight 0 are left out (non-finite values must not poison the sums). Returns whether
+/// every sum is finite (and sets `finite` so).
+fn contrib_portable(
+    wx: &[f32],
+    wy: &[f32],
+    rgba: &[f32],
+    lanes: usize,
+    skip_zero: bool,
+    out: &mut Contrib,
+) -> bool {
+    let mut acc = [[0f32; LANES]; NSUMS];
+    let mut lo = [[0f32; LANES]; 4];
+    let mut hi = lo;
+    for chunk in 0..lanes / LANES {
+        for l in 0..LANES {
+            let s = chunk * LANES + l;
+            let v = [0, 1, 2, 3].map(|c| rgba[c * lanes + s]);
+            for t in 0..TAPS * TAPS {
+                let w = wx[(t % TAPS) * lanes + s] * wy[(t / TAPS) * lanes + s];
+                if skip_zero && w == 0.0 {
+                    continue;
+                }
+                for c in 0..4 {
+                    acc[5 * t + c][l] += w * v[c];
+                }
+                acc[5 * t + 4][l] += w;
+            }
+            for c in 0..4 {
+                if chunk == 0 {
+                    (lo[c][l], hi[c][l]) = (v[c], v[c]);
+                } else {
+                    lo[c][l] = vmin(lo[c][l], v[c]);
+                    hi[c][l] = vmax(hi[c][l], v[c]);
+                }
             }
         }
     }
-    flags
+    for (s, a) in out.sums.iter_mut().zip(&acc) {
+        *s = reduce(*a, |a, b| a + b);
+    }
+    out.sums[NSUMS..].fill(0.0);
+    for c in 0..4 {
+        out.range[c] = reduce(lo[c], vmin);
+        out.range[4 + c] = -reduce(hi[c], vmax);
+    }
+    let finite = out.sums.iter().all(|s| s.is_finite());
+    out.finite = if finite { !0 } else { 0 };
+    finite
 }
 
 /// Filters the pixels `[x0, x0 + w) × [y0, y0 + h)` of `film` from the prepared buckets
@@ -394,8 +487,6 @@ pub fn gather_tile(
     tile.w = w;
     tile.h = h;
     tile.data = vec![0f32; w * h * 5];
-    let lanes = parts[0].lanes;
-    debug_assert!(parts.iter().all(|p| p.lanes == lanes));
     // Each pixel of the region grown by one: (bucket, pixel index), None outside the image.
     let gw = w + 2;
     let mut grid: Vec<Option<(usize, usize)>> = vec![None; gw * (h + 2)];
@@ -418,76 +509,118 @@ pub fn gather_tile(
             }
         }
     }
-    let kernel = pick_kernel();
-    let mut nb: [(&[f32], u64); 9] = [(&[], 0); 9];
+    let nb: Vec<&Contrib> = grid
+        .iter()
+        .map(|g| g.map_or(&ABSENT_PX, |(k, pi)| &parts[k].px[pi]))
+        .collect();
+    let g = Grid {
+        parts,
+        grid: &grid,
+        nb: &nb,
+        gw,
+    };
+    match pick_kernel() {
+        // SAFETY: chosen only where the CPU has AVX2.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 => unsafe { gather_avx2(&g, w, h, &mut tile.data) },
+        _ => gather_pixels(&g, w, h, &mut tile.data, combine),
+    }
+    tile
+}
+
+/// The pixels around a tile, for [`gather_pixels`].
+struct Grid<'a> {
+    parts: &'a [&'a Prepared],
+    /// (bucket, pixel) of each pixel of the tile grown by one, None outside the image.
+    grid: &'a [Option<(usize, usize)>],
+    /// The same pixels' contributions ([`ABSENT`] outside the image).
+    nb: &'a [&'a Contrib],
+    /// Width of the grown tile.
+    gw: usize,
+}
+
+/// [`gather_pixels`] built for AVX2, with [`avx2::combine`] (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gather_avx2(g: &Grid, w: usize, h: usize, data: &mut [f32]) {
+    // (The closure has this function's AVX2, so the call is safe.)
+    gather_pixels(g, w, h, data, |nb| avx2::combine(nb))
+}
+
+/// What the nine neighbours (row by row) give a pixel: the sums of their contributions
+/// towards it (r g b a w, in lanes 0–4) added in a fixed tree, their ranges combined
+/// ([`vmin`] in order), their finiteness.
+#[inline(always)]
+fn combine(nb: &[&Contrib; 9]) -> ([f32; LANES], [f32; 8], u32) {
+    type V = [f32; LANES];
+    let add = |a: V, b: V| -> V { std::array::from_fn(|l| a[l] + b[l]) };
+    let part = |k: usize| -> V {
+        let t = 5 * (8 - k);
+        nb[k].sums[t..t + LANES].try_into().unwrap()
+    };
+    let s = add(
+        add(add(part(0), part(1)), add(part(2), part(3))),
+        add(add(part(4), part(5)), add(part(6), part(7))),
+    );
+    let s = add(s, part(8));
+    let mut range = nb[0].range;
+    let mut finite = nb[0].finite;
+    for n in &nb[1..] {
+        range = std::array::from_fn(|l| vmin(range[l], n.range[l]));
+        finite &= n.finite;
+    }
+    (s, range, finite)
+}
+
+/// The tile's `w × h` pixels into `data` (r g b a z each): per pixel, the nine
+/// contributions towards it through `combine` (see [`combine`]), normalised by their weight.
+#[inline(always)]
+fn gather_pixels(
+    g: &Grid,
+    w: usize,
+    h: usize,
+    data: &mut [f32],
+    combine: impl Fn(&[&Contrib; 9]) -> ([f32; LANES], [f32; 8], u32),
+) {
+    let gw = g.gw;
     for j in 0..h {
+        let rows = [j * gw, (j + 1) * gw, (j + 2) * gw];
         for i in 0..w {
-            let out = &mut tile.data[(j * w + i) * 5..(j * w + i + 1) * 5];
-            let Some((ok, opi)) = grid[(j + 1) * gw + i + 1] else {
+            let out = &mut data[(j * w + i) * 5..(j * w + i + 1) * 5];
+            let Some((ok, opi)) = g.grid[rows[1] + i + 1] else {
                 out[4] = f32::INFINITY;
                 continue;
             };
-            let own = parts[ok];
-            out[4] = own.z[opi];
-            // The neighbours present, row by row: neighbour k is at (dx, dy) = (k % 3, k / 3)
-            // in the 3 × 3 around the pixel; absent ones keep no chunk.
-            let mut lo = [f32::INFINITY; 4];
-            let mut hi = [f32::NEG_INFINITY; 4];
-            let mut finite = FINITE;
-            for k in 0..9 {
-                let (dx, dy) = (k % 3, k / 3);
-                nb[k] = (&[], 0);
-                if let Some((pk, pi)) = grid[(j + dy) * gw + i + dx] {
-                    let p = parts[pk];
-                    let f = p.flags[pi];
-                    // From the neighbour, the centre pixel lies at offset (1 − dx, 1 − dy):
-                    // weight blocks 2 − dx (x) and 5 − dy (y); a chunk counts when both
-                    // have a non-zero weight in it.
-                    let chunks = ((f >> (8 * (2 - dx))) & (f >> (8 * (5 - dy)))) & 0xff;
-                    nb[k] = (p.block(pi), chunks);
-                    let r = &p.range[pi];
-                    for c in 0..4 {
-                        lo[c] = lo[c].min(r[c]);
-                        hi[c] = hi[c].max(r[4 + c]);
-                    }
-                    finite &= f;
-                }
-            }
-            let finite = finite != 0;
-            let sums = match (finite, kernel) {
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: chosen only where the CPU has AVX2.
-                (true, Kernel::Avx2) => unsafe { avx2::accumulate(&nb, lanes) },
-                (true, _) => accumulate_portable(&nb, lanes, false),
-                (false, _) => accumulate_portable(&nb, lanes, true),
-            };
-            let ws = sums[4];
+            // Neighbour k at (k % 3 − 1, k / 3 − 1) from the pixel; the pixel is its
+            // target 8 − k.
+            let nb: [&Contrib; 9] = std::array::from_fn(|k| g.nb[rows[k / 3] + i + k % 3]);
+            let (s, range, finite) = combine(&nb);
+            out[4] = nb[4].z;
+            let ws = s[4];
             if ws.abs() > 1e-12 {
                 for c in 0..4 {
-                    out[c] = sums[c] / ws;
+                    out[c] = s[c] / ws;
                 }
             } else {
                 // Nothing (or weights cancelling) in the support: the plain mean of the
                 // pixel's own samples.
-                let b = own.block(opi);
+                let own = g.parts[ok];
+                let b = &own.rgba[opi * 4 * own.lanes..];
                 for c in 0..4 {
-                    let s: f64 = (0..own.spp)
-                        .map(|s| b[(2 * TAPS + c) * lanes + s] as f64)
-                        .sum();
+                    let s: f64 = (0..own.spp).map(|s| b[c * own.lanes + s] as f64).sum();
                     out[c] = (s / own.spp as f64) as f32;
                 }
             }
             // Equal over the neighbourhood: exactly that value.
-            if finite {
+            if finite != 0 {
                 for c in 0..4 {
-                    if lo[c] == hi[c] {
-                        out[c] = lo[c];
+                    if range[c] == -range[4 + c] {
+                        out[c] = range[c];
                     }
                 }
             }
         }
     }
-    tile
 }
 
 /// A bucket's output tile started right after its samples are prepared, while they are in
@@ -596,59 +729,11 @@ fn copy_into(tile: &mut Tile, part: &Tile) {
     }
 }
 
-/// Σ w·r, Σ w·g, Σ w·b, Σ w·a, Σ w over the neighbours' chunks (w = wx · wy towards the
-/// centre pixel; neighbour k is (block, chunk mask), its weight blocks 2 − k % 3 and
-/// 5 − k / 3): per lane, chunk by chunk into two alternating sets of accumulators (by chunk
-/// index), then the sets added and each reduced by [`reduce`]. Chunks whose weights are all
-/// zero are left out (they add nothing). With `skip_zero`, single products with a zero
-/// weight are left out too (non-finite values must not poison the sum).
-fn accumulate_portable(nb: &[(&[f32], u64); 9], lanes: usize, skip_zero: bool) -> [f32; 5] {
-    let mut acc = [[[0f32; LANES]; 5]; 2];
-    for (k, &(b, chunks)) in nb.iter().enumerate() {
-        let (dx, dy) = (k % 3, k / 3);
-        let wx = (2 - dx) * lanes;
-        let wy = (TAPS + 2 - dy) * lanes;
-        for chunk in 0..lanes / LANES {
-            if chunks & (1 << chunk) == 0 {
-                continue;
-            }
-            let set = chunk & 1;
-            for l in 0..LANES {
-                let s = chunk * LANES + l;
-                let w = b[wx + s] * b[wy + s];
-                if skip_zero && w == 0.0 {
-                    continue;
-                }
-                acc[set][4][l] += w;
-                for c in 0..4 {
-                    acc[set][c][l] += w * b[(2 * TAPS + c) * lanes + s];
-                }
-            }
-        }
-    }
-    let mut out = [0f32; 5];
-    for c in 0..5 {
-        let mut v = [0f32; LANES];
-        for l in 0..LANES {
-            v[l] = acc[0][c][l] + acc[1][c][l];
-        }
-        out[c] = reduce(v);
-    }
-    out
-}
-
-/// The sum of 8 lanes as AVX reduces them: ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)).
-#[inline]
-fn reduce(v: [f32; LANES]) -> f32 {
-    let s = [v[0] + v[4], v[1] + v[5], v[2] + v[6], v[3] + v[7]];
-    (s[0] + s[2]) + (s[1] + s[3])
-}
-
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::{Table1d, BLOCKS, LANES, TAPS};
+    use super::{Contrib, Table1d, LANES, NSUMS, SUMS, TAPS};
 
     /// [`super::weights_portable`], eight samples at a time.
     #[target_feature(enable = "avx2")]
@@ -659,8 +744,7 @@ mod avx2 {
         t: &Table1d,
         pairs: &[[f32; 2]],
         out: &mut [f32],
-    ) -> u32 {
-        let mut flags = 0u32;
+    ) {
         let lanes = pos.len();
         assert!(lanes % LANES == 0 && out.len() >= TAPS * lanes);
         let (_, scale, steps) = t.parts();
@@ -681,14 +765,19 @@ mod avx2 {
             let i = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(u), st), zi);
             let f = _mm256_sub_ps(u, _mm256_cvtepi32_ps(i));
             // SAFETY: 0 ≤ i ≤ steps < pairs.len().
+            // Eight 64-bit loads (faster here than two gathers).
+            let mut k = [0i32; 8];
+            // SAFETY: 8 lanes into 8 i32.
+            unsafe { _mm256_storeu_si256(k.as_mut_ptr() as *mut __m256i, i) };
+            // SAFETY: 0 ≤ k ≤ steps < pairs.len().
             let (g0, g1) = unsafe {
-                let p = pairs.as_ptr() as *const i64;
+                let p = pairs.as_ptr() as *const f64;
+                let two = |a: i32, b: i32| {
+                    _mm_loadh_pd(_mm_load_sd(p.add(a as usize)), p.add(b as usize))
+                };
                 (
-                    _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(p, _mm256_castsi256_si128(i))),
-                    _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(
-                        p,
-                        _mm256_extracti128_si256::<1>(i),
-                    )),
+                    _mm256_castpd_ps(_mm256_set_m128d(two(k[2], k[3]), two(k[0], k[1]))),
+                    _mm256_castpd_ps(_mm256_set_m128d(two(k[6], k[7]), two(k[4], k[5]))),
                 )
             };
             // g0 = a0 b0 a1 b1 | a2 b2 a3 b3, g1 = a4 b4 a5 b5 | a6 b6 a7 b7.
@@ -720,109 +809,218 @@ mod avx2 {
                     _mm256_cmp_ps::<_CMP_LE_OQ>(c[o], b),
                 );
                 let w = _mm256_and_ps(reached, w[o]);
-                let nz = _mm256_cmp_ps::<_CMP_NEQ_UQ>(w, _mm256_setzero_ps());
-                if _mm256_movemask_ps(nz) != 0 {
-                    flags |= 1 << (8 * o + chunk);
-                }
                 // SAFETY: LANES floats inside block o.
                 unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), w) };
             }
         }
-        flags
     }
 
-    /// [`super::range_portable`], eight samples at a time (the padding lanes left out).
-    #[target_feature(enable = "avx2")]
-    pub(super) fn range(rgba: &[f32], lanes: usize, spp: usize) -> ([f32; 8], bool) {
-        assert!(rgba.len() >= 4 * lanes && spp <= lanes && lanes % LANES == 0);
-        let inf = _mm256_set1_ps(f32::INFINITY);
-        let ninf = _mm256_set1_ps(f32::NEG_INFINITY);
-        let zero = _mm256_setzero_ps();
-        let mut range = [0f32; 8];
-        let mut bad = _mm256_setzero_ps();
-        for c in 0..4 {
-            let (mut lo, mut hi) = (inf, ninf);
-            for chunk in 0..lanes / LANES {
-                // SAFETY: inside block c.
-                let x = unsafe { _mm256_loadu_ps(rgba.as_ptr().add(c * lanes + chunk * LANES)) };
-                let n = (spp - (chunk * LANES).min(spp)).min(LANES) as i32;
-                let valid = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-                    _mm256_set1_epi32(n),
-                    _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-                ));
-                lo = _mm256_min_ps(lo, _mm256_blendv_ps(inf, x, valid));
-                hi = _mm256_max_ps(hi, _mm256_blendv_ps(ninf, x, valid));
-                // x − x is 0 for finite x, NaN otherwise.
-                let d = _mm256_sub_ps(x, x);
-                bad = _mm256_or_ps(
-                    bad,
-                    _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_NEQ_UQ>(d, zero)),
-                );
-            }
-            let l = _mm_min_ps(_mm256_castps256_ps128(lo), _mm256_extractf128_ps::<1>(lo));
-            let l = _mm_min_ps(l, _mm_movehl_ps(l, l));
-            let l = _mm_min_ss(l, _mm_shuffle_ps::<0b01>(l, l));
-            let h = _mm_max_ps(_mm256_castps256_ps128(hi), _mm256_extractf128_ps::<1>(hi));
-            let h = _mm_max_ps(h, _mm_movehl_ps(h, h));
-            let h = _mm_max_ss(h, _mm_shuffle_ps::<0b01>(h, h));
-            range[c] = _mm_cvtss_f32(l);
-            range[4 + c] = _mm_cvtss_f32(h);
-        }
-        (range, _mm256_movemask_ps(bad) == 0)
-    }
-
-    /// One chunk of one neighbour into a set of accumulators.
+    /// [`super::combine`] in AVX2.
     #[inline]
     #[target_feature(enable = "avx2")]
-    fn step(acc: &mut [__m256; 5], p: *const f32, wx: usize, wy: usize, rgba: usize, lanes: usize) {
-        // SAFETY: the caller keeps every offset + LANES inside the block.
+    pub(super) fn combine(nb: &[&Contrib; 9]) -> ([f32; LANES], [f32; 8], u32) {
+        // SAFETY: 8 floats at 5·(8 − k) ≤ 40 of 48 sums; `range` is 8 floats.
+        let part = |k: usize| unsafe { _mm256_loadu_ps(nb[k].sums.as_ptr().add(5 * (8 - k))) };
+        let range = |k: usize| unsafe { _mm256_loadu_ps(nb[k].range.as_ptr()) };
+        let add = |a, b| _mm256_add_ps(a, b);
+        let s = add(
+            add(add(part(0), part(1)), add(part(2), part(3))),
+            add(add(part(4), part(5)), add(part(6), part(7))),
+        );
+        let s = add(s, part(8));
+        let mut r = range(0);
+        let mut finite = nb[0].finite;
+        for k in 1..9 {
+            r = _mm256_min_ps(r, range(k));
+            finite &= nb[k].finite;
+        }
+        let (mut so, mut ro) = ([0f32; LANES], [0f32; 8]);
+        // SAFETY: 8 floats each.
         unsafe {
-            let w = _mm256_mul_ps(_mm256_loadu_ps(p.add(wx)), _mm256_loadu_ps(p.add(wy)));
-            acc[4] = _mm256_add_ps(acc[4], w);
-            for c in 0..4 {
-                let v = _mm256_loadu_ps(p.add(rgba + c * lanes));
-                acc[c] = _mm256_add_ps(acc[c], _mm256_mul_ps(w, v));
+            _mm256_storeu_ps(so.as_mut_ptr(), s);
+            _mm256_storeu_ps(ro.as_mut_ptr(), r);
+        }
+        (so, ro, finite)
+    }
+
+    /// The lanes of each of the eight vectors combined by `op`, into one vector (lane i
+    /// from vector i), in the order of [`super::reduce`]. `op`: 0 add, 1 min, 2 max.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn reduce8<const OP: u8>(v: &[__m256; 8]) -> __m256 {
+        let op = |a: __m256, b: __m256| match OP {
+            0 => _mm256_add_ps(a, b),
+            1 => _mm256_min_ps(a, b),
+            _ => _mm256_max_ps(a, b),
+        };
+        // Pairs: [op(a0, a2) op(b0, b2) op(a1, a3) op(b1, b3) | the same of lanes 4–7].
+        let p = [0, 2, 4, 6].map(|k| {
+            op(
+                _mm256_unpacklo_ps(v[k], v[k + 1]),
+                _mm256_unpackhi_ps(v[k], v[k + 1]),
+            )
+        });
+        // Quads: [a0123 b0123 c0123 d0123 | a4567 …].
+        let q = [0, 2].map(|k| {
+            op(
+                _mm256_shuffle_ps::<0b01_00_01_00>(p[k], p[k + 1]),
+                _mm256_shuffle_ps::<0b11_10_11_10>(p[k], p[k + 1]),
+            )
+        });
+        op(
+            _mm256_permute2f128_ps::<0x20>(q[0], q[1]),
+            _mm256_permute2f128_ps::<0x31>(q[0], q[1]),
+        )
+    }
+
+    /// Sums 8·B … 8·B + 7 of [`super::contrib_portable`] (see [`super::Contrib`]), over
+    /// `CH` chunks (`chunks` when `CH` is 0). With `SPLIT` (two chunks, the first reaching no
+    /// row below, the second none above: a 4 × 4 pattern's halves), the products known to
+    /// be ±0 are left out — the same bits, as an accumulator starting at +0 never holds −0
+    /// and adding ±0 to it changes nothing (the values are finite: a non-finite one shows
+    /// in the middle row's sums, which use every chunk).
+    ///
+    /// # Safety
+    /// `wx`, `wy` hold three blocks of `lanes` floats, `rgba` four, `lanes` = 8 · chunks.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn batch<const B: usize, const CH: usize, const SPLIT: bool>(
+        wx: *const f32,
+        wy: *const f32,
+        rgba: *const f32,
+        lanes: usize,
+        chunks: usize,
+    ) -> __m256 {
+        let mut acc = [_mm256_setzero_ps(); 8];
+        let chunks = if CH > 0 { CH } else { chunks };
+        for chunk in 0..chunks {
+            let o = chunk * LANES;
+            for (i, acc) in acc.iter_mut().enumerate() {
+                let k = 8 * B + i;
+                if k >= NSUMS {
+                    break;
+                }
+                let (t, c) = (k / 5, k % 5);
+                if SPLIT && ((t / TAPS == 0 && chunk == 1) || (t / TAPS == 2 && chunk == 0)) {
+                    continue;
+                }
+                // SAFETY: inside the blocks (the caller's contract).
+                let p = unsafe {
+                    let w = _mm256_mul_ps(
+                        _mm256_loadu_ps(wx.add((t % TAPS) * lanes + o)),
+                        _mm256_loadu_ps(wy.add((t / TAPS) * lanes + o)),
+                    );
+                    if c == 4 {
+                        w
+                    } else {
+                        _mm256_mul_ps(w, _mm256_loadu_ps(rgba.add(c * lanes + o)))
+                    }
+                };
+                *acc = _mm256_add_ps(*acc, p);
             }
+        }
+        reduce8::<0>(&acc)
+    }
+
+    /// The six vectors of sums, over `CH` chunks (`lanes / 8` when `CH` is 0).
+    ///
+    /// # Safety
+    /// As [`batch`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sums<const CH: usize, const SPLIT: bool>(
+        wx: *const f32,
+        wy: *const f32,
+        rgba: *const f32,
+        lanes: usize,
+    ) -> [__m256; 6] {
+        let n = lanes / LANES;
+        // SAFETY: the caller's contract.
+        unsafe {
+            [
+                batch::<0, CH, SPLIT>(wx, wy, rgba, lanes, n),
+                batch::<1, CH, SPLIT>(wx, wy, rgba, lanes, n),
+                batch::<2, CH, SPLIT>(wx, wy, rgba, lanes, n),
+                batch::<3, CH, SPLIT>(wx, wy, rgba, lanes, n),
+                batch::<4, CH, SPLIT>(wx, wy, rgba, lanes, n),
+                batch::<5, CH, SPLIT>(wx, wy, rgba, lanes, n),
+            ]
         }
     }
 
-    /// [`super::accumulate_portable`] without `skip_zero`, in AVX2: even chunks into one set
-    /// of accumulators, odd chunks into the other.
+    /// [`super::contrib_portable`] without `skip_zero`.
     #[target_feature(enable = "avx2")]
-    pub(super) fn accumulate(nb: &[(&[f32], u64); 9], lanes: usize) -> [f32; 5] {
-        let z = _mm256_setzero_ps();
-        let (mut a, mut b) = ([z; 5], [z; 5]);
-        let nchunks = lanes / LANES;
-        for (k, &(blk, chunks)) in nb.iter().enumerate() {
-            if chunks == 0 {
-                continue;
+    pub(super) fn contrib(
+        wx: &[f32],
+        wy: &[f32],
+        rgba: &[f32],
+        lanes: usize,
+        out: &mut Contrib,
+    ) -> bool {
+        assert!(
+            lanes % LANES == 0
+                && lanes > 0
+                && wx.len() >= TAPS * lanes
+                && wy.len() >= TAPS * lanes
+                && rgba.len() >= 4 * lanes
+        );
+        const { assert!(SUMS == 48) };
+        let (px, py, pv) = (wx.as_ptr(), wy.as_ptr(), rgba.as_ptr());
+        // SAFETY: the blocks as asserted.
+        let s = unsafe {
+            match lanes {
+                8 => sums::<1, false>(px, py, pv, lanes),
+                16 => {
+                    // Whether the first chunk reaches no row below and the second none above.
+                    let zero = _mm256_setzero_ps();
+                    let nz = |at: usize| {
+                        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(
+                            _mm256_loadu_ps(py.add(at)),
+                            zero,
+                        ))
+                    };
+                    if nz(LANES) | nz(2 * lanes) == 0 {
+                        sums::<2, true>(px, py, pv, lanes)
+                    } else {
+                        sums::<2, false>(px, py, pv, lanes)
+                    }
+                }
+                _ => sums::<0, false>(px, py, pv, lanes),
             }
-            let (dx, dy) = (k % 3, k / 3);
-            assert!(blk.len() >= BLOCKS * lanes && nchunks <= 8);
-            let p = blk.as_ptr();
-            let (wx, wy, rgba) = ((2 - dx) * lanes, (TAPS + 2 - dy) * lanes, 2 * TAPS * lanes);
-            let mut chunk = 0;
-            while chunk < nchunks {
-                let o = chunk * LANES;
-                if chunks & (1 << chunk) != 0 {
-                    step(&mut a, p, wx + o, wy + o, rgba + o, lanes);
-                }
-                if chunk + 1 < nchunks && chunks & (2 << chunk) != 0 {
-                    let o = o + LANES;
-                    step(&mut b, p, wx + o, wy + o, rgba + o, lanes);
-                }
-                chunk += 2;
+        };
+        // x − x is 0 for finite x, NaN otherwise.
+        let zero = _mm256_setzero_ps();
+        let mut bad = zero;
+        for (k, s) in s.iter().enumerate() {
+            bad = _mm256_or_ps(
+                bad,
+                _mm256_cmp_ps::<_CMP_NEQ_UQ>(_mm256_sub_ps(*s, *s), zero),
+            );
+            // SAFETY: 8 floats at 8·k < SUMS.
+            unsafe { _mm256_storeu_ps(out.sums.as_mut_ptr().add(8 * k), *s) };
+        }
+        // Ranges: lane-wise over the chunks, then across the lanes.
+        let ld = |c: usize, o: usize| {
+            // SAFETY: inside block c (asserted above).
+            unsafe { _mm256_loadu_ps(rgba.as_ptr().add(c * lanes + o)) }
+        };
+        let mut lo = [0, 1, 2, 3].map(|c| ld(c, 0));
+        let mut hi = lo;
+        for chunk in 1..lanes / LANES {
+            for c in 0..4 {
+                let v = ld(c, chunk * LANES);
+                lo[c] = _mm256_min_ps(lo[c], v);
+                hi[c] = _mm256_max_ps(hi[c], v);
             }
         }
-        let mut out = [0f32; 5];
-        for c in 0..5 {
-            let v = _mm256_add_ps(a[c], b[c]);
-            let s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
-            let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
-            let s = _mm_add_ss(s, _mm_shuffle_ps::<0b01>(s, s));
-            out[c] = _mm_cvtss_f32(s);
-        }
-        out
+        let lo = reduce8::<1>(&[lo[0], lo[1], lo[2], lo[3], lo[0], lo[1], lo[2], lo[3]]);
+        let hi = reduce8::<2>(&[hi[0], hi[1], hi[2], hi[3], hi[0], hi[1], hi[2], hi[3]]);
+        let r = _mm256_blend_ps::<0b1111_0000>(lo, _mm256_xor_ps(hi, _mm256_set1_ps(-0.0)));
+        // SAFETY: 8 floats.
+        unsafe { _mm256_storeu_ps(out.range.as_mut_ptr(), r) };
+        let finite = _mm256_movemask_ps(bad) == 0;
+        out.finite = if finite { !0 } else { 0 };
+        finite
     }
 }
 
@@ -873,8 +1071,12 @@ mod tests {
             let f = Filter::new(kind, width, width);
             let t = f.tables().unwrap();
             let (w, h) = (7, 5);
-            for n in [1, 3, 4] {
-                let whole = buffer(0, 0, w, h, n, 7);
+            for n in [1, 3, 4, 8] {
+                let mut whole = buffer(0, 0, w, h, n, 7);
+                // Samples on a midline, an edge and a corner of their pixels.
+                whole.positions[n * n * 8] = [1.5, 1.25];
+                whole.positions[n * n * 9] = [2.0, 1.5];
+                whole.positions[n * n * 16] = [2.0, 2.0];
                 let fm = film(w, h);
                 assert!(applies(&f, Some(&t), 5, n * n, &fm));
                 let want = filter_tile(&fm, &whole, &f, 0, 0, w, h, DepthFilter::Min);
@@ -936,43 +1138,83 @@ mod tests {
 
     #[test]
     fn portable_and_vector_builds_agree_bit_for_bit() {
-        let f = Filter::new(FilterKind::Gaussian, 2.0, 2.0);
-        let t = f.tables().unwrap();
-        let b = buffer(3, 2, 6, 5, 4, 11);
-        let p = prepare(&b, &PrepareCtx::new(&f, &t, DepthFilter::Min));
-        // Weights: the portable loop against whatever `prepare` ran.
-        let lanes = p.lanes;
-        for pix in 0..b.width * b.height {
-            let (qx, qy) = (3 + (pix % b.width) as i32, 2 + (pix / b.width) as i32);
-            let mut xs = vec![f32::NAN; lanes];
-            let mut ys = vec![f32::NAN; lanes];
-            for s in 0..16 {
-                xs[s] = b.positions[pix * 16 + s][0];
-                ys[s] = b.positions[pix * 16 + s][1];
-            }
-            let mut wx = vec![0f32; TAPS * lanes];
-            let mut wy = vec![0f32; TAPS * lanes];
-            weights_portable(&xs, qx, 1.0, &t.x, &mut wx);
-            weights_portable(&ys, qy, 1.0, &t.y, &mut wy);
-            let blk = p.block(pix);
-            assert_eq!(&blk[..TAPS * lanes], &wx[..]);
-            assert_eq!(&blk[TAPS * lanes..2 * TAPS * lanes], &wy[..]);
-        }
-        // Sums: every neighbourhood of the interior pixels.
-        for j in 1..b.height - 1 {
-            for i in 1..b.width - 1 {
-                let mut nb: [(&[f32], u64); 9] = [(&[], 0); 9];
-                for k in 0..9 {
-                    nb[k] = (p.block((j + k / 3 - 1) * b.width + i + k % 3 - 1), 0xff);
+        for (kind, width) in [(FilterKind::Gaussian, 2.0), (FilterKind::Sinc, 2.5)] {
+            let f = Filter::new(kind, width, width);
+            let t = f.tables().unwrap();
+            let ctx = PrepareCtx::new(&f, &t, DepthFilter::Min);
+            for n in [1, 3, 4, 8] {
+                let spp = n * n;
+                let mut b = buffer(3, 2, 6, 5, n, 11);
+                // Samples on the midlines and the edges, and a non-finite value.
+                b.positions[0] = [3.5, 2.5];
+                b.positions[spp + spp / 2] = [4.0, 2.0];
+                b.values[5 * (2 * spp) + 1] = f32::INFINITY;
+                let lanes = spp.div_ceil(LANES) * LANES;
+                for pix in 0..b.width * b.height {
+                    let (qx, qy) = (3 + (pix % b.width) as i32, 2 + (pix / b.width) as i32);
+                    let mut xs = vec![f32::NAN; lanes];
+                    let mut ys = vec![f32::NAN; lanes];
+                    let mut rgba = vec![0f32; 4 * lanes];
+                    for s in 0..lanes {
+                        let k = pix * spp + s.min(spp - 1) * (s < spp) as usize;
+                        if s < spp {
+                            [xs[s], ys[s]] = b.positions[k];
+                        }
+                        for c in 0..4 {
+                            rgba[c * lanes + s] = b.values[5 * k + c];
+                        }
+                    }
+                    let mut w = vec![0f32; 2 * TAPS * lanes];
+                    let (wx, wy) = w.split_at_mut(TAPS * lanes);
+                    weights_portable(&xs, qx, f.radius().0, &t.x, wx);
+                    weights_portable(&ys, qy, f.radius().1, &t.y, wy);
+                    let mut a = ABSENT;
+                    let fa = contrib_portable(wx, wy, &rgba, lanes, false, &mut a);
+                    #[cfg(target_arch = "x86_64")]
+                    if std::arch::is_x86_feature_detected!("avx2") {
+                        let mut v = vec![0f32; 2 * TAPS * lanes];
+                        let (vx, vy) = v.split_at_mut(TAPS * lanes);
+                        // SAFETY: the CPU has AVX2.
+                        unsafe {
+                            avx2::weights(&xs, qx, f.radius().0, &t.x, &ctx.pairs[0], vx);
+                            avx2::weights(&ys, qy, f.radius().1, &t.y, &ctx.pairs[1], vy);
+                        }
+                        assert_eq!(wx, vx);
+                        assert_eq!(wy, vy);
+                        let mut c = ABSENT;
+                        // SAFETY: the CPU has AVX2.
+                        let fc = unsafe { avx2::contrib(vx, vy, &rgba, lanes, &mut c) };
+                        // Both see a non-finite sum (then the careful portable path runs),
+                        // or they agree bit for bit.
+                        assert_eq!(fa, fc);
+                        if !fa {
+                            continue;
+                        }
+                        assert_eq!(a.sums.map(f32::to_bits), c.sums.map(f32::to_bits));
+                        assert_eq!(a.range.map(f32::to_bits), c.range.map(f32::to_bits));
+                        assert_eq!(a.finite, c.finite);
+                    }
+                    // The pixel's own weight is never zero for these filters.
+                    assert!(!fa || a.sums[5 * 4 + 4] != 0.0);
                 }
-                let a = accumulate_portable(&nb, lanes, false);
-                #[cfg(target_arch = "x86_64")]
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2.
-                    let v = unsafe { avx2::accumulate(&nb, lanes) };
-                    assert_eq!(a.map(f32::to_bits), v.map(f32::to_bits));
+                // Combining the neighbours, around every interior pixel.
+                let p = prepare(&b, &ctx);
+                for j in 1..b.height - 1 {
+                    for i in 1..b.width - 1 {
+                        let nb: [&Contrib; 9] = std::array::from_fn(|k| {
+                            &p.px[(j + k / 3 - 1) * b.width + i + k % 3 - 1]
+                        });
+                        let a = combine(&nb);
+                        #[cfg(target_arch = "x86_64")]
+                        if std::arch::is_x86_feature_detected!("avx2") {
+                            // SAFETY: the CPU has AVX2.
+                            let v = unsafe { avx2::combine(&nb) };
+                            assert_eq!(a.0.map(f32::to_bits), v.0.map(f32::to_bits));
+                            assert_eq!(a.1.map(f32::to_bits), v.1.map(f32::to_bits));
+                            assert_eq!(a.2, v.2);
+                        }
+                    }
                 }
-                assert!(a[4] > 0.0);
             }
         }
     }
