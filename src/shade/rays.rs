@@ -17,7 +17,7 @@ use crate::shade::exec::RayTracer;
 use crate::shade::system::ShadeSystem;
 use crate::shade::{Grid, GridVar};
 
-use crate::ray::{RayGrid, RayScene};
+use crate::ray::{Cone, RayGrid, RayScene};
 
 /// Default most ray depth (PRMan's `Option "trace" "maxdepth"`).
 pub const DEFAULT_MAX_DEPTH: u32 = 10;
@@ -188,6 +188,44 @@ fn lerp_weights(rg: &RayGrid, index: u32, a: f32, b: f32) -> ([usize; 4], [f32; 
     )
 }
 
+/// Interpolation weights at grid coordinates `(x, y)` (in micropolygons from the grid's
+/// first vertex), extrapolating linearly from the boundary micropolygon beyond the grid.
+fn grid_weights(g: &Grid, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
+    let (qu, qv) = (g.nu - 1, g.nv - 1);
+    let x = if x.is_finite() { x } else { 0.0 };
+    let y = if y.is_finite() { y } else { 0.0 };
+    let i = (x.floor().max(0.0) as usize).min(qu - 1);
+    let j = (y.floor().max(0.0) as usize).min(qv - 1);
+    let (a, b) = (x - i as f32, y - j as f32);
+    let k = j * g.nu + i;
+    (
+        [k, k + 1, k + g.nu, k + g.nu + 1],
+        [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b],
+    )
+}
+
+/// The grid coordinates one ray footprint away from a hit along u and along v: the hit's
+/// cone of width `w` along the unit direction `d` crosses the surface in an ellipse, whose
+/// extent along a surface direction `e` is `w / |e⊥|` (`e⊥`: `e` less its part along the
+/// ray); in micropolygons, that is `w / |∂P/∂a ⊥|` along the grid's rows (and the same down
+/// its columns). Returns the two offsets' grid coordinates.
+fn footprint_steps(g: &Grid, k: &[usize; 4], a: f32, b: f32, d: Vec3, w: f32) -> (f32, f32) {
+    let p = &g.p;
+    // The bilinear patch's derivatives at (a, b).
+    let pa = (p[k[1]] - p[k[0]]) * (1.0 - b) + (p[k[3]] - p[k[2]]) * b;
+    let pb = (p[k[2]] - p[k[0]]) * (1.0 - a) + (p[k[3]] - p[k[1]]) * a;
+    let step = |e: Vec3| {
+        let len = e.length();
+        let perp = (e - d * e.dot(d)).length().max(0.05 * len);
+        if perp > 0.0 && w > 0.0 {
+            (w / perp).min(1e4)
+        } else {
+            0.0
+        }
+    };
+    (step(pa), step(pb))
+}
+
 #[inline]
 fn mix3(v: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
     v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
@@ -208,12 +246,19 @@ struct PendingHit {
     p: Vec3,
     /// Incident vector (hit − origin).
     i: Vec3,
+    /// The ray's cone, its width taken at the hit.
+    cone: Cone,
 }
 
 /// Builds the grid of hits on one primitive, or on primitives that shade as one (all `hits`
-/// come from grids with the same primitive-variable layout, see [`shading_classes`]).
-fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
-    let n = hits.len();
+/// come from grids with the same primitive-variable layout, see [`shading_classes`]). With
+/// `triples`, each hit is followed by the surface one ray footprint away along u and along v
+/// (`ops::TRIPLES`): the point of the ray grid that far across it, seen along the ray's
+/// neighbour in the cone (the incident vector turned by the cone's spread), so derivatives
+/// (and texture filter widths) at the hit follow the ray's footprint.
+fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
+    let per = if triples { 3 } else { 1 };
+    let n = hits.len() * per;
     let mut g = Grid::with_size(n, 1);
     let first = &rs.grids[hits[0].grid as usize].grid;
     g.du = first.du;
@@ -235,10 +280,48 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
             strings: v.strings.clone(),
         })
         .collect();
-    for (h, hit) in hits.iter().enumerate() {
+    for (h, (hit, (k, w))) in hits
+        .iter()
+        .flat_map(|hit| {
+            let rg = &rs.grids[hit.grid as usize];
+            let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
+            let mut pts = [(*hit, (k, w)); 3];
+            if triples {
+                let src = &rg.grid;
+                let qu = src.nu - 1;
+                let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
+                let (x, y) = (
+                    i as f32 + hit.a.clamp(0.0, 1.0),
+                    j as f32 + hit.b.clamp(0.0, 1.0),
+                );
+                let len = hit.i.length();
+                let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
+                let width = hit.cone.width;
+                let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
+                for (q, (x, y)) in [(1, (x + sa, y)), (2, (x, y + sb))] {
+                    let (k2, w2) = grid_weights(src, x, y);
+                    let p = mix3(&src.p, &k2, &w2);
+                    // The neighbouring ray of the cone through p: turned by the spread per
+                    // width of sideways offset.
+                    let off = p - hit.p;
+                    let side = off - d * off.dot(d);
+                    let turn = if width > 0.0 {
+                        side * (hit.cone.spread / width)
+                    } else {
+                        Vec3::ZERO
+                    };
+                    let mut aux = *hit;
+                    aux.p = p;
+                    aux.i = (d + turn) * len;
+                    pts[q] = (aux, (k2, w2));
+                }
+            }
+            pts.into_iter().take(per)
+        })
+        .enumerate()
+    {
         let rg = &rs.grids[hit.grid as usize];
         let src = &rg.grid;
-        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
         g.p[h] = hit.p;
         g.i[h] = hit.i;
         g.n[h] = mix3(&src.n, &k, &w);
@@ -278,6 +361,7 @@ impl RayTracer for Tracer<'_, '_> {
         &self,
         org: &[Vec3],
         dir: &[Vec3],
+        cones: &[Cone],
         active: &[bool],
         ci: &mut [Vec3],
         dist: &mut [f32],
@@ -321,6 +405,10 @@ impl RayTracer for Tracer<'_, '_> {
                             dist[k] = travelled[k] + h.t;
                         }
                         travelled[k] += h.t;
+                        let cone = cones.get(k).map_or(Cone::default(), |c| Cone {
+                            width: c.width_at(travelled[k] * d.length()),
+                            spread: c.spread,
+                        });
                         pending.push(PendingHit {
                             ray: k,
                             grid: h.grid,
@@ -329,6 +417,7 @@ impl RayTracer for Tracer<'_, '_> {
                             b: h.b,
                             p,
                             i: p - org[k],
+                            cone,
                         });
                     }
                     None => live[k] = false,
@@ -352,13 +441,27 @@ impl RayTracer for Tracer<'_, '_> {
                     e += 1;
                 }
                 let group = &pending[s..e];
-                let mut g = hit_grid(&rs, group);
-                self.sys
-                    .shade_ray_hits(self.scene, self.camera, prim, &mut g, self.depth + 1);
+                let triples = self.sys.hit_wants_differentials(self.scene, prim);
+                let mut g = hit_grid(&rs, group, triples);
+                let per = if triples { 3 } else { 1 };
+                let hit_cones: Vec<Cone> = group
+                    .iter()
+                    .flat_map(|h| std::iter::repeat_n(h.cone, per))
+                    .collect();
+                self.sys.shade_ray_hits(
+                    self.scene,
+                    self.camera,
+                    prim,
+                    &mut g,
+                    self.depth + 1,
+                    &hit_cones,
+                    triples,
+                );
                 for (h, hit) in group.iter().enumerate() {
                     let k = hit.ray;
-                    ci[k] += weight[k] * g.ci[h];
-                    weight[k] *= Vec3::ONE - g.oi[h].clamp(Vec3::ZERO, Vec3::ONE);
+                    let (c, op) = (g.ci[h * per], g.oi[h * per]);
+                    ci[k] += weight[k] * c;
+                    weight[k] *= Vec3::ONE - op.clamp(Vec3::ZERO, Vec3::ONE);
                     o[k] = hit.p;
                     if weight[k].max_element() < 1.0 / 256.0 {
                         live[k] = false;
