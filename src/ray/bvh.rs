@@ -1,7 +1,7 @@
 //! A compact binned-SAH bounding volume hierarchy over micropolygon quads.
 //!
-//! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid) with the grid and
-//! quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
+//! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid, in a shared vertex
+//! array) with the grid and quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
 //! every hit) is the same whatever the thread count; nodes are 4 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to four
@@ -19,14 +19,27 @@
 
 use glam::Vec3;
 
-/// One micropolygon: corners `p[0]=v00, p[1]=v10, p[2]=v01, p[3]=v11`.
+/// One micropolygon, its corners in the shared vertex array: `v00 = verts[k]`,
+/// `v10 = verts[k + 1]`, `v01 = verts[k + row]`, `v11 = verts[k + row + 1]` (a grid's points
+/// are stored once, row by row, and its micropolygons point into them: 16 bytes a quad
+/// instead of 56, and the quads of a leaf share their corners' cache lines).
 #[derive(Clone, Copy, Debug)]
 pub struct Quad {
-    pub p: [Vec3; 4],
+    pub k: u32,
+    pub row: u32,
     /// Index of the ray grid it belongs to.
     pub grid: u32,
     /// Quad index inside the grid: `j * (nu − 1) + i`.
     pub index: u32,
+}
+
+impl Quad {
+    /// The corners `v00 v10 v01 v11`.
+    #[inline(always)]
+    pub fn corners(&self, verts: &[Vec3]) -> [Vec3; 4] {
+        let (k, r) = (self.k as usize, self.row as usize);
+        [verts[k], verts[k + 1], verts[k + r], verts[k + r + 1]]
+    }
 }
 
 /// A 4-wide node: the boxes of up to four children side by side (lane `i` of each array),
@@ -67,6 +80,8 @@ pub struct Hit {
 pub struct Bvh {
     nodes: Vec<Node4>,
     pub quads: Vec<Quad>,
+    /// The quads' corners (see [`Quad`]).
+    pub verts: Vec<Vec3>,
     /// The root when the whole tree is one leaf (then `nodes` is empty): its quad count.
     root_leaf: u32,
 }
@@ -135,16 +150,19 @@ impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
     /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
     /// alone (see the module invariants).
-    pub fn build(quads: Vec<Quad>) -> Bvh {
+    pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
         if n == 0 {
             return Bvh::default();
         }
         let boxes: Vec<Aabb> = quads
             .iter()
-            .map(|q| Aabb {
-                min: q.p[0].min(q.p[1]).min(q.p[2].min(q.p[3])),
-                max: q.p[0].max(q.p[1]).max(q.p[2].max(q.p[3])),
+            .map(|q| {
+                let p = q.corners(&verts);
+                Aabb {
+                    min: p[0].min(p[1]).min(p[2].min(p[3])),
+                    max: p[0].max(p[1]).max(p[2].max(p[3])),
+                }
             })
             .collect();
         let cent: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
@@ -277,6 +295,7 @@ impl Bvh {
         let mut bvh = Bvh {
             nodes: Vec::with_capacity(nodes.len() / 2 + 1),
             quads: sorted,
+            verts,
             root_leaf: 0,
         };
         if nodes[0].count > 0 {
@@ -383,7 +402,7 @@ impl Bvh {
     ) -> bool {
         let (s, e) = (first as usize, (first + count) as usize);
         for q in &self.quads[s..e] {
-            if let Some((t, a, b)) = intersect_quad_wt(q, wt, tmin, *tmax) {
+            if let Some((t, a, b)) = intersect_quad_wt(q.corners(&self.verts), wt, tmin, *tmax) {
                 if on_hit(q, t, a, b, tmax) {
                     return true;
                 }
@@ -680,8 +699,8 @@ fn tri_wt(a: [f32; 3], b: [f32; 3], c: [f32; 3], tmin: f32, tmax: f32) -> Option
 /// The quad's two triangles `(v00 v10 v11)` and `(v00 v11 v01)`, watertight; returns
 /// (t, a, b).
 #[inline]
-fn intersect_quad_wt(q: &Quad, r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    let [p00, p10, p01, p11] = q.p;
+fn intersect_quad_wt(p: [Vec3; 4], r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let [p00, p10, p01, p11] = p;
     let (a, b, c, d) = (r.xform(p00), r.xform(p10), r.xform(p01), r.xform(p11));
     let mut best = None;
     let mut tm = tmax;
@@ -699,31 +718,46 @@ fn intersect_quad_wt(q: &Quad, r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, 
 
 /// [`intersect_quad_wt`] for a ray given by origin and direction.
 #[cfg(test)]
-fn intersect_quad(q: &Quad, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    intersect_quad_wt(q, &WtRay::new(o, d), tmin, tmax)
+fn intersect_quad(p: [Vec3; 4], o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    intersect_quad_wt(p, &WtRay::new(o, d), tmin, tmax)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn square(z: f32, grid: u32) -> Quad {
+    /// A quad of its own four corners `v00 v10 v01 v11`, appended to `verts`.
+    fn quad(verts: &mut Vec<Vec3>, p: [Vec3; 4], grid: u32) -> Quad {
+        let k = verts.len() as u32;
+        verts.extend(p);
         Quad {
-            p: [
+            k,
+            row: 2,
+            grid,
+            index: 0,
+        }
+    }
+
+    fn square(verts: &mut Vec<Vec3>, z: f32, grid: u32) -> Quad {
+        quad(
+            verts,
+            [
                 Vec3::new(-1.0, -1.0, z),
                 Vec3::new(1.0, -1.0, z),
                 Vec3::new(-1.0, 1.0, z),
                 Vec3::new(1.0, 1.0, z),
             ],
             grid,
-            index: 0,
-        }
+        )
     }
 
     #[test]
     fn closest_hit_of_stacked_squares() {
-        let quads: Vec<Quad> = (0..100).map(|k| square(k as f32 + 1.0, k)).collect();
-        let bvh = Bvh::build(quads);
+        let mut verts = Vec::new();
+        let quads: Vec<Quad> = (0..100)
+            .map(|k| square(&mut verts, k as f32 + 1.0, k))
+            .collect();
+        let bvh = Bvh::build(quads, verts);
         let h = bvh
             .closest(Vec3::new(0.5, 0.0, 0.0), Vec3::Z, 0.0, 1e30)
             .unwrap();
@@ -753,23 +787,20 @@ mod tests {
             (h as f32 / u32::MAX as f32) * 2.0 - 1.0
         };
         let mut quads = Vec::new();
+        let mut verts = Vec::new();
         for k in 0..500 {
             let c = Vec3::new(rnd() * 5.0, rnd() * 5.0, rnd() * 5.0);
             let u = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
             let v = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
-            quads.push(Quad {
-                p: [c, c + u, c + v, c + u + v],
-                grid: k,
-                index: 0,
-            });
+            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
         }
-        let bvh = Bvh::build(quads.clone());
+        let bvh = Bvh::build(quads.clone(), verts.clone());
         for _ in 0..300 {
             let o = Vec3::new(rnd(), rnd(), rnd()) * 6.0;
             let d = Vec3::new(rnd(), rnd(), rnd()).normalize_or(Vec3::X);
             let mut best: Option<(f32, u32)> = None;
             for q in &quads {
-                if let Some((t, _, _)) = intersect_quad(q, o, d, 0.0, 1e30) {
+                if let Some((t, _, _)) = intersect_quad(q.corners(&verts), o, d, 0.0, 1e30) {
                     if best.is_none_or(|b| t < b.0) {
                         best = Some((t, q.grid));
                     }

@@ -17,6 +17,7 @@ use crate::shade::exec::RayTracer;
 use crate::shade::system::ShadeSystem;
 use crate::shade::{Grid, GridVar};
 
+use crate::ray::geometry::HitVertex;
 use crate::ray::{Cone, RayGrid, RayScene};
 
 /// Default most ray depth (PRMan's `Option "trace" "maxdepth"`).
@@ -230,9 +231,12 @@ fn footprint_steps(g: &Grid, k: &[usize; 4], a: f32, b: f32, d: Vec3, w: f32) ->
 fn mix3(v: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
     v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
 }
+
+/// The shading records of a ray grid's vertices `k` (see [`HitVertex`]).
 #[inline]
-fn mix1(v: &[f32], k: &[usize; 4], w: &[f32; 4]) -> f32 {
-    v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
+fn corners(rs: &RayScene, rg: &RayGrid, k: &[usize; 4]) -> [HitVertex; 4] {
+    let v = &rs.verts[rg.first..];
+    [v[k[0]], v[k[1]], v[k[2]], v[k[3]]]
 }
 
 /// One hit to shade: which ray, where.
@@ -324,16 +328,20 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
         let src = &rg.grid;
         g.p[h] = hit.p;
         g.i[h] = hit.i;
-        g.n[h] = mix3(&src.n, &k, &w);
-        g.ng[h] = mix3(&src.ng, &k, &w);
-        g.dpdu[h] = mix3(&src.dpdu, &k, &w);
-        g.dpdv[h] = mix3(&src.dpdv, &k, &w);
-        g.u[h] = mix1(&src.u, &k, &w);
-        g.v[h] = mix1(&src.v, &k, &w);
-        g.s[h] = mix1(&src.s, &k, &w);
-        g.t[h] = mix1(&src.t, &k, &w);
-        g.cs[h] = mix3(&src.cs, &k, &w);
-        g.os[h] = mix3(&src.os, &k, &w);
+        let c = corners(rs, rg, &k);
+        let m3 = |f: fn(&HitVertex) -> Vec3| {
+            f(&c[0]) * w[0] + f(&c[1]) * w[1] + f(&c[2]) * w[2] + f(&c[3]) * w[3]
+        };
+        g.n[h] = m3(|v| v.n);
+        g.ng[h] = m3(|v| v.ng);
+        g.dpdu[h] = m3(|v| v.dpdu);
+        g.dpdv[h] = m3(|v| v.dpdv);
+        let uvst: [f32; 4] = std::array::from_fn(|e| {
+            c[0].uvst[e] * w[0] + c[1].uvst[e] * w[1] + c[2].uvst[e] * w[2] + c[3].uvst[e] * w[3]
+        });
+        [g.u[h], g.v[h], g.s[h], g.t[h]] = uvst;
+        g.cs[h] = m3(|v| v.cs);
+        g.os[h] = m3(|v| v.os);
         for (dst, sv) in pv.iter_mut().zip(&src.primvars) {
             if dst.uniform || sv.uniform || sv.width() != dst.width() {
                 continue;
@@ -502,7 +510,9 @@ impl RayTracer for Tracer<'_, '_> {
                     return false;
                 }
                 let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
-                let os = mix3(&rg.grid.os, &kk, &w).clamp(Vec3::ZERO, Vec3::ONE);
+                let c = corners(&rs, rg, &kk);
+                let os = (c[0].os * w[0] + c[1].os * w[1] + c[2].os * w[2] + c[3].os * w[3])
+                    .clamp(Vec3::ZERO, Vec3::ONE);
                 t *= Vec3::ONE - os;
                 // An opaque blocker (its interpolated opacity within rounding of 1) ends the
                 // walk: nothing can pass.
