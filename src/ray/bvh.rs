@@ -47,9 +47,10 @@ impl Quad {
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    /// Box corners per axis (x, y, z), per child lane. Empty lanes hold an inverted box.
-    lo: [[f32; 4]; 3],
-    hi: [[f32; 4]; 3],
+    /// Box corners per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones (a
+    /// ray picks its near and far row per axis once, by its direction's signs). Empty lanes
+    /// hold an inverted box.
+    b: [[f32; 4]; 6],
     /// Interior child: node index. Leaf child: its first quad.
     child: [u32; 4],
     /// Quads in a leaf child; 0 for an interior child (and an empty lane).
@@ -58,8 +59,14 @@ struct Node4 {
 
 impl Node4 {
     const EMPTY: Node4 = Node4 {
-        lo: [[f32::INFINITY; 4]; 3],
-        hi: [[f32::NEG_INFINITY; 4]; 3],
+        b: [
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
         child: [0; 4],
         count: [0; 4],
     };
@@ -330,8 +337,8 @@ impl Bvh {
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
             for axis in 0..3 {
-                node.lo[axis][lane] = c.bb.min[axis];
-                node.hi[axis][lane] = c.bb.max[axis];
+                node.b[axis][lane] = c.bb.min[axis];
+                node.b[3 + axis][lane] = c.bb.max[axis];
             }
             if c.count > 0 {
                 node.child[lane] = c.first;
@@ -411,6 +418,27 @@ impl Bvh {
         false
     }
 
+    /// Asks for the cache line of a pushed child (an interior node, or a leaf's first quads):
+    /// a later visit then finds it on the way. No effect on results.
+    #[inline(always)]
+    fn prefetch(&self, child: u32, count: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            if count == 0 {
+                if let Some(n) = self.nodes.get(child as usize) {
+                    // SAFETY: a prefetch of a valid reference's address (SSE, x86-64 baseline).
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>((n as *const Node4).cast()) };
+                }
+            } else if let Some(q) = self.quads.get(child as usize) {
+                // SAFETY: as above. (Not the corners: finding them would wait for the quad.)
+                unsafe { _mm_prefetch::<_MM_HINT_T0>((q as *const Quad).cast()) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (child, count);
+    }
+
     /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
     /// shrink `tmax`; returning true stops the walk.
     fn walk(
@@ -439,61 +467,61 @@ impl Bvh {
         };
         let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
         let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
-        let neg = [inv[0] < 0.0, inv[1] < 0.0, inv[2] < 0.0];
+        let rb = SlabRay::new(inv, oi);
         // Pending children: (child, quad count (0: interior), entry distance). Deeper than
         // the array (a degenerate tree), they spill to the heap.
-        let mut stack = [(0u32, 0u32, 0f32); 32];
+        // Not initialised: only entries below `sp` are ever read (no memset per ray).
+        let mut stack = [std::mem::MaybeUninit::<(u32, u32, f32)>::uninit(); 32];
         let mut spill: Vec<(u32, u32, f32)> = Vec::new();
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             let n = &self.nodes[cur as usize];
-            let (mask, tnear) = slab4(n, neg, inv, oi, tmin, *tmax);
-            if mask.is_power_of_two() {
-                // One child in reach (the common case deep in the tree): go straight to it.
-                let i = mask.trailing_zeros() as usize;
+            let (mask, tnear) = slab4(n, &rb, tmin, *tmax);
+            if mask != 0 {
+                // Sort keys of the children in reach: the entry distance's bits (distances are
+                // ≥ tmin ≥ 0, whose bits order as the numbers do) above the lane.
+                let mut key = [0u64; 4];
+                let mut c = 0;
+                let mut m = mask;
+                while m != 0 {
+                    let i = m.trailing_zeros() as usize & 3;
+                    key[c & 3] = (u64::from(tnear[i].to_bits()) << 2) | i as u64;
+                    c += 1;
+                    m &= m - 1;
+                }
+                if ordered {
+                    // Nearest first (keys are distinct: the lane is in them).
+                    for a in 1..c {
+                        let x = key[a];
+                        let mut b = a;
+                        while b > 0 && key[b - 1] > x {
+                            key[b] = key[b - 1];
+                            b -= 1;
+                        }
+                        key[b] = x;
+                    }
+                }
+                // Push all but the first, farthest first; visit the first now (as if pushed
+                // and popped at once: the same order).
+                for &kk in key[1..c].iter().rev() {
+                    let i = (kk & 3) as usize;
+                    let e = (n.child[i], n.count[i], tnear[i]);
+                    self.prefetch(e.0, e.1);
+                    if sp < stack.len() {
+                        stack[sp].write(e);
+                        sp += 1;
+                    } else {
+                        spill.push(e);
+                    }
+                }
+                let i = (key[0] & 3) as usize;
                 if n.count[i] == 0 {
                     cur = n.child[i];
                     continue;
                 }
                 if self.leaf(n.child[i], n.count[i], &wt, tmin, tmax, on_hit) {
                     return;
-                }
-            } else if mask != 0 {
-                // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
-                // order as the numbers do) above the lane; misses sort last.
-                let mut key = [u64::MAX; 4];
-                for i in 0..4 {
-                    if mask & (1 << i) != 0 {
-                        key[i] = (u64::from(tnear[i].to_bits()) << 2) | i as u64;
-                    }
-                }
-                if ordered {
-                    // A sorting network, nearest first.
-                    let cx = |key: &mut [u64; 4], a: usize, b: usize| {
-                        let (x, y) = (key[a], key[b]);
-                        key[a] = x.min(y);
-                        key[b] = x.max(y);
-                    };
-                    cx(&mut key, 0, 1);
-                    cx(&mut key, 2, 3);
-                    cx(&mut key, 0, 2);
-                    cx(&mut key, 1, 3);
-                    cx(&mut key, 1, 2);
-                }
-                // Push farthest first, so the nearest is popped first.
-                for &kk in key.iter().rev() {
-                    if kk == u64::MAX {
-                        continue;
-                    }
-                    let i = (kk & 3) as usize;
-                    let e = (n.child[i], n.count[i], tnear[i]);
-                    if sp < stack.len() {
-                        stack[sp] = e;
-                        sp += 1;
-                    } else {
-                        spill.push(e);
-                    }
                 }
             }
             // Pop: leaves are tested as they come; the first interior node still in reach
@@ -503,7 +531,8 @@ impl Bvh {
                     e
                 } else if sp > 0 {
                     sp -= 1;
-                    stack[sp]
+                    // SAFETY: entries below `sp` were written by the pushes above.
+                    unsafe { stack[sp].assume_init() }
                 } else {
                     return;
                 };
@@ -520,6 +549,24 @@ impl Bvh {
                 break;
             }
         }
+    }
+}
+
+/// A ray prepared for the slab test: per axis its near and far row of a node's boxes (low
+/// or high, by the direction's sign) and the reciprocal direction and origin scaled by it.
+struct SlabRay {
+    near: [usize; 3],
+    far: [usize; 3],
+    inv: [f32; 3],
+    oi: [f32; 3],
+}
+
+impl SlabRay {
+    #[inline(always)]
+    fn new(inv: [f32; 3], oi: [f32; 3]) -> SlabRay {
+        let near: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { 3 + a } else { a });
+        let far: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { a } else { 3 + a });
+        SlabRay { near, far, inv, oi }
     }
 }
 
@@ -546,33 +593,27 @@ fn vslab(p: &[f32; 4], inv: f32, oi: f32) -> [f32; 4] {
 /// same children are visited.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn slab4(
-    n: &Node4,
-    neg: [bool; 3],
-    inv: [f32; 3],
-    oi: [f32; 3],
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; 4]) {
+fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
     use std::arch::x86_64::*;
-    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] arrays of the node
-    // and the store writes a [f32; 4], all unaligned-safe.
+    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] rows of the node
+    // (row indices < 6 by construction in SlabRay::new) and the store writes a [f32; 4], all
+    // unaligned-safe.
     unsafe {
-        let slab = |p: &[f32; 4], a: usize| {
+        let row = |i: usize| n.b.get_unchecked(i).as_ptr();
+        let slab = |i: usize, a: usize| {
             _mm_sub_ps(
-                _mm_mul_ps(_mm_loadu_ps(p.as_ptr()), _mm_set1_ps(inv[a])),
-                _mm_set1_ps(oi[a]),
+                _mm_mul_ps(_mm_loadu_ps(row(i)), _mm_set1_ps(r.inv[a])),
+                _mm_set1_ps(r.oi[a]),
             )
         };
-        let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
-        let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+        let (near, far) = (r.near, r.far);
         let t0 = _mm_max_ps(
-            _mm_max_ps(slab(near(0), 0), slab(near(1), 1)),
-            _mm_max_ps(slab(near(2), 2), _mm_set1_ps(tmin)),
+            _mm_max_ps(slab(near[0], 0), slab(near[1], 1)),
+            _mm_max_ps(slab(near[2], 2), _mm_set1_ps(tmin)),
         );
         let f = _mm_min_ps(
-            _mm_min_ps(slab(far(0), 0), slab(far(1), 1)),
-            slab(far(2), 2),
+            _mm_min_ps(slab(far[0], 0), slab(far[1], 1)),
+            slab(far[2], 2),
         );
         let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
         let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32;
@@ -585,16 +626,10 @@ fn slab4(
 /// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn slab4(
-    n: &Node4,
-    neg: [bool; 3],
-    inv: [f32; 3],
-    oi: [f32; 3],
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; 4]) {
-    let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
-    let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
+    let (inv, oi) = (r.inv, r.oi);
+    let near = |a: usize| &n.b[r.near[a]];
+    let far = |a: usize| &n.b[r.far[a]];
     let t0 = vmax(
         vmax(vslab(near(0), inv[0], oi[0]), vslab(near(1), inv[1], oi[1])),
         vmax(vslab(near(2), inv[2], oi[2]), [tmin; 4]),

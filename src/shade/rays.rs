@@ -234,9 +234,9 @@ fn mix3(v: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
 
 /// The shading records of a ray grid's vertices `k` (see [`HitVertex`]).
 #[inline]
-fn corners(rs: &RayScene, rg: &RayGrid, k: &[usize; 4]) -> [HitVertex; 4] {
+fn corners<'r>(rs: &'r RayScene, rg: &RayGrid, k: &[usize; 4]) -> [&'r HitVertex; 4] {
     let v = &rs.verts[rg.first..];
-    [v[k[0]], v[k[1]], v[k[2]], v[k[3]]]
+    [&v[k[0]], &v[k[1]], &v[k[2]], &v[k[3]]]
 }
 
 /// One hit to shade: which ray, where.
@@ -330,7 +330,7 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
         g.i[h] = hit.i;
         let c = corners(rs, rg, &k);
         let m3 = |f: fn(&HitVertex) -> Vec3| {
-            f(&c[0]) * w[0] + f(&c[1]) * w[1] + f(&c[2]) * w[2] + f(&c[3]) * w[3]
+            f(c[0]) * w[0] + f(c[1]) * w[1] + f(c[2]) * w[2] + f(c[3]) * w[3]
         };
         g.n[h] = m3(|v| v.n);
         g.ng[h] = m3(|v| v.ng);
@@ -440,7 +440,8 @@ impl RayTracer for Tracer<'_, '_> {
                 let prim = rs.grids[h.grid as usize].prim;
                 rs.shade_as.get(prim).copied().unwrap_or(prim)
             };
-            pending.sort_by_key(|h| (shade_as(h), h.ray));
+            // Keys are distinct (one hit per ray per layer): unstable sorting is the same order.
+            pending.sort_unstable_by_key(|h| (shade_as(h), h.ray));
             let mut s = 0;
             while s < pending.len() {
                 let prim = shade_as(&pending[s]);
