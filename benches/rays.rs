@@ -138,7 +138,14 @@ fn bench(c: &mut Criterion) {
     let mut dist = vec![0f32; BATCH];
     let batches: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..16).map(|k| rays(BATCH, k)).collect();
     let hits = {
-        tracer.trace(&batches[0].0, &batches[0].1, &active, &mut ci, &mut dist);
+        tracer.trace(
+            &batches[0].0,
+            &batches[0].1,
+            &[],
+            &active,
+            &mut ci,
+            &mut dist,
+        );
         dist.iter().filter(|d| d.is_finite()).count()
     };
     eprintln!("hit fraction: {:.2}", hits as f64 / BATCH as f64);
@@ -150,7 +157,7 @@ fn bench(c: &mut Criterion) {
         let c0 = thread_cpu();
         for k in 0..n {
             let (o, d) = &batches[k % batches.len()];
-            tracer.trace(o, d, &active, &mut ci, &mut dist);
+            tracer.trace(o, d, &[], &active, &mut ci, &mut dist);
         }
         let s = t.elapsed().as_secs_f64();
         let cpu = thread_cpu().zip(c0).map(|(b, a)| b - a);
@@ -173,7 +180,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let (o, d) = &batches[k % batches.len()];
             k += 1;
-            tracer.trace(o, d, &active, &mut ci, &mut dist);
+            tracer.trace(o, d, &[], &active, &mut ci, &mut dist);
         })
     });
     g.finish();

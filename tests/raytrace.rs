@@ -537,3 +537,146 @@ fn ray_geometry_is_watertight_where_grids_of_different_rates_meet() {
         assert_eq!(misses, 0, "{prim}: {misses} of {n} rays slipped through");
     }
 }
+
+/// Traces rays with explicit cones at a 20 × 20 bilinear patch in the plane z = 10 (s along
+/// x, t along y) shaded by `footprint`; returns each ray's colour.
+fn footprint_hits(rays: &[(glam::Vec3, arbor::ray::Cone)]) -> Vec<glam::Vec3> {
+    use arbor::diag::{Diagnostics, SourceMap};
+    use arbor::render::Camera;
+    use arbor::scene::{build_scenes, BuildContext};
+    use arbor::shade::exec::RayTracer;
+    use arbor::shade::rays::Tracer;
+    use arbor::shade::system::ShadeSystem;
+    use arbor::sl::ShaderLibrary;
+    use glam::Vec3;
+    let rib = "Format 64 64 1\nProjection \"perspective\" \"fov\" [60]\nWorldBegin\n\
+               Surface \"footprint\"\n\
+               Patch \"bilinear\" \"P\" [-10 -10 10  10 -10 10  -10 10 10  10 10 10]\nWorldEnd\n";
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
+    let ctx = BuildContext {
+        sources: &sources,
+        diags: &diags,
+        shader_paths: vec![],
+        texture_paths: vec![],
+        archive_paths: vec![],
+        base_dir: None,
+        frames: None,
+        procedurals: Default::default(),
+    };
+    let scene = build_scenes(reqs, &ctx).remove(0);
+    let library = ShaderLibrary::new(common::stdlib_options(&[shaders()]));
+    let camera = Camera::new(&scene);
+    let sys = ShadeSystem {
+        library: &library,
+        sources: &sources,
+        diags: &diags,
+        textures: None,
+        aovs: vec![],
+        rays: Default::default(),
+    };
+    let tracer = Tracer {
+        sys: &sys,
+        scene: &scene,
+        camera: &camera,
+        depth: 0,
+        skip_light: None,
+    };
+    let n = rays.len();
+    let org = vec![Vec3::ZERO; n];
+    let dir: Vec<Vec3> = rays.iter().map(|r| r.0).collect();
+    let cones: Vec<arbor::ray::Cone> = rays.iter().map(|r| r.1).collect();
+    let mut ci = vec![Vec3::ZERO; n];
+    let mut dist = vec![0f32; n];
+    tracer.trace(&org, &dir, &cones, &vec![true; n], &mut ci, &mut dist);
+    ci
+}
+
+#[test]
+fn derivatives_at_a_ray_hit_follow_the_ray_cone() {
+    // Cone of width 0.01 at the eye spreading 0.002 per unit. Head on, at distance 10 the
+    // footprint is 0.03 wide: area(P) = 0.03², s and t change by 0.03 / 20 across it. At 45°
+    // in x (distance 10√2) the width is w = 0.01 + 0.002·10√2 and the footprint stretches to
+    // w√2 along x: area = √2·w², s changes by w√2 / 20, t by w / 20.
+    use arbor::ray::Cone;
+    use glam::Vec3;
+    let cone = Cone {
+        width: 0.01,
+        spread: 0.002,
+    };
+    let got = footprint_hits(&[
+        (Vec3::Z, cone),
+        (Vec3::new(1.0, 0.0, 1.0), cone),
+        (Vec3::Z, Cone::default()),
+    ]);
+    let close = |a: f32, b: f32| (a - b).abs() <= 0.01 * b.abs() + 1e-7;
+    let head_on = Vec3::new(0.03, 0.0015, 0.0015);
+    assert!(
+        (0..3).all(|c| close(got[0][c], head_on[c])),
+        "head on: {:?}, want {head_on:?}",
+        got[0]
+    );
+    let w = 0.01 + 0.002 * 10.0 * std::f32::consts::SQRT_2;
+    let oblique = Vec3::new(
+        (std::f32::consts::SQRT_2 * w * w).sqrt(),
+        w * std::f32::consts::SQRT_2 / 20.0,
+        w / 20.0,
+    );
+    assert!(
+        (0..3).all(|c| close(got[1][c], oblique[c])),
+        "45°: {:?}, want {oblique:?}",
+        got[1]
+    );
+    // A ray of no width sees a point: no derivatives.
+    assert_eq!(got[2], Vec3::ZERO);
+}
+
+#[test]
+fn the_footprint_seen_in_a_flat_mirror_grows_with_the_whole_path() {
+    // Perspective camera at the origin, a flat mirror at z = 5 facing it, and behind the
+    // camera a wall at z = −5 or z = −15 that shows its footprint's width (sqrt(area(P))).
+    // The camera's pixel cone reflects off a flat mirror unchanged, so the width at the
+    // wall is the pixel cone's at the whole path length: 5 + 10 against 5 + 20 (the
+    // mirror's micropolygon width spreading by the angle between neighbouring reflected
+    // rays).
+    let render = |wall: f32| {
+        let rib = format!(
+            r#"Format 16 16 1
+Projection "perspective" "fov" [30]
+PixelSamples 2 2
+WorldBegin
+AttributeBegin
+  Surface "mirrortest"
+  Patch "bilinear" "P" [-3 -3 5  3 -3 5  -3 3 5  3 3 5]
+AttributeEnd
+AttributeBegin
+  Surface "footprint"
+  Patch "bilinear" "P" [-40 -40 {wall}  40 -40 {wall}  -40 40 {wall}  40 40 {wall}]
+AttributeEnd
+WorldEnd
+"#
+        );
+        let rgb = film_rgb(&render_rib(&rib, &[shaders()]));
+        // The four centre pixels' red.
+        [(7, 7), (8, 7), (7, 8), (8, 8)]
+            .iter()
+            .map(|&(x, y)| rgb[(y * 16 + x) * 3])
+            .sum::<f32>()
+            / 4.0
+    };
+    let (near, far) = (render(-5.0), render(-15.0));
+    assert!(near > 0.0, "the footprint has a width: {near}");
+    // Micropolygons of ShadingRate 1 are a pixel wide: the cone is the pixel's.
+    let pixel = 2.0 * 15f32.to_radians().tan() / 16.0;
+    assert!(
+        (near - 15.0 * pixel).abs() < 0.05 * 15.0 * pixel,
+        "footprint {near}, want the pixel cone's {}",
+        15.0 * pixel
+    );
+    let ratio = far / near;
+    assert!(
+        (ratio - 25.0 / 15.0).abs() < 0.03 * 25.0 / 15.0,
+        "footprints {near} and {far}: ratio {ratio}, want 25/15"
+    );
+}

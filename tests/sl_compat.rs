@@ -54,6 +54,7 @@ fn run(prog: &Program, n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
         textures: None,
         seed: 7,
         rays: None,
+        cones: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

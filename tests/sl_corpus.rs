@@ -128,6 +128,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         textures: None,
         seed: 11,
         rays: None,
+        cones: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

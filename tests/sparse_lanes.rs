@@ -58,6 +58,7 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64, u64) {
         textures: None,
         seed: 7,
         rays: None,
+        cones: None,
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.sparse = sparse;

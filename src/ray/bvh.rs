@@ -1,7 +1,7 @@
 //! A compact binned-SAH bounding volume hierarchy over micropolygon quads.
 //!
-//! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid) with the grid and
-//! quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
+//! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid, in a shared vertex
+//! array) with the grid and quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
 //! every hit) is the same whatever the thread count; nodes are 4 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to four
@@ -19,14 +19,27 @@
 
 use glam::Vec3;
 
-/// One micropolygon: corners `p[0]=v00, p[1]=v10, p[2]=v01, p[3]=v11`.
+/// One micropolygon, its corners in the shared vertex array: `v00 = verts[k]`,
+/// `v10 = verts[k + 1]`, `v01 = verts[k + row]`, `v11 = verts[k + row + 1]` (a grid's points
+/// are stored once, row by row, and its micropolygons point into them: 16 bytes a quad
+/// instead of 56, and the quads of a leaf share their corners' cache lines).
 #[derive(Clone, Copy, Debug)]
 pub struct Quad {
-    pub p: [Vec3; 4],
+    pub k: u32,
+    pub row: u32,
     /// Index of the ray grid it belongs to.
     pub grid: u32,
     /// Quad index inside the grid: `j * (nu − 1) + i`.
     pub index: u32,
+}
+
+impl Quad {
+    /// The corners `v00 v10 v01 v11`.
+    #[inline(always)]
+    pub fn corners(&self, verts: &[Vec3]) -> [Vec3; 4] {
+        let (k, r) = (self.k as usize, self.row as usize);
+        [verts[k], verts[k + 1], verts[k + r], verts[k + r + 1]]
+    }
 }
 
 /// A 4-wide node: the boxes of up to four children side by side (lane `i` of each array),
@@ -34,9 +47,10 @@ pub struct Quad {
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    /// Box corners per axis (x, y, z), per child lane. Empty lanes hold an inverted box.
-    lo: [[f32; 4]; 3],
-    hi: [[f32; 4]; 3],
+    /// Box corners per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones (a
+    /// ray picks its near and far row per axis once, by its direction's signs). Empty lanes
+    /// hold an inverted box.
+    b: [[f32; 4]; 6],
     /// Interior child: node index. Leaf child: its first quad.
     child: [u32; 4],
     /// Quads in a leaf child; 0 for an interior child (and an empty lane).
@@ -45,8 +59,14 @@ struct Node4 {
 
 impl Node4 {
     const EMPTY: Node4 = Node4 {
-        lo: [[f32::INFINITY; 4]; 3],
-        hi: [[f32::NEG_INFINITY; 4]; 3],
+        b: [
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
         child: [0; 4],
         count: [0; 4],
     };
@@ -67,6 +87,8 @@ pub struct Hit {
 pub struct Bvh {
     nodes: Vec<Node4>,
     pub quads: Vec<Quad>,
+    /// The quads' corners (see [`Quad`]).
+    pub verts: Vec<Vec3>,
     /// The root when the whole tree is one leaf (then `nodes` is empty): its quad count.
     root_leaf: u32,
 }
@@ -135,16 +157,19 @@ impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
     /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
     /// alone (see the module invariants).
-    pub fn build(quads: Vec<Quad>) -> Bvh {
+    pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
         if n == 0 {
             return Bvh::default();
         }
         let boxes: Vec<Aabb> = quads
             .iter()
-            .map(|q| Aabb {
-                min: q.p[0].min(q.p[1]).min(q.p[2].min(q.p[3])),
-                max: q.p[0].max(q.p[1]).max(q.p[2].max(q.p[3])),
+            .map(|q| {
+                let p = q.corners(&verts);
+                Aabb {
+                    min: p[0].min(p[1]).min(p[2].min(p[3])),
+                    max: p[0].max(p[1]).max(p[2].max(p[3])),
+                }
             })
             .collect();
         let cent: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
@@ -277,6 +302,7 @@ impl Bvh {
         let mut bvh = Bvh {
             nodes: Vec::with_capacity(nodes.len() / 2 + 1),
             quads: sorted,
+            verts,
             root_leaf: 0,
         };
         if nodes[0].count > 0 {
@@ -311,8 +337,8 @@ impl Bvh {
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
             for axis in 0..3 {
-                node.lo[axis][lane] = c.bb.min[axis];
-                node.hi[axis][lane] = c.bb.max[axis];
+                node.b[axis][lane] = c.bb.min[axis];
+                node.b[3 + axis][lane] = c.bb.max[axis];
             }
             if c.count > 0 {
                 node.child[lane] = c.first;
@@ -383,13 +409,34 @@ impl Bvh {
     ) -> bool {
         let (s, e) = (first as usize, (first + count) as usize);
         for q in &self.quads[s..e] {
-            if let Some((t, a, b)) = intersect_quad_wt(q, wt, tmin, *tmax) {
+            if let Some((t, a, b)) = intersect_quad_wt(q.corners(&self.verts), wt, tmin, *tmax) {
                 if on_hit(q, t, a, b, tmax) {
                     return true;
                 }
             }
         }
         false
+    }
+
+    /// Asks for the cache line of a pushed child (an interior node, or a leaf's first quads):
+    /// a later visit then finds it on the way. No effect on results.
+    #[inline(always)]
+    fn prefetch(&self, child: u32, count: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            if count == 0 {
+                if let Some(n) = self.nodes.get(child as usize) {
+                    // SAFETY: a prefetch of a valid reference's address (SSE, x86-64 baseline).
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>((n as *const Node4).cast()) };
+                }
+            } else if let Some(q) = self.quads.get(child as usize) {
+                // SAFETY: as above. (Not the corners: finding them would wait for the quad.)
+                unsafe { _mm_prefetch::<_MM_HINT_T0>((q as *const Quad).cast()) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (child, count);
     }
 
     /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
@@ -420,61 +467,61 @@ impl Bvh {
         };
         let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
         let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
-        let neg = [inv[0] < 0.0, inv[1] < 0.0, inv[2] < 0.0];
+        let rb = SlabRay::new(inv, oi);
         // Pending children: (child, quad count (0: interior), entry distance). Deeper than
         // the array (a degenerate tree), they spill to the heap.
-        let mut stack = [(0u32, 0u32, 0f32); 32];
+        // Not initialised: only entries below `sp` are ever read (no memset per ray).
+        let mut stack = [std::mem::MaybeUninit::<(u32, u32, f32)>::uninit(); 32];
         let mut spill: Vec<(u32, u32, f32)> = Vec::new();
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             let n = &self.nodes[cur as usize];
-            let (mask, tnear) = slab4(n, neg, inv, oi, tmin, *tmax);
-            if mask.is_power_of_two() {
-                // One child in reach (the common case deep in the tree): go straight to it.
-                let i = mask.trailing_zeros() as usize;
+            let (mask, tnear) = slab4(n, &rb, tmin, *tmax);
+            if mask != 0 {
+                // Sort keys of the children in reach: the entry distance's bits (distances are
+                // ≥ tmin ≥ 0, whose bits order as the numbers do) above the lane.
+                let mut key = [0u64; 4];
+                let mut c = 0;
+                let mut m = mask;
+                while m != 0 {
+                    let i = m.trailing_zeros() as usize & 3;
+                    key[c & 3] = (u64::from(tnear[i].to_bits()) << 2) | i as u64;
+                    c += 1;
+                    m &= m - 1;
+                }
+                if ordered {
+                    // Nearest first (keys are distinct: the lane is in them).
+                    for a in 1..c {
+                        let x = key[a];
+                        let mut b = a;
+                        while b > 0 && key[b - 1] > x {
+                            key[b] = key[b - 1];
+                            b -= 1;
+                        }
+                        key[b] = x;
+                    }
+                }
+                // Push all but the first, farthest first; visit the first now (as if pushed
+                // and popped at once: the same order).
+                for &kk in key[1..c].iter().rev() {
+                    let i = (kk & 3) as usize;
+                    let e = (n.child[i], n.count[i], tnear[i]);
+                    self.prefetch(e.0, e.1);
+                    if sp < stack.len() {
+                        stack[sp].write(e);
+                        sp += 1;
+                    } else {
+                        spill.push(e);
+                    }
+                }
+                let i = (key[0] & 3) as usize;
                 if n.count[i] == 0 {
                     cur = n.child[i];
                     continue;
                 }
                 if self.leaf(n.child[i], n.count[i], &wt, tmin, tmax, on_hit) {
                     return;
-                }
-            } else if mask != 0 {
-                // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
-                // order as the numbers do) above the lane; misses sort last.
-                let mut key = [u64::MAX; 4];
-                for i in 0..4 {
-                    if mask & (1 << i) != 0 {
-                        key[i] = (u64::from(tnear[i].to_bits()) << 2) | i as u64;
-                    }
-                }
-                if ordered {
-                    // A sorting network, nearest first.
-                    let cx = |key: &mut [u64; 4], a: usize, b: usize| {
-                        let (x, y) = (key[a], key[b]);
-                        key[a] = x.min(y);
-                        key[b] = x.max(y);
-                    };
-                    cx(&mut key, 0, 1);
-                    cx(&mut key, 2, 3);
-                    cx(&mut key, 0, 2);
-                    cx(&mut key, 1, 3);
-                    cx(&mut key, 1, 2);
-                }
-                // Push farthest first, so the nearest is popped first.
-                for &kk in key.iter().rev() {
-                    if kk == u64::MAX {
-                        continue;
-                    }
-                    let i = (kk & 3) as usize;
-                    let e = (n.child[i], n.count[i], tnear[i]);
-                    if sp < stack.len() {
-                        stack[sp] = e;
-                        sp += 1;
-                    } else {
-                        spill.push(e);
-                    }
                 }
             }
             // Pop: leaves are tested as they come; the first interior node still in reach
@@ -484,7 +531,8 @@ impl Bvh {
                     e
                 } else if sp > 0 {
                     sp -= 1;
-                    stack[sp]
+                    // SAFETY: entries below `sp` were written by the pushes above.
+                    unsafe { stack[sp].assume_init() }
                 } else {
                     return;
                 };
@@ -501,6 +549,24 @@ impl Bvh {
                 break;
             }
         }
+    }
+}
+
+/// A ray prepared for the slab test: per axis its near and far row of a node's boxes (low
+/// or high, by the direction's sign) and the reciprocal direction and origin scaled by it.
+struct SlabRay {
+    near: [usize; 3],
+    far: [usize; 3],
+    inv: [f32; 3],
+    oi: [f32; 3],
+}
+
+impl SlabRay {
+    #[inline(always)]
+    fn new(inv: [f32; 3], oi: [f32; 3]) -> SlabRay {
+        let near: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { 3 + a } else { a });
+        let far: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { a } else { 3 + a });
+        SlabRay { near, far, inv, oi }
     }
 }
 
@@ -527,33 +593,27 @@ fn vslab(p: &[f32; 4], inv: f32, oi: f32) -> [f32; 4] {
 /// same children are visited.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn slab4(
-    n: &Node4,
-    neg: [bool; 3],
-    inv: [f32; 3],
-    oi: [f32; 3],
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; 4]) {
+fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
     use std::arch::x86_64::*;
-    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] arrays of the node
-    // and the store writes a [f32; 4], all unaligned-safe.
+    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] rows of the node
+    // (row indices < 6 by construction in SlabRay::new) and the store writes a [f32; 4], all
+    // unaligned-safe.
     unsafe {
-        let slab = |p: &[f32; 4], a: usize| {
+        let row = |i: usize| n.b.get_unchecked(i).as_ptr();
+        let slab = |i: usize, a: usize| {
             _mm_sub_ps(
-                _mm_mul_ps(_mm_loadu_ps(p.as_ptr()), _mm_set1_ps(inv[a])),
-                _mm_set1_ps(oi[a]),
+                _mm_mul_ps(_mm_loadu_ps(row(i)), _mm_set1_ps(r.inv[a])),
+                _mm_set1_ps(r.oi[a]),
             )
         };
-        let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
-        let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+        let (near, far) = (r.near, r.far);
         let t0 = _mm_max_ps(
-            _mm_max_ps(slab(near(0), 0), slab(near(1), 1)),
-            _mm_max_ps(slab(near(2), 2), _mm_set1_ps(tmin)),
+            _mm_max_ps(slab(near[0], 0), slab(near[1], 1)),
+            _mm_max_ps(slab(near[2], 2), _mm_set1_ps(tmin)),
         );
         let f = _mm_min_ps(
-            _mm_min_ps(slab(far(0), 0), slab(far(1), 1)),
-            slab(far(2), 2),
+            _mm_min_ps(slab(far[0], 0), slab(far[1], 1)),
+            slab(far[2], 2),
         );
         let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
         let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32;
@@ -566,16 +626,10 @@ fn slab4(
 /// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn slab4(
-    n: &Node4,
-    neg: [bool; 3],
-    inv: [f32; 3],
-    oi: [f32; 3],
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; 4]) {
-    let near = |a: usize| if neg[a] { &n.hi[a] } else { &n.lo[a] };
-    let far = |a: usize| if neg[a] { &n.lo[a] } else { &n.hi[a] };
+fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
+    let (inv, oi) = (r.inv, r.oi);
+    let near = |a: usize| &n.b[r.near[a]];
+    let far = |a: usize| &n.b[r.far[a]];
     let t0 = vmax(
         vmax(vslab(near(0), inv[0], oi[0]), vslab(near(1), inv[1], oi[1])),
         vmax(vslab(near(2), inv[2], oi[2]), [tmin; 4]),
@@ -680,8 +734,8 @@ fn tri_wt(a: [f32; 3], b: [f32; 3], c: [f32; 3], tmin: f32, tmax: f32) -> Option
 /// The quad's two triangles `(v00 v10 v11)` and `(v00 v11 v01)`, watertight; returns
 /// (t, a, b).
 #[inline]
-fn intersect_quad_wt(q: &Quad, r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    let [p00, p10, p01, p11] = q.p;
+fn intersect_quad_wt(p: [Vec3; 4], r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    let [p00, p10, p01, p11] = p;
     let (a, b, c, d) = (r.xform(p00), r.xform(p10), r.xform(p01), r.xform(p11));
     let mut best = None;
     let mut tm = tmax;
@@ -699,31 +753,46 @@ fn intersect_quad_wt(q: &Quad, r: &WtRay, tmin: f32, tmax: f32) -> Option<(f32, 
 
 /// [`intersect_quad_wt`] for a ray given by origin and direction.
 #[cfg(test)]
-fn intersect_quad(q: &Quad, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    intersect_quad_wt(q, &WtRay::new(o, d), tmin, tmax)
+fn intersect_quad(p: [Vec3; 4], o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    intersect_quad_wt(p, &WtRay::new(o, d), tmin, tmax)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn square(z: f32, grid: u32) -> Quad {
+    /// A quad of its own four corners `v00 v10 v01 v11`, appended to `verts`.
+    fn quad(verts: &mut Vec<Vec3>, p: [Vec3; 4], grid: u32) -> Quad {
+        let k = verts.len() as u32;
+        verts.extend(p);
         Quad {
-            p: [
+            k,
+            row: 2,
+            grid,
+            index: 0,
+        }
+    }
+
+    fn square(verts: &mut Vec<Vec3>, z: f32, grid: u32) -> Quad {
+        quad(
+            verts,
+            [
                 Vec3::new(-1.0, -1.0, z),
                 Vec3::new(1.0, -1.0, z),
                 Vec3::new(-1.0, 1.0, z),
                 Vec3::new(1.0, 1.0, z),
             ],
             grid,
-            index: 0,
-        }
+        )
     }
 
     #[test]
     fn closest_hit_of_stacked_squares() {
-        let quads: Vec<Quad> = (0..100).map(|k| square(k as f32 + 1.0, k)).collect();
-        let bvh = Bvh::build(quads);
+        let mut verts = Vec::new();
+        let quads: Vec<Quad> = (0..100)
+            .map(|k| square(&mut verts, k as f32 + 1.0, k))
+            .collect();
+        let bvh = Bvh::build(quads, verts);
         let h = bvh
             .closest(Vec3::new(0.5, 0.0, 0.0), Vec3::Z, 0.0, 1e30)
             .unwrap();
@@ -753,23 +822,20 @@ mod tests {
             (h as f32 / u32::MAX as f32) * 2.0 - 1.0
         };
         let mut quads = Vec::new();
+        let mut verts = Vec::new();
         for k in 0..500 {
             let c = Vec3::new(rnd() * 5.0, rnd() * 5.0, rnd() * 5.0);
             let u = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
             let v = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
-            quads.push(Quad {
-                p: [c, c + u, c + v, c + u + v],
-                grid: k,
-                index: 0,
-            });
+            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
         }
-        let bvh = Bvh::build(quads.clone());
+        let bvh = Bvh::build(quads.clone(), verts.clone());
         for _ in 0..300 {
             let o = Vec3::new(rnd(), rnd(), rnd()) * 6.0;
             let d = Vec3::new(rnd(), rnd(), rnd()).normalize_or(Vec3::X);
             let mut best: Option<(f32, u32)> = None;
             for q in &quads {
-                if let Some((t, _, _)) = intersect_quad(q, o, d, 0.0, 1e30) {
+                if let Some((t, _, _)) = intersect_quad(q.corners(&verts), o, d, 0.0, 1e30) {
                     if best.is_none_or(|b| t < b.0) {
                         best = Some((t, q.grid));
                     }

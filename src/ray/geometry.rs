@@ -35,11 +35,30 @@ const MAX_SIDE: usize = 24;
 /// Most splits along one path (then the surface dices at the clamped rate).
 const MAX_DEPTH: u32 = 20;
 
-/// One diced, displaced grid of ray geometry.
+/// What hit shading interpolates at a vertex of a ray grid, side by side: a hit reads the
+/// records of its micropolygon's four corners (two pairs of neighbours) instead of ten
+/// arrays four times over (the cache misses of hit shading, on large scenes).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HitVertex {
+    pub n: Vec3,
+    pub ng: Vec3,
+    pub dpdu: Vec3,
+    pub dpdv: Vec3,
+    pub cs: Vec3,
+    pub os: Vec3,
+    /// u, v, s, t.
+    pub uvst: [f32; 4],
+}
+
+/// One diced, displaced grid of ray geometry. Its per-vertex shading data (`n`, `ng`, `dpdu`,
+/// `dpdv`, `u`, `v`, `s`, `t`, `cs`, `os`) lives in [`RayScene::verts`] from `first` on (the
+/// grid's own arrays for them are emptied); `p` and the primitive variables stay.
 #[derive(Debug)]
 pub struct RayGrid {
     pub prim: usize,
     pub grid: Grid,
+    /// Index of the grid's first vertex in [`RayScene::verts`].
+    pub first: usize,
     /// Seen by reflection/refraction rays (`trace`, `gather`, `indirectdiffuse`).
     pub trace: bool,
     /// Blocks shadow rays (`transmission`, `shadow("raytrace")`, `occlusion`).
@@ -52,6 +71,8 @@ pub struct RayGrid {
 #[derive(Debug, Default)]
 pub struct RayScene {
     pub grids: Vec<RayGrid>,
+    /// Every grid's vertices' shading data (see [`RayGrid::first`]).
+    pub verts: Vec<HitVertex>,
     pub bvh: Bvh,
     /// Total micropolygons.
     pub micropolygons: usize,
@@ -140,6 +161,7 @@ pub fn build(
     let min_dist = (0.05 * diag).max(camera.near.max(1e-6));
     let mut out = RayScene::default();
     let mut quads = Vec::new();
+    let mut verts: Vec<Vec3> = Vec::new();
     for (prim, surfs, (trace, shadows)) in all {
         let first_grid = out.grids.len();
         let a = &scene.primitives[prim].attributes;
@@ -196,11 +218,13 @@ pub fn build(
             }
             let gi = out.grids.len() as u32;
             let (gu, gv) = (grid.nu, grid.nv);
+            let base = verts.len();
+            verts.extend_from_slice(&grid.p);
             for j in 0..gv - 1 {
                 for i in 0..gu - 1 {
-                    let k = j * gu + i;
                     quads.push(Quad {
-                        p: [grid.p[k], grid.p[k + 1], grid.p[k + gu], grid.p[k + gu + 1]],
+                        k: (base + j * gu + i) as u32,
+                        row: gu as u32,
                         grid: gi,
                         index: (j * (gu - 1) + i) as u32,
                     });
@@ -210,15 +234,49 @@ pub fn build(
             out.grids.push(RayGrid {
                 prim,
                 grid,
+                first: 0,
                 trace,
                 shadows,
                 area_light: a.area_light,
             });
         }
-        out.crack_fills += fill_cracks(&out.grids[first_grid..], first_grid, &mut quads);
+        out.crack_fills +=
+            fill_cracks(&out.grids[first_grid..], first_grid, &mut quads, &mut verts);
+    }
+    // The shading data side by side (see HitVertex); the grids' own arrays are freed.
+    let total: usize = out.grids.iter().map(|g| g.grid.p.len()).sum();
+    out.verts.reserve_exact(total);
+    for rg in &mut out.grids {
+        rg.first = out.verts.len();
+        let g = &mut rg.grid;
+        out.verts.extend((0..g.p.len()).map(|k| HitVertex {
+            n: g.n[k],
+            ng: g.ng[k],
+            dpdu: g.dpdu[k],
+            dpdv: g.dpdv[k],
+            cs: g.cs[k],
+            os: g.os[k],
+            uvst: [g.u[k], g.v[k], g.s[k], g.t[k]],
+        }));
+        for v in [
+            &mut g.n,
+            &mut g.ng,
+            &mut g.dpdu,
+            &mut g.dpdv,
+            &mut g.cs,
+            &mut g.os,
+            &mut g.i,
+            &mut g.ci,
+            &mut g.oi,
+        ] {
+            *v = Vec::new();
+        }
+        for v in [&mut g.u, &mut g.v, &mut g.s, &mut g.t] {
+            *v = Vec::new();
+        }
     }
     out.bound = (!scene_bound.is_empty()).then_some(scene_bound);
-    out.bvh = Bvh::build(quads);
+    out.bvh = Bvh::build(quads, verts);
     out
 }
 
@@ -325,9 +383,15 @@ impl RateModel {
 /// covers the sliver between the edge and the neighbour's polyline. Done from both sides,
 /// this closes T-junctions and edges whose vertices interleave. Each fill is a quad whose
 /// second triangle is degenerate, belonging to the micropolygon along the edge (its hits
-/// shade with that micropolygon's values). Deterministic: candidates are sorted.
+/// shade with that micropolygon's values), its corners appended to `corners` (the BVH's
+/// vertex array). Deterministic: candidates are sorted.
 /// `grids[k]` is ray grid `first + k`; returns the number of fills added.
-pub fn fill_cracks(grids: &[RayGrid], first: usize, quads: &mut Vec<Quad>) -> usize {
+pub fn fill_cracks(
+    grids: &[RayGrid],
+    first: usize,
+    quads: &mut Vec<Quad>,
+    corners: &mut Vec<Vec3>,
+) -> usize {
     use std::collections::HashMap;
     if grids.len() < 2 {
         return 0;
@@ -466,10 +530,12 @@ pub fn fill_cracks(grids: &[RayGrid], first: usize, quads: &mut Vec<Quad>) -> us
                 .collect();
             for pair in fan.windows(2) {
                 quads.push(Quad {
-                    p: [a, pair[0], pair[1], pair[1]],
+                    k: corners.len() as u32,
+                    row: 2,
                     grid: (first + s.grid) as u32,
                     index: s.quads[e],
                 });
+                corners.extend([a, pair[0], pair[1], pair[1]]);
                 added += 1;
             }
         }

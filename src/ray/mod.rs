@@ -59,6 +59,31 @@ impl std::fmt::Debug for RayCache {
     }
 }
 
+/// A ray cone (Amanatides 1984; the "ray cones" of Akenine-Möller et al. 2019, a one-number
+/// ray differential): the width of the ray's footprint where it starts and how fast the width
+/// grows per unit of distance (the spread angle between neighbouring rays, radians). A
+/// converging cone (a concave mirror) has a negative spread; its width is taken as the
+/// magnitude. Hit shading uses the width at the hit for its derivatives and texture filter
+/// widths (see `shade::rays`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Cone {
+    pub width: f32,
+    pub spread: f32,
+}
+
+impl Cone {
+    /// The footprint width `dist` along the ray.
+    #[inline]
+    pub fn width_at(&self, dist: f32) -> f32 {
+        let w = (self.width + self.spread * dist).abs();
+        if w.is_finite() {
+            w
+        } else {
+            0.0
+        }
+    }
+}
+
 /// A uniform number in [0, 1) from a hash.
 #[inline]
 pub fn unit(h: u32) -> f32 {

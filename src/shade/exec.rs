@@ -192,6 +192,9 @@ pub struct Env<'a> {
     pub seed: u32,
     /// Ray queries (None: no ray tracing here; ray functions return their miss values).
     pub rays: Option<&'a dyn RayTracer>,
+    /// On a grid of ray hits: each point's incoming ray cone, its width taken at the hit
+    /// (rays cast from the point start with this footprint). None elsewhere.
+    pub cones: Option<&'a [crate::ray::Cone]>,
 }
 
 /// Ray queries from shaders, answered by the shading system over the frame's ray geometry.
@@ -201,8 +204,17 @@ pub trait RayTracer {
     fn depth(&self) -> u32;
     /// The hit's shaded `Ci` along each active ray (black on a miss or past the depth limit;
     /// partly transparent hits are seen through) and the distance to the first hit
-    /// (infinite on a miss), in units of `dir`'s length.
-    fn trace(&self, org: &[Vec3], dir: &[Vec3], active: &[bool], ci: &mut [Vec3], dist: &mut [f32]);
+    /// (infinite on a miss), in units of `dir`'s length. `cones` (one per ray, or empty for
+    /// rays of no width) set the footprint the hit is shaded over.
+    fn trace(
+        &self,
+        org: &[Vec3],
+        dir: &[Vec3],
+        cones: &[crate::ray::Cone],
+        active: &[bool],
+        ci: &mut [Vec3],
+        dist: &mut [f32],
+    );
     /// The fraction of light passing from `from` to `to` (1: nothing in the way), through the
     /// opacity `Os` of every shadow-casting surface between.
     fn transmission(&self, from: &[Vec3], to: &[Vec3], active: &[bool], out: &mut [Vec3]);
@@ -1406,6 +1418,12 @@ impl<'a> Exec<'a> {
         let mut ci = vec![Vec3::ZERO; n];
         let mut oi = vec![Vec3::ZERO; n];
         let mut dist = vec![0f32; n];
+        let cones = crate::shade::ops::rayops::cones(
+            self,
+            &p,
+            &d,
+            crate::shade::ops::rayops::sample_spread(cone, count),
+        );
         for k in 0..count {
             let dirs: Vec<Vec3> = (0..n)
                 .map(|i| {
@@ -1414,7 +1432,7 @@ impl<'a> Exec<'a> {
                     crate::ray::cosine_dir(d[i], u1, u2, cone)
                 })
                 .collect();
-            rt.trace(&p, &dirs, &start.bits, &mut ci, &mut dist);
+            rt.trace(&p, &dirs, &cones, &start.bits, &mut ci, &mut dist);
             let _ = &mut oi;
             let hit: Vec<bool> = (0..n)
                 .map(|i| start.bits[i] && dist[i].is_finite())

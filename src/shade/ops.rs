@@ -18,7 +18,7 @@ use crate::sl::builtins::Builtin;
 use crate::sl::ir::*;
 
 #[path = "rayops.rs"]
-mod rayops;
+pub(crate) mod rayops;
 
 fn take(ex: &mut Exec, r: Reg) -> Slot {
     std::mem::take(&mut ex.regs[r as usize])
@@ -494,14 +494,41 @@ fn arg<'a>(ex: &'a Exec, args: &[Reg], i: usize) -> &'a Slot {
     &ex.regs[args[i] as usize]
 }
 
-/// Central differences along u (`dir` 0) or v (`dir` 1) of a float field, divided by the step.
+/// `Env::nu` of a grid of ray hits shaded with their ray differentials (`Env::nv` is then the
+/// number of hits): points `3h`, `3h + 1` and `3h + 2` are hit `h` and the surface one ray
+/// footprint away from it along u and along v (see `shade::rays`). Derivatives are the
+/// differences across the footprint divided by the step (`du`, `dv`), the same at the three
+/// points, so `Du(x)·du` is the change of `x` over the ray's footprint as it is over a
+/// micropolygon on a camera grid.
+pub const TRIPLES: usize = usize::MAX;
+
+/// Whether the points of a grid of `n` laid out as `nu × nv` (or as [`TRIPLES`]) have
+/// neighbours to take differences across.
+pub fn has_neighbours(nu: usize, nv: usize, n: usize) -> bool {
+    n > 0
+        && if nu == TRIPLES {
+            nv.checked_mul(3) == Some(n)
+        } else {
+            nu.checked_mul(nv) == Some(n)
+        }
+}
+
+/// Central differences along u (`dir` 0) or v (`dir` 1) of a float field, divided by the step
+/// (forward differences across the footprint on a [`TRIPLES`] layout).
 pub fn deriv_f(x: &[f32], nu: usize, nv: usize, dir: usize, step: f32) -> Vec<f32> {
     let n = x.len();
     let mut out = vec![0.0; n];
-    if nu * nv != n || n == 0 {
+    if !has_neighbours(nu, nv, n) {
         return out;
     }
     let inv = if step != 0.0 { 1.0 / step } else { 0.0 };
+    if nu == TRIPLES {
+        for (o, c) in out.chunks_exact_mut(3).zip(x.chunks_exact(3)) {
+            let d = (c[1 + dir.min(1)] - c[0]) * inv;
+            o.fill(d);
+        }
+        return out;
+    }
     for j in 0..nv {
         for i in 0..nu {
             let k = j * nu + i;
@@ -1293,7 +1320,7 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                 }
             });
         }
-        CalculateNormal if ex.env.nu * ex.env.nv != n => {
+        CalculateNormal if !has_neighbours(ex.env.nu, ex.env.nv, n) => {
             // A grid of ray hits has no neighbours to differentiate: the surface normal.
             out = ex
                 .prog

@@ -7,12 +7,20 @@
 //! sample directions are stratified and hashed from each point's position and the call's place
 //! in the source, so results never depend on the grid, bucket or thread; with no ray tracer
 //! every function returns its "nothing there" value (black, unoccluded, unshadowed).
+//!
+//! Ray differentials: every ray carries a [`Cone`] whose width where it starts is the
+//! footprint of the shading point (the grid's differences of `P`) and whose spread is the
+//! change of the ray direction across that footprint (the differences of the normalised
+//! direction: a flat mirror passes on the camera's pixel spread, a curved one widens it, as
+//! ray cones do), plus the solid angle per sample for stochastic rays. On a grid of ray
+//! hits laid out as [`TRIPLES`], only the hits themselves cast rays; the two footprint
+//! neighbours of each hit take its answers.
 
 use glam::Vec3;
 
-use super::{arg, put, vec_t};
+use super::{arg, deriv_t, has_neighbours, put, vec_t, TRIPLES};
 use crate::diag::Span;
-use crate::ray::{cone_dir, cosine_dir, point_seed, stratified};
+use crate::ray::{cone_dir, cosine_dir, point_seed, stratified, Cone};
 use crate::shade::exec::{Exec, InfoValue, Mask};
 use crate::shade::rays;
 use crate::shade::value::Slot;
@@ -49,13 +57,26 @@ pub(super) fn call(
         return false;
     }
     let n = ex.n;
+    let triples = ex.env.nu == TRIPLES && has_neighbours(ex.env.nu, ex.env.nv, n);
+    let own_bits;
+    let bits: &[bool] = if triples {
+        own_bits = mask
+            .bits
+            .iter()
+            .enumerate()
+            .map(|(k, &b)| b && k % 3 == 0)
+            .collect::<Vec<bool>>();
+        &own_bits
+    } else {
+        &mask.bits
+    };
     let out = match f {
         RayLevel => Slot::F(ex.env.rays.map_or(0.0, |r| r.depth() as f32)),
         IsShadowRay => Slot::F(0.0),
         Trace => {
             let p = vec_t(arg(ex, args, 0), n);
             let r = vec_t(arg(ex, args, 1), n);
-            let ci = trace_rays(ex, &p, &r, &mask.bits);
+            let ci = trace_rays(ex, &p, &r, &r, 0.0, bits);
             if ex.prog.regs[dst as usize].kind == Kind::Float {
                 Slot::VF(ci.iter().map(|c| lum(*c)).collect())
             } else {
@@ -78,7 +99,7 @@ pub(super) fn call(
                     ),
                 }
             }
-            Slot::VT(transmit(ex, &a, &b, &mask.bits, samples, cone, span))
+            Slot::VT(transmit(ex, &a, &b, bits, samples, cone, span))
         }
         Occlusion | IndirectDiffuse => {
             let p = vec_t(arg(ex, args, 0), n);
@@ -108,7 +129,7 @@ pub(super) fn call(
                 f == Occlusion,
                 &p,
                 &nn,
-                &mask.bits,
+                bits,
                 count,
                 maxdist,
                 cone,
@@ -149,7 +170,7 @@ pub(super) fn call(
                     }
                 })
                 .collect();
-            let t = transmit(ex, &p, &to, &mask.bits, samples, blur, span);
+            let t = transmit(ex, &p, &to, bits, samples, blur, span);
             Slot::VF(t.iter().map(|c| 1.0 - lum(*c)).collect())
         }
         EnvironmentC | EnvironmentF => {
@@ -165,6 +186,11 @@ pub(super) fn call(
             let count = samples.round().clamp(1.0, 1024.0) as u32;
             let mut acc = vec![Vec3::ZERO; n];
             let salt = span.start.wrapping_mul(0x9e37_79b9) ^ 0xe27;
+            let spread = if count > 1 && blur > 0.0 {
+                sample_spread(blur, count)
+            } else {
+                0.0
+            };
             for k in 0..count {
                 let dirs: Vec<Vec3> = (0..n)
                     .map(|i| {
@@ -175,7 +201,7 @@ pub(super) fn call(
                         cone_dir(r[i].normalize_or_zero(), a, b, blur) * r[i].length()
                     })
                     .collect();
-                let ci = trace_rays(ex, &p, &dirs, &mask.bits);
+                let ci = trace_rays(ex, &p, &dirs, &r, spread, bits);
                 for (a, c) in acc.iter_mut().zip(ci) {
                     *a += c / count as f32;
                 }
@@ -187,6 +213,22 @@ pub(super) fn call(
             }
         }
         _ => return false,
+    };
+    // A hit's footprint neighbours take its answer.
+    let out = match out {
+        Slot::VF(mut v) if triples && v.len() == n => {
+            for c in v.chunks_exact_mut(3) {
+                (c[1], c[2]) = (c[0], c[0]);
+            }
+            Slot::VF(v)
+        }
+        Slot::VT(mut v) if triples && v.len() == n => {
+            for c in v.chunks_exact_mut(3) {
+                (c[1], c[2]) = (c[0], c[0]);
+            }
+            Slot::VT(v)
+        }
+        o => o,
     };
     let varying = ex.prog.regs[dst as usize].varying;
     let out = if varying && !out.is_varying() {
@@ -232,15 +274,75 @@ fn map_params(ex: &Exec, args: &[Reg], first: usize, span: Span) -> (f32, f32) {
     (samples, blur.max(0.0))
 }
 
-/// Ci along each active ray (black without a ray tracer).
-fn trace_rays(ex: &Exec, p: &[Vec3], r: &[Vec3], active: &[bool]) -> Vec<Vec3> {
+/// Ci along each active ray (black without a ray tracer); `axis` is the direction the rays
+/// are spread around (`r` itself for one ray per point) and `extra` the spread the sampling
+/// adds (see [`cones`]).
+fn trace_rays(
+    ex: &Exec,
+    p: &[Vec3],
+    r: &[Vec3],
+    axis: &[Vec3],
+    extra: f32,
+    active: &[bool],
+) -> Vec<Vec3> {
     let n = p.len();
     let mut ci = vec![Vec3::ZERO; n];
     if let Some(rt) = ex.env.rays {
         let mut dist = vec![0f32; n];
-        rt.trace(p, r, active, &mut ci, &mut dist);
+        let cones = cones(ex, p, axis, extra);
+        rt.trace(p, r, &cones, active, &mut ci, &mut dist);
     }
     ci
+}
+
+/// The solid angle of a cone of half-angle `angle`, per sample, as a spread angle
+/// (√Ω: the side of a square of that solid angle).
+pub(crate) fn sample_spread(angle: f32, count: u32) -> f32 {
+    if count <= 1 && angle <= 0.0 {
+        return 0.0;
+    }
+    let omega = 2.0 * std::f32::consts::PI * (1.0 - angle.clamp(0.0, std::f32::consts::PI).cos());
+    (omega / count.max(1) as f32).sqrt()
+}
+
+/// The ray cones of rays cast from `p` around the directions `axis`: width the footprint of
+/// the shading point (the largest difference of `p` to a neighbour along u or v), spread the
+/// largest difference of the unit axis to a neighbour plus `extra`. On a grid of ray hits
+/// without neighbours (no derivatives wanted), the incoming cone at each hit, its spread
+/// passed on.
+pub(crate) fn cones(ex: &Exec, p: &[Vec3], axis: &[Vec3], extra: f32) -> Vec<Cone> {
+    let n = p.len();
+    let (nu, nv) = (ex.env.nu, ex.env.nv);
+    if has_neighbours(nu, nv, n) && axis.len() == n {
+        let (pu, pv) = (deriv_t(p, nu, nv, 0, 1.0), deriv_t(p, nu, nv, 1, 1.0));
+        let unit: Vec<Vec3> = axis.iter().map(|v| v.normalize_or_zero()).collect();
+        let (ru, rv) = (
+            deriv_t(&unit, nu, nv, 0, 1.0),
+            deriv_t(&unit, nu, nv, 1, 1.0),
+        );
+        return (0..n)
+            .map(|i| Cone {
+                width: pu[i].length().max(pv[i].length()),
+                spread: ru[i].length().max(rv[i].length()) + extra,
+            })
+            .collect();
+    }
+    match ex.env.cones {
+        Some(c) if c.len() == n => c
+            .iter()
+            .map(|c| Cone {
+                width: c.width,
+                spread: c.spread + extra,
+            })
+            .collect(),
+        _ => vec![
+            Cone {
+                width: 0.0,
+                spread: extra,
+            };
+            n
+        ],
+    }
 }
 
 /// Transmission from `a` to `b`, averaged over `samples` targets jittered in a cone of
@@ -330,8 +432,10 @@ fn hemisphere(
         if rays::diffuse_depth() >= max_diffuse_depth(ex) {
             return Slot::T(Vec3::ZERO);
         }
-        let seen =
-            rays::mean_radiance(rt, p, &units, active, count, maxdist, cone, env_color, salt);
+        let cones = cones(ex, p, &units, sample_spread(cone, count));
+        let seen = rays::mean_radiance(
+            rt, p, &units, &cones, active, count, maxdist, cone, env_color, salt,
+        );
         return Slot::VT(seen);
     }
     let mut acc = vec![0f32; n];

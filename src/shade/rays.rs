@@ -17,7 +17,8 @@ use crate::shade::exec::RayTracer;
 use crate::shade::system::{Medium, ShadeSystem};
 use crate::shade::{Grid, GridVar};
 
-use crate::ray::{RayGrid, RayScene};
+use crate::ray::geometry::HitVertex;
+use crate::ray::{Cone, RayGrid, RayScene};
 
 /// Default most ray depth (PRMan's `Option "trace" "maxdepth"`).
 pub const DEFAULT_MAX_DEPTH: u32 = 10;
@@ -192,13 +193,54 @@ fn lerp_weights(rg: &RayGrid, index: u32, a: f32, b: f32) -> ([usize; 4], [f32; 
     )
 }
 
+/// Interpolation weights at grid coordinates `(x, y)` (in micropolygons from the grid's
+/// first vertex), extrapolating linearly from the boundary micropolygon beyond the grid.
+fn grid_weights(g: &Grid, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
+    let (qu, qv) = (g.nu - 1, g.nv - 1);
+    let x = if x.is_finite() { x } else { 0.0 };
+    let y = if y.is_finite() { y } else { 0.0 };
+    let i = (x.floor().max(0.0) as usize).min(qu - 1);
+    let j = (y.floor().max(0.0) as usize).min(qv - 1);
+    let (a, b) = (x - i as f32, y - j as f32);
+    let k = j * g.nu + i;
+    (
+        [k, k + 1, k + g.nu, k + g.nu + 1],
+        [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b],
+    )
+}
+
+/// The grid coordinates one ray footprint away from a hit along u and along v: the hit's
+/// cone of width `w` along the unit direction `d` crosses the surface in an ellipse, whose
+/// extent along a surface direction `e` is `w / |e⊥|` (`e⊥`: `e` less its part along the
+/// ray); in micropolygons, that is `w / |∂P/∂a ⊥|` along the grid's rows (and the same down
+/// its columns). Returns the two offsets' grid coordinates.
+fn footprint_steps(g: &Grid, k: &[usize; 4], a: f32, b: f32, d: Vec3, w: f32) -> (f32, f32) {
+    let p = &g.p;
+    // The bilinear patch's derivatives at (a, b).
+    let pa = (p[k[1]] - p[k[0]]) * (1.0 - b) + (p[k[3]] - p[k[2]]) * b;
+    let pb = (p[k[2]] - p[k[0]]) * (1.0 - a) + (p[k[3]] - p[k[1]]) * a;
+    let step = |e: Vec3| {
+        let len = e.length();
+        let perp = (e - d * e.dot(d)).length().max(0.05 * len);
+        if perp > 0.0 && w > 0.0 {
+            (w / perp).min(1e4)
+        } else {
+            0.0
+        }
+    };
+    (step(pa), step(pb))
+}
+
 #[inline]
 fn mix3(v: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
     v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
 }
+
+/// The shading records of a ray grid's vertices `k` (see [`HitVertex`]).
 #[inline]
-fn mix1(v: &[f32], k: &[usize; 4], w: &[f32; 4]) -> f32 {
-    v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3]
+fn corners<'r>(rs: &'r RayScene, rg: &RayGrid, k: &[usize; 4]) -> [&'r HitVertex; 4] {
+    let v = &rs.verts[rg.first..];
+    [&v[k[0]], &v[k[1]], &v[k[2]], &v[k[3]]]
 }
 
 /// One hit to shade: which ray, where.
@@ -214,6 +256,8 @@ struct PendingHit {
     i: Vec3,
     /// The space the ray crossed (picks the hit's volume shader).
     medium: Medium,
+    /// The ray's cone, its width taken at the hit.
+    cone: Cone,
 }
 
 /// The space a ray crossed to reach its hit: the inside of the hit object when the ray leaves
@@ -237,7 +281,9 @@ fn medium_of(
         return Medium::Outside;
     }
     let (k, w) = lerp_weights(rg, index, a, b);
-    if d.dot(mix3(&rg.grid.ng, &k, &w)) > 0.0 {
+    let c = corners(rs, rg, &k);
+    let ng = c[0].ng * w[0] + c[1].ng * w[1] + c[2].ng * w[2] + c[3].ng * w[3];
+    if d.dot(ng) > 0.0 {
         Medium::Inside
     } else {
         Medium::Outside
@@ -245,9 +291,14 @@ fn medium_of(
 }
 
 /// Builds the grid of hits on one primitive, or on primitives that shade as one (all `hits`
-/// come from grids with the same primitive-variable layout, see [`shading_classes`]).
-fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
-    let n = hits.len();
+/// come from grids with the same primitive-variable layout, see [`shading_classes`]). With
+/// `triples`, each hit is followed by the surface one ray footprint away along u and along v
+/// (`ops::TRIPLES`): the point of the ray grid that far across it, seen along the ray's
+/// neighbour in the cone (the incident vector turned by the cone's spread), so derivatives
+/// (and texture filter widths) at the hit follow the ray's footprint.
+fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
+    let per = if triples { 3 } else { 1 };
+    let n = hits.len() * per;
     let mut g = Grid::with_size(n, 1);
     let first = &rs.grids[hits[0].grid as usize].grid;
     g.du = first.du;
@@ -269,22 +320,64 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit]) -> Grid {
             strings: v.strings.clone(),
         })
         .collect();
-    for (h, hit) in hits.iter().enumerate() {
+    for (h, (hit, (k, w))) in hits
+        .iter()
+        .flat_map(|hit| {
+            let rg = &rs.grids[hit.grid as usize];
+            let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
+            let mut pts = [(*hit, (k, w)); 3];
+            if triples {
+                let src = &rg.grid;
+                let qu = src.nu - 1;
+                let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
+                let (x, y) = (
+                    i as f32 + hit.a.clamp(0.0, 1.0),
+                    j as f32 + hit.b.clamp(0.0, 1.0),
+                );
+                let len = hit.i.length();
+                let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
+                let width = hit.cone.width;
+                let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
+                for (q, (x, y)) in [(1, (x + sa, y)), (2, (x, y + sb))] {
+                    let (k2, w2) = grid_weights(src, x, y);
+                    let p = mix3(&src.p, &k2, &w2);
+                    // The neighbouring ray of the cone through p: turned by the spread per
+                    // width of sideways offset.
+                    let off = p - hit.p;
+                    let side = off - d * off.dot(d);
+                    let turn = if width > 0.0 {
+                        side * (hit.cone.spread / width)
+                    } else {
+                        Vec3::ZERO
+                    };
+                    let mut aux = *hit;
+                    aux.p = p;
+                    aux.i = (d + turn) * len;
+                    pts[q] = (aux, (k2, w2));
+                }
+            }
+            pts.into_iter().take(per)
+        })
+        .enumerate()
+    {
         let rg = &rs.grids[hit.grid as usize];
         let src = &rg.grid;
-        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
         g.p[h] = hit.p;
         g.i[h] = hit.i;
-        g.n[h] = mix3(&src.n, &k, &w);
-        g.ng[h] = mix3(&src.ng, &k, &w);
-        g.dpdu[h] = mix3(&src.dpdu, &k, &w);
-        g.dpdv[h] = mix3(&src.dpdv, &k, &w);
-        g.u[h] = mix1(&src.u, &k, &w);
-        g.v[h] = mix1(&src.v, &k, &w);
-        g.s[h] = mix1(&src.s, &k, &w);
-        g.t[h] = mix1(&src.t, &k, &w);
-        g.cs[h] = mix3(&src.cs, &k, &w);
-        g.os[h] = mix3(&src.os, &k, &w);
+        let c = corners(rs, rg, &k);
+        let m3 = |f: fn(&HitVertex) -> Vec3| {
+            f(c[0]) * w[0] + f(c[1]) * w[1] + f(c[2]) * w[2] + f(c[3]) * w[3]
+        };
+        g.n[h] = m3(|v| v.n);
+        g.ng[h] = m3(|v| v.ng);
+        g.dpdu[h] = m3(|v| v.dpdu);
+        g.dpdv[h] = m3(|v| v.dpdv);
+        let uvst: [f32; 4] = std::array::from_fn(|e| {
+            c[0].uvst[e] * w[0] + c[1].uvst[e] * w[1] + c[2].uvst[e] * w[2] + c[3].uvst[e] * w[3]
+        });
+        [g.u[h], g.v[h], g.s[h], g.t[h]] = uvst;
+        g.cs[h] = m3(|v| v.cs);
+        g.os[h] = m3(|v| v.os);
         for (dst, sv) in pv.iter_mut().zip(&src.primvars) {
             if dst.uniform || sv.uniform || sv.width() != dst.width() {
                 continue;
@@ -312,6 +405,7 @@ impl RayTracer for Tracer<'_, '_> {
         &self,
         org: &[Vec3],
         dir: &[Vec3],
+        cones: &[Cone],
         active: &[bool],
         ci: &mut [Vec3],
         dist: &mut [f32],
@@ -355,6 +449,10 @@ impl RayTracer for Tracer<'_, '_> {
                             dist[k] = travelled[k] + h.t;
                         }
                         travelled[k] += h.t;
+                        let cone = cones.get(k).map_or(Cone::default(), |c| Cone {
+                            width: c.width_at(travelled[k] * d.length()),
+                            spread: c.spread,
+                        });
                         pending.push(PendingHit {
                             ray: k,
                             grid: h.grid,
@@ -364,6 +462,7 @@ impl RayTracer for Tracer<'_, '_> {
                             p,
                             i: p - org[k],
                             medium: medium_of(&rs, self.scene, h.grid, h.index, h.a, h.b, d),
+                            cone,
                         });
                     }
                     None => live[k] = false,
@@ -381,7 +480,8 @@ impl RayTracer for Tracer<'_, '_> {
                     h.medium == Medium::Inside,
                 )
             };
-            pending.sort_by_key(|h| (shade_as(h), h.ray));
+            // Keys are distinct (one hit per ray per layer): unstable sorting is the same order.
+            pending.sort_unstable_by_key(|h| (shade_as(h), h.ray));
             let mut s = 0;
             while s < pending.len() {
                 let key = shade_as(&pending[s]);
@@ -390,19 +490,29 @@ impl RayTracer for Tracer<'_, '_> {
                     e += 1;
                 }
                 let group = &pending[s..e];
-                let mut g = hit_grid(&rs, group);
+                let prim = key.0;
+                let triples = self.sys.hit_wants_differentials(self.scene, prim);
+                let mut g = hit_grid(&rs, group, triples);
+                let per = if triples { 3 } else { 1 };
+                let hit_cones: Vec<Cone> = group
+                    .iter()
+                    .flat_map(|h| std::iter::repeat_n(h.cone, per))
+                    .collect();
                 self.sys.shade_ray_hits(
                     self.scene,
                     self.camera,
-                    key.0,
+                    prim,
                     &mut g,
                     self.depth + 1,
                     group[0].medium,
+                    &hit_cones,
+                    triples,
                 );
                 for (h, hit) in group.iter().enumerate() {
                     let k = hit.ray;
-                    ci[k] += weight[k] * g.ci[h];
-                    weight[k] *= Vec3::ONE - g.oi[h].clamp(Vec3::ZERO, Vec3::ONE);
+                    let (c, op) = (g.ci[h * per], g.oi[h * per]);
+                    ci[k] += weight[k] * c;
+                    weight[k] *= Vec3::ONE - op.clamp(Vec3::ZERO, Vec3::ONE);
                     o[k] = hit.p;
                     if weight[k].max_element() < 1.0 / 256.0 {
                         live[k] = false;
@@ -443,7 +553,9 @@ impl RayTracer for Tracer<'_, '_> {
                     return false;
                 }
                 let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
-                let os = mix3(&rg.grid.os, &kk, &w).clamp(Vec3::ZERO, Vec3::ONE);
+                let c = corners(&rs, rg, &kk);
+                let os = (c[0].os * w[0] + c[1].os * w[1] + c[2].os * w[2] + c[3].os * w[3])
+                    .clamp(Vec3::ZERO, Vec3::ONE);
                 t *= Vec3::ONE - os;
                 // An opaque blocker (its interpolated opacity within rounding of 1) ends the
                 // walk: nothing can pass.
@@ -494,13 +606,15 @@ pub fn diffuse_depth() -> u32 {
 
 /// The mean radiance arriving at each active point `p` over the hemisphere (or the cone of
 /// half-angle `cone`) around unit normal `units`, cosine-weighted, from `count` stratified
-/// rays: the hits' shaded Ci, `env_color` past `maxdist` or on a miss. The hits are shaded
+/// rays (with ray `cones`, none: zero width and spread): the hits' shaded Ci, `env_color`
+/// past `maxdist` or on a miss. The hits are shaded
 /// one diffuse bounce deeper ([`diffuse_depth`]). `salt` decorrelates callers.
 #[allow(clippy::too_many_arguments)]
 pub fn mean_radiance(
     rt: &dyn RayTracer,
     p: &[Vec3],
     units: &[Vec3],
+    cones: &[Cone],
     active: &[bool],
     count: u32,
     maxdist: f32,
@@ -530,7 +644,7 @@ pub fn mean_radiance(
                 cosine_dir(units[i], u1, u2, cone)
             })
             .collect();
-        rt.trace(p, &dirs, active, &mut buf, &mut dist);
+        rt.trace(p, &dirs, cones, active, &mut buf, &mut dist);
         for i in 0..n {
             acc[i] += if dist[i] <= maxdist {
                 buf[i]

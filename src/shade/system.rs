@@ -54,6 +54,7 @@ fn any_instr(instrs: &[Instr], pred: &dyn Fn(&Instr) -> bool) -> bool {
                 Instr::Gather {
                     body, otherwise, ..
                 } => any_instr(body, pred) || any_instr(otherwise, pred),
+                Instr::Illuminance { body, .. } => any_instr(body, pred),
                 _ => false,
             }
     })
@@ -97,6 +98,38 @@ fn lattice(n: usize) -> Vec<usize> {
         v.push(n - 1);
     }
     v
+}
+
+/// Whether a program takes derivatives (`Du`, `Dv`, `Deriv`, `area`, `calculatenormal`,
+/// `filterstep`, filtered texture and map lookups, horizon maps) or casts rays: its hits are
+/// then shaded with their ray differentials (see `shade::rays`).
+fn uses_derivatives(instrs: &[Instr]) -> bool {
+    use crate::sl::builtins::Builtin::*;
+    any_instr(instrs, &|i| match i {
+        Instr::Call { f, .. } => matches!(
+            f,
+            DuF | DvF
+                | DuT
+                | DvT
+                | DerivF
+                | DerivT
+                | Area
+                | CalculateNormal
+                | FilterStep
+                | TextureF
+                | TextureC
+                | Bump
+                | EnvironmentF
+                | EnvironmentC
+                | Shadow
+                | Horizon
+                | HorizonHeight
+                | Trace
+                | IndirectDiffuse
+        ),
+        Instr::Gather { .. } => true,
+        _ => false,
+    })
 }
 
 /// Whether a light program has a `solar()` without an axis (it lights along the normal).
@@ -171,8 +204,13 @@ struct RunCtx<'s> {
     /// Ray depth of the grid (0: seen by the camera).
     depth: u32,
     /// The grid is a batch of ray hits: neighbouring points are unrelated, so derivatives
-    /// across it read as zero.
+    /// across it read as zero (unless `triples`).
     hits: bool,
+    /// The hits are laid out as `ops::TRIPLES` (each hit and its two footprint neighbours):
+    /// derivatives are differences across the rays' footprints.
+    triples: bool,
+    /// Per point of a grid of hits: its incoming ray cone at the hit.
+    cones: Option<&'s [crate::ray::Cone]>,
     /// The grid holds points sampled on this area light (a light shader's P, N, u, v, s, t
     /// are the grid's, RISpec §15.2.2); rays it casts pass through the light's own surfaces.
     area_light: Option<usize>,
@@ -357,6 +395,8 @@ impl<'a> ShadeSystem<'a> {
             alpha: None,
             depth: 0,
             hits: false,
+            triples: false,
+            cones: None,
             area_light: None,
             medium: Medium::Camera,
         }
@@ -409,6 +449,8 @@ impl<'a> ShadeSystem<'a> {
                 alpha: Some(&alpha),
                 depth: 0,
                 hits: false,
+                triples: false,
+                cones: None,
                 area_light: None,
                 medium: Medium::Camera,
             };
@@ -448,7 +490,9 @@ impl<'a> ShadeSystem<'a> {
         self.shade_with(ctx, prim, grid)
     }
 
-    /// Shades a grid of ray hits on `prim` at ray depth `depth` (see `shade::rays`).
+    /// Shades a grid of ray hits on `prim` at ray depth `depth` (see `shade::rays`), with
+    /// each point's incoming ray cone; `triples`: the grid is laid out as `ops::TRIPLES`.
+    #[allow(clippy::too_many_arguments)]
     pub fn shade_ray_hits(
         &self,
         scene: &Scene,
@@ -457,12 +501,38 @@ impl<'a> ShadeSystem<'a> {
         grid: &mut Grid,
         depth: u32,
         medium: Medium,
+        cones: &[crate::ray::Cone],
+        triples: bool,
     ) {
         let mut ctx = self.ctx(scene, camera, prim);
         ctx.depth = depth;
         ctx.hits = true;
         ctx.medium = medium;
+        ctx.triples = triples && grid.p.len() % 3 == 0;
+        ctx.cones = (cones.len() == grid.p.len()).then_some(cones);
         self.shade_with(ctx, prim, grid)
+    }
+
+    /// Whether hits on `prim` want their ray differentials: its surface or atmosphere shader
+    /// takes derivatives, filters textures or casts rays (see [`uses_derivatives`]).
+    pub fn hit_wants_differentials(&self, scene: &Scene, prim: usize) -> bool {
+        let Some(p) = scene.primitives.get(prim) else {
+            return false;
+        };
+        let a = &p.attributes;
+        let surface = a
+            .surface
+            .as_ref()
+            .and_then(|s| self.program(s, ShaderKind::Surface))
+            .is_some_and(|prog| uses_derivatives(&prog.body));
+        surface
+            || [&a.atmosphere, &a.interior, &a.exterior]
+                .into_iter()
+                .any(|v| {
+                    v.as_ref()
+                        .and_then(|s| self.program(s, ShaderKind::Volume))
+                        .is_some_and(|prog| uses_derivatives(&prog.body))
+                })
     }
 
     fn shade_with(&self, ctx: RunCtx, prim: usize, grid: &mut Grid) {
@@ -687,6 +757,7 @@ impl<'a> ShadeSystem<'a> {
             &tracer,
             &p,
             &nf,
+            &[],
             &active,
             RADIOSITY_SAMPLES,
             f32::INFINITY,
@@ -830,6 +901,8 @@ impl<'a> ShadeSystem<'a> {
                     alpha: None,
                     // Its neighbours are unrelated points: derivatives read zero.
                     hits: true,
+                    triples: false,
+                    cones: None,
                     ..*ctx
                 };
                 self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want))
@@ -908,6 +981,8 @@ impl<'a> ShadeSystem<'a> {
             };
             let actx = RunCtx {
                 hits: true,
+                triples: false,
+                cones: None,
                 area_light: Some(gl.index),
                 ..*ctx
             };
@@ -1084,7 +1159,13 @@ impl<'a> ShadeSystem<'a> {
         };
         // A grid of ray hits has no neighbours to differentiate across (0 × 0: every
         // derivative reads zero).
-        let (env_nu, env_nv) = if ctx.hits { (0, 0) } else { (grid.nu, grid.nv) };
+        let (env_nu, env_nv) = if ctx.triples {
+            (crate::shade::ops::TRIPLES, n / 3)
+        } else if ctx.hits {
+            (0, 0)
+        } else {
+            (grid.nu, grid.nv)
+        };
         let env = Env {
             nu: env_nu,
             nv: env_nv,
@@ -1099,6 +1180,7 @@ impl<'a> ShadeSystem<'a> {
             textures: self.textures,
             seed: ctx.seed,
             rays: Some(&tracer),
+            cones: ctx.cones,
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);
