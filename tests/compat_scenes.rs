@@ -92,11 +92,17 @@ fn known_renderer_settings_are_typed_and_quiet() {
     );
     // The ignored ones are notes (shown at -v), naming the setting.
     let notes = b.of(Severity::Note);
-    // (render:casts_shadows, light:shadows and visibility:trace are used by ray tracing.)
-    for key in ["\"radiosity\" \"steps\"", "\"identifier\" \"shadinggroup\""] {
+    // (render:casts_shadows, light:shadows and visibility:trace are used by ray tracing;
+    // radiosity:steps turns on the traced bounce, trace:maxdiffusedepth limits it.)
+    for key in [
+        "\"radiosity\" \"minpatchsamples\"",
+        "\"identifier\" \"shadinggroup\"",
+    ] {
         assert!(notes.iter().any(|n| n.contains(key)), "{key}: {notes:#?}");
     }
     // What arbor uses is not noted, and is applied.
+    assert!(!notes.iter().any(|n| n.contains("\"radiosity\" \"steps\"")));
+    assert!(!notes.iter().any(|n| n.contains("\"maxdiffusedepth\"")));
     assert!(!notes.iter().any(|n| n.contains("\"identifier\" \"name\"")));
     assert!(!notes.iter().any(|n| n.contains("\"dice\" \"binary\"")));
     let s = &b.scenes[0];
