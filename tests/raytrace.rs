@@ -222,15 +222,7 @@ WorldEnd
         &rgb[..6]
     );
     // The camera inside a closed box [−5, 5]³ (six walls), looking at the wall z = 5.
-    let walls = [
-        "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
-        "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
-        "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
-        "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
-    ]
-    .join("\n");
+    let walls = CLOSED_BOX.join("\n");
     let closed = format!(
         r#"Format 16 16 1
 Projection "orthographic"
@@ -370,21 +362,23 @@ WorldEnd
     );
 }
 
+/// The six walls of the box from (−5, −5, −5) to (5, 5, 5), the camera inside it.
+const CLOSED_BOX: [&str; 6] = [
+    "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
+    "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
+    "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
+    "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
+    "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
+    "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
+];
+
 /// indirectdiffuse() in a shader its own rays hit would recurse (samples to the power of the
 /// ray depth): past `"trace" "maxdiffusedepth"` (default 1, as PRMan) it casts nothing and
 /// reads black. Inside a closed box of `bounce` walls (0.5 glow + half the indirect light)
 /// the camera sees 0.75 with one bounce and 0.875 with two.
 #[test]
 fn indirectdiffuse_stops_at_the_diffuse_depth() {
-    let walls = [
-        "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
-        "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
-        "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
-        "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
-    ]
-    .join("\n");
+    let walls = CLOSED_BOX.join("\n");
     for (option, want) in [
         ("", 0.75f32),
         ("Option \"trace\" \"maxdiffusedepth\" 2", 0.875),
@@ -416,15 +410,7 @@ WorldEnd
 /// the option, 0.5 + 0.5·0.2 = 0.6. The lattice interpolation keeps a constant field exact.
 #[test]
 fn radiosity_adds_the_traced_bounce_to_ambient() {
-    let walls = [
-        "Polygon \"P\" [-5 -5 5  5 -5 5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 5 -5  -5 5 -5]",
-        "Polygon \"P\" [5 -5 -5  5 5 -5  5 5 5  5 -5 5]",
-        "Polygon \"P\" [-5 -5 -5  -5 5 -5  -5 5 5  -5 -5 5]",
-        "Polygon \"P\" [-5 5 -5  5 5 -5  5 5 5  -5 5 5]",
-        "Polygon \"P\" [-5 -5 -5  5 -5 -5  5 -5 5  -5 -5 5]",
-    ]
-    .join("\n");
+    let walls = CLOSED_BOX.join("\n");
     for (option, want) in [("", 0.6f32), ("Option \"radiosity\" \"steps\" [10]", 0.9)] {
         let rib = format!(
             r#"Format 16 16 1
