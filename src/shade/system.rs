@@ -77,7 +77,8 @@ fn calls_ambient(instrs: &[Instr]) -> bool {
 }
 
 /// Rays per point of the radiosity lattice (BMRT's `Option "radiosity"`, see
-/// [`ShadeSystem::radiosity_light`]).
+/// [`ShadeSystem::radiosity_light`]); grids too small to thin out get fewer, down to a
+/// sixteenth.
 const RADIOSITY_SAMPLES: u32 = 256;
 /// The radiosity lattice takes every this many grid points along u and v (and the last).
 const RADIOSITY_STRIDE: usize = 4;
@@ -753,13 +754,18 @@ impl<'a> ShadeSystem<'a> {
             skip_light: None,
         };
         let active = vec![true; p.len()];
+        // A small grid is its own lattice: fewer rays a point there keep the cost at most
+        // RADIOSITY_SAMPLES / 16 rays per shaded point (a mesh diced into many tiny grids).
+        let per_point = RADIOSITY_SAMPLES / (RADIOSITY_STRIDE * RADIOSITY_STRIDE) as u32;
+        let samples = (per_point as usize * n / p.len())
+            .clamp(per_point as usize, RADIOSITY_SAMPLES as usize);
         let seen = crate::shade::rays::mean_radiance(
             &tracer,
             &p,
             &nf,
             &[],
             &active,
-            RADIOSITY_SAMPLES,
+            samples as u32,
             f32::INFINITY,
             std::f32::consts::FRAC_PI_2,
             Vec3::ZERO,
