@@ -217,7 +217,8 @@ fn plan(
                 );
                 Format::ZFile
             }
-            "framebuffer" => {
+            // PRMan's `it`, and the X11/Windows framebuffer drivers: windows too.
+            "framebuffer" | "it" | "x11" | "windows" => {
                 path = path.with_extension("png");
                 diags.report(
                     Diag::warning(
@@ -249,7 +250,9 @@ fn plan(
                         ),
                     )
                     .maybe_label(d.span, "this Display")
-                    .help("display types: file, tiff, png, exr, zfile, shadow, framebuffer"),
+                    .help(
+                        "display types: file, tiff, png, exr, zfile, shadow, framebuffer (it, x11)",
+                    ),
                 );
                 f
             }
@@ -1105,13 +1108,19 @@ mod tests {
         let d = Diagnostics::new();
         let first = dir.join("first.tif");
         let fb = dir.join("window");
+        let it = dir.join("render.tif");
         let o = opts(vec![
             display(&first, "file", "rgba"),
             display(&fb, "framebuffer", "rgbaz"),
+            display(&it, "it", "rgba"),
         ]);
         let over = dir.join("over.png");
         let out = write_displays(&f, &o, &d, Some(&over)).unwrap();
-        assert_eq!(out, vec![over.clone(), dir.join("window.png")]);
+        // PRMan's `it` is a window as well: a PNG of the display's name.
+        assert_eq!(
+            out,
+            vec![over.clone(), dir.join("window.png"), dir.join("render.png")]
+        );
         assert!(!first.exists(), "the override replaces the first display");
         assert_eq!(image::open(&over).unwrap().color(), image::ColorType::Rgba8);
         let img = image::open(dir.join("window.png")).unwrap();
