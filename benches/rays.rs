@@ -67,16 +67,7 @@ fn rig() -> Rig {
     let diags = Diagnostics::new();
     let rib = scene_rib();
     let reqs = arbor::rib::parse_bytes("<bench>", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: Vec::new(),
-        texture_paths: Vec::new(),
-        archive_paths: Vec::new(),
-        base_dir: None,
-        frames: None,
-        procedurals: Default::default(),
-    };
+    let ctx = BuildContext::new(&sources, &diags);
     let scene = build_scenes(reqs, &ctx).remove(0);
     let library = ShaderLibrary::new(CompileOptions::default());
     Rig {

@@ -88,16 +88,7 @@ fn bench(c: &mut Criterion) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("bench.rib", SCENE.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: vec![],
-        texture_paths: vec![],
-        archive_paths: vec![],
-        base_dir: None,
-        frames: None,
-        procedurals: Default::default(),
-    };
+    let ctx = BuildContext::new(&sources, &diags);
     let scenes = build_scenes(reqs, &ctx);
     let scene = &scenes[0];
     let camera = Camera::new(scene);

@@ -350,16 +350,7 @@ mod tests {
         let sources = SourceMap::new();
         let diags = Diagnostics::new();
         let reqs = crate::rib::parse_bytes("<swatch>", rib.as_bytes(), &sources, &diags);
-        let ctx = BuildContext {
-            sources: &sources,
-            diags: &diags,
-            shader_paths: Vec::new(),
-            texture_paths: Vec::new(),
-            archive_paths: Vec::new(),
-            base_dir: None,
-            frames: None,
-            procedurals: Default::default(),
-        };
+        let ctx = BuildContext::new(&sources, &diags);
         let scenes = build_scenes(reqs, &ctx);
         assert!(!diags.has_errors(), "{:?}", diags.snapshot());
         assert_eq!(scenes.len(), 1);

@@ -21,18 +21,17 @@ fn square(h: f32, z: f32) -> String {
     )
 }
 
-#[test]
-fn a_perfect_mirror_returns_the_mirrored_constant_colour_exactly() {
-    // Orthographic view down +z onto a mirror at z = 5; behind the camera (culled by REYES,
-    // seen only by rays) a constant-coloured wall at z = −5.
+/// Orthographic view down +z onto a square with surface `shader` at z = 5; behind the camera
+/// (culled by REYES, seen only by rays) a constant wall of colour (0.2, 0.5, 0.8) at z = −5.
+/// `options` go before `Projection`. Returns the RGB floats.
+fn mirror_over_wall(shader: &str, options: &str) -> Vec<f32> {
     let rib = format!(
-        r#"Format 24 24 1
+        r#"{options}
 Projection "orthographic"
 ScreenWindow -1 1 -1 1
-PixelSamples 2 2
 WorldBegin
 AttributeBegin
-  Surface "mirrortest"
+  Surface "{shader}"
   {mirror}
 AttributeEnd
 AttributeBegin
@@ -45,8 +44,14 @@ WorldEnd
         mirror = square(2.0, 5.0),
         wall = square(10.0, -5.0)
     );
-    let film = render_rib(&rib, &[shaders()]);
-    let rgb = film_rgb(&film);
+    film_rgb(&render_rib(&rib, &[shaders()]))
+}
+
+#[test]
+fn a_perfect_mirror_returns_the_mirrored_constant_colour_exactly() {
+    // Orthographic view down +z onto a mirror at z = 5; behind the camera (culled by REYES,
+    // seen only by rays) a constant-coloured wall at z = −5.
+    let rgb = mirror_over_wall("mirrortest", "Format 24 24 1\nPixelSamples 2 2");
     for px in rgb.chunks_exact(3) {
         for (c, want) in px.iter().zip([0.2f32, 0.5, 0.8]) {
             assert!((c - want).abs() < 1e-6, "pixel {px:?}");
@@ -96,27 +101,7 @@ WorldEnd
 fn trace_inside_arithmetic_is_a_colour() {
     // `Kr * trace(P, R)`: the float sibling does not make trace() the grey float form (the
     // gallery's mirror sphere reflected grey stripes when it did).
-    let rib = format!(
-        r#"Format 8 8 1
-Projection "orthographic"
-ScreenWindow -1 1 -1 1
-WorldBegin
-AttributeBegin
-  Surface "halfmirror"
-  {mirror}
-AttributeEnd
-AttributeBegin
-  Color [0.2 0.5 0.8]
-  Surface "constant"
-  {wall}
-AttributeEnd
-WorldEnd
-"#,
-        mirror = square(2.0, 5.0),
-        wall = square(10.0, -5.0)
-    );
-    let film = render_rib(&rib, &[shaders()]);
-    let rgb = film_rgb(&film);
+    let rgb = mirror_over_wall("halfmirror", "Format 8 8 1");
     for px in rgb.chunks_exact(3) {
         for (c, want) in px.iter().zip([0.1f32, 0.25, 0.4]) {
             assert!((c - want).abs() < 1e-6, "pixel {px:?}");
@@ -447,16 +432,7 @@ fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: vec![],
-        texture_paths: vec![],
-        archive_paths: vec![],
-        base_dir: None,
-        frames: None,
-        procedurals: Default::default(),
-    };
+    let ctx = BuildContext::new(&sources, &diags);
     let scene = build_scenes(reqs, &ctx).remove(0);
     let library = ShaderLibrary::new(CompileOptions::default());
     let camera = Camera::new(&scene);
@@ -541,16 +517,7 @@ fn footprint_hits(rays: &[(glam::Vec3, arbor::ray::Cone)]) -> Vec<glam::Vec3> {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: vec![],
-        texture_paths: vec![],
-        archive_paths: vec![],
-        base_dir: None,
-        frames: None,
-        procedurals: Default::default(),
-    };
+    let ctx = BuildContext::new(&sources, &diags);
     let scene = build_scenes(reqs, &ctx).remove(0);
     let library = ShaderLibrary::new(common::stdlib_options(&[shaders()]));
     let camera = Camera::new(&scene);

@@ -278,16 +278,7 @@ mod tests {
         let sources = crate::diag::SourceMap::new();
         let diags = Diagnostics::new();
         let reqs = crate::rib::parse_bytes("<test>", rib.as_bytes(), &sources, &diags);
-        let ctx = crate::scene::BuildContext {
-            sources: &sources,
-            diags: &diags,
-            shader_paths: Vec::new(),
-            texture_paths: Vec::new(),
-            archive_paths: Vec::new(),
-            base_dir: None,
-            frames: None,
-            procedurals: Default::default(),
-        };
+        let ctx = crate::scene::BuildContext::new(&sources, &diags);
         let scene = crate::scene::build_scenes(reqs, &ctx).remove(0);
         let camera = Camera::new(&scene);
         AreaShape::build(&scene, &camera, 0, &diags)

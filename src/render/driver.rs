@@ -585,6 +585,29 @@ impl Frame<'_> {
         }
     }
 
+    /// Primitive `prim`'s surfaces as top-level work, each with the bucket row it first needs
+    /// (at least `min_row`; None when culled).
+    fn place_all(
+        &self,
+        prim: usize,
+        surfaces: SurfaceList,
+        min_row: usize,
+    ) -> Vec<(Option<usize>, Work)> {
+        surfaces
+            .into_iter()
+            .enumerate()
+            .map(|(j, surface)| {
+                let w = Work {
+                    surface,
+                    key: surface_key(prim, j),
+                    depth: 0,
+                    eye_splits: 0,
+                };
+                (self.place(&w, min_row), w)
+            })
+            .collect()
+    }
+
     /// The bucket row a surface first needs (at least `min_row`), or None when culled.
     fn place(&self, w: &Work, min_row: usize) -> Option<usize> {
         let b = self.widened_bound(w)?;
@@ -972,19 +995,7 @@ fn render_inner(
                     (None, Some(m)) => (m(i, &local), remade_cheaply(&scene.primitives[i])),
                     (None, None) => (Vec::new(), false),
                 };
-                let works: Vec<(Option<usize>, Work)> = list
-                    .into_iter()
-                    .enumerate()
-                    .map(|(j, surface)| {
-                        let w = Work {
-                            surface,
-                            key: surface_key(i, j),
-                            depth: 0,
-                            eye_splits: 0,
-                        };
-                        (frame.place(&w, 0), w)
-                    })
-                    .collect();
+                let works = frame.place_all(i, list, 0);
                 out.push(if remade {
                     Placed::Remade {
                         prim: i,
@@ -1142,19 +1153,7 @@ fn render_inner(
                     .into_par_iter()
                     .map(|i| {
                         let i = i as usize;
-                        m(i, &quiet)
-                            .into_iter()
-                            .enumerate()
-                            .map(|(j, surface)| {
-                                let w = Work {
-                                    surface,
-                                    key: surface_key(i, j),
-                                    depth: 0,
-                                    eye_splits: 0,
-                                };
-                                (frame.place(&w, row), w)
-                            })
-                            .collect()
+                        frame.place_all(i, m(i, &quiet), row)
                     })
                     .collect();
                 for (r, w) in made.into_iter().flatten() {

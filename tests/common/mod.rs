@@ -57,16 +57,7 @@ pub fn render_rib_with(
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext {
-        sources: &sources,
-        diags: &diags,
-        shader_paths: Vec::new(),
-        texture_paths: Vec::new(),
-        archive_paths: Vec::new(),
-        base_dir: None,
-        frames: None,
-        procedurals: Default::default(),
-    };
+    let ctx = BuildContext::new(&sources, &diags);
     let scenes = build_scenes(reqs, &ctx);
     assert!(
         !scenes.is_empty(),
