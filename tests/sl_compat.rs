@@ -490,6 +490,50 @@ fn specular_exponent_is_eight_over_roughness() {
     assert!((v - want).abs() < 1e-4, "{v} vs {want}");
 }
 
+/// BMRT's `Option "render" "prmanspecular" [0]` switches `specular()` and `specularbrdf` to
+/// RISpec's reference exponent 1/roughness; without it the tight 8/roughness stays. A distant
+/// light at 45° over a plane seen head-on puts H at 22.5° from N everywhere: with roughness 0.5
+/// the highlight is cos^16 (tight) or cos^2 (RISpec), in every pixel.
+#[test]
+fn prmanspecular_zero_gives_rispec_highlights() {
+    let dir = common::scratch_dir("sl_compat_prmanspecular");
+    std::fs::write(
+        dir.join("specprobe.sl"),
+        "surface specprobe(float brdf = 0) {\n\
+         normal Nf = faceforward(normalize(N), I);\n\
+         vector V = -normalize(I);\n\
+         Oi = 1;\n\
+         if (brdf != 0) Ci = specularbrdf(normalize(vector(1, 0, -1)), Nf, V, 0.5);\n\
+         else Ci = specular(Nf, V, 0.5);\n\
+         }\n",
+    )
+    .unwrap();
+    let cos = 22.5f32.to_radians().cos();
+    for (option, exponent) in [
+        ("", 16.0),
+        ("Option \"render\" \"prmanspecular\" [0]\n", 2.0),
+    ] {
+        for brdf in [0, 1] {
+            let rib = format!(
+                "{option}Format 8 8 1\nPixelSamples 1 1\nPixelFilter \"box\" 1 1\n\
+                 Projection \"orthographic\"\nScreenWindow -1 1 -1 1\nTranslate 0 0 5\n\
+                 WorldBegin\nLightSource \"distantlight\" 1 \"from\" [1 0 -1] \"to\" [0 0 0]\n\
+                 Surface \"specprobe\" \"brdf\" {brdf}\n\
+                 Patch \"bilinear\" \"P\" [-2 -2 0  2 -2 0  -2 2 0  2 2 0]\nWorldEnd\n"
+            );
+            let film = common::render_rib(&rib, &[dir.clone()]);
+            let rgb = common::film_rgb(&film);
+            let want = cos.powf(exponent);
+            for v in rgb {
+                assert!(
+                    (v - want).abs() < 1e-3,
+                    "{option:?} brdf {brdf}: {v} vs {want}"
+                );
+            }
+        }
+    }
+}
+
 /// `Deriv(P, s)` where s changes only along u: Dv(s) is rounding noise (the patch's s is
 /// interpolated from non-representable corner values), and dividing by it must not blow up.
 /// dP/ds is the patch width over the s range everywhere: 4 / 0.6.

@@ -69,7 +69,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("statistics:progress", "uniform integer", Ignored),
     ("render:bucketorder", "uniform string", Ignored),
     ("render:multipass", "uniform integer", Ignored),
-    ("render:prmanspecular", "uniform integer", Ignored),
+    ("render:prmanspecular", "uniform integer", Used),
     ("render:max_raylevel", "uniform integer", Used),
     ("render:minshadowbias", "uniform float", Used),
     ("render:use_hierarchy", "uniform integer", Ignored),

@@ -364,6 +364,9 @@ pub struct Exec<'a> {
     /// Most iterations one execution of a loop statement may run (`Option "limits"
     /// "loopiterations"`); the whole run may loop 64 times that.
     pub loop_limit: u64,
+    /// The specular exponent is this over `roughness` (see [`crate::shade::ops::spec_exponent`]):
+    /// [`SPEC_SCALE_TIGHT`] unless the scene asks for RISpec's highlight.
+    pub spec_scale: f32,
     /// Spare mask buffers, so control flow allocates nothing per instruction.
     bits_pool: Vec<Vec<bool>>,
     idx_pool: Vec<Vec<u32>>,
@@ -494,6 +497,14 @@ pub static SPARSE_LANES: std::sync::atomic::AtomicBool = std::sync::atomic::Atom
 /// smallest step real shaders use runs some ten thousand steps).
 pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
 
+/// `specular()`'s exponent times `roughness` by default: the tight highlight of BMRT with its
+/// `"prmanspecular"` on (Aqsis's `roughness/8` emulates the same), which the published BMRT and
+/// PRMan pictures show.
+pub const SPEC_SCALE_TIGHT: f32 = 8.0;
+/// RISpec's reference `specular()`: `pow(N·H, 1/roughness)`, BMRT's with
+/// `Option "render" "prmanspecular" [0]`.
+pub const SPEC_SCALE_RISPEC: f32 = 1.0;
+
 /// From this iteration on, a loop is checked for a fixed point at every power of two: when a
 /// whole iteration leaves every register and the running mask unchanged, it can never end.
 const FIRST_PROGRESS_CHECK: u64 = 1024;
@@ -541,6 +552,7 @@ impl<'a> Exec<'a> {
             current_light: None,
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
+            spec_scale: SPEC_SCALE_TIGHT,
             bits_pool: Vec::new(),
             idx_pool: Vec::new(),
             sel_pool: Vec::new(),

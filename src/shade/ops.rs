@@ -1514,12 +1514,14 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
                     arg(ex, args, 2).t(),
                     arg(ex, args, 3).f(),
                 );
+                let scale = ex.spec_scale;
                 write_t(&mut out, n, varying_any!(), |i| {
                     Vec3::splat(spec_brdf(
                         normalize(l.at(i)),
                         normalize(nn.at(i)),
                         normalize(vv.at(i)),
                         r.at(i),
+                        scale,
                     ))
                 });
                 put(ex, dst, out);
@@ -1533,8 +1535,10 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             let nv = to_vec_t(nn, n, normalize);
             let vn = to_vec_t(vv, n, normalize);
             let phong = f == Phong;
-            // The exponent: 8/roughness (specular) or size (phong); once per grid when uniform.
-            let exponent = |x: f32| if phong { x } else { spec_exponent(x) };
+            // The exponent: scale/roughness (specular) or size (phong); once per grid when
+            // uniform.
+            let scale = ex.spec_scale;
+            let exponent = |x: f32| if phong { x } else { spec_exponent(x, scale) };
             let expo: Vec<f32> = match r {
                 F::U(x) => vec![exponent(x)],
                 F::V(v) => v.iter().map(|&x| exponent(x)).collect(),
@@ -1715,22 +1719,24 @@ pub fn fresnel(i: Vec3, n: Vec3, eta: f32) -> (f32, f32, Vec3, Vec3) {
     (kr, 1.0 - kr, r, t)
 }
 
-/// The exponent of `specular`/`specularbrdf` for a roughness. RISpec's reference code writes
-/// `1/roughness`, but PRMan and BMRT render highlights as tight as `8/roughness` (Aqsis uses
-/// `roughness/8` for the same reason), and the published scenes and their shipped pictures
-/// rely on that: with `1/roughness` every `plastic` highlight is several times too broad.
-pub fn spec_exponent(roughness: f32) -> f32 {
+/// The exponent of `specular`/`specularbrdf` for a roughness: `scale / roughness`. RISpec's
+/// reference code writes `1/roughness`, but BMRT (with its default `"prmanspecular"`, meant to
+/// match PRMan) renders highlights as tight as `8/roughness`, Aqsis uses `roughness/8` for the
+/// same reason, and most published pictures rely on it; a scene that sets BMRT's
+/// `Option "render" "prmanspecular" [0]` gets RISpec's (the scale is the execution's
+/// [`crate::shade::exec::Exec::spec_scale`]).
+pub fn spec_exponent(roughness: f32, scale: f32) -> f32 {
     if roughness > 0.0 {
-        8.0 / roughness
+        scale / roughness
     } else {
-        8e4
+        scale * 1e4
     }
 }
 
-/// The specular term for one light: pow(max(0, N·H), 8/roughness) (see [`spec_exponent`]).
-pub fn spec_brdf(l: Vec3, n: Vec3, v: Vec3, roughness: f32) -> f32 {
+/// The specular term for one light: pow(max(0, N·H), scale/roughness) (see [`spec_exponent`]).
+pub fn spec_brdf(l: Vec3, n: Vec3, v: Vec3, roughness: f32, scale: f32) -> f32 {
     let h = normalize(l + v);
-    n.dot(h).max(0.0).powf(spec_exponent(roughness))
+    n.dot(h).max(0.0).powf(spec_exponent(roughness, scale))
 }
 
 fn format_text(ex: &Exec, args: &[Reg]) -> String {

@@ -1190,6 +1190,7 @@ impl<'a> ShadeSystem<'a> {
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);
+        ex.spec_scale = spec_scale(scene);
         if relight.is_some() {
             ex.relight = relight;
             ex.lights_at = Some(&grid.p);
@@ -1316,6 +1317,15 @@ fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
 }
 
 /// `Option "limits" "loopiterations"`: most iterations of one loop statement per grid.
+/// BMRT's `Option "render" "prmanspecular" [0]` asks for RISpec's `specular()` highlight
+/// (`1/roughness`); otherwise the tight one (see [`crate::shade::ops::spec_exponent`]).
+fn spec_scale(scene: &Scene) -> f32 {
+    match scene.options.user_floats("render:prmanspecular") {
+        Some([x, ..]) if *x == 0.0 => crate::shade::exec::SPEC_SCALE_RISPEC,
+        _ => crate::shade::exec::SPEC_SCALE_TIGHT,
+    }
+}
+
 fn loop_limit(scene: &Scene) -> u64 {
     match scene.options.user_floats("limits:loopiterations") {
         Some([x, ..]) if *x >= 1.0 => *x as u64,
