@@ -534,6 +534,56 @@ fn prmanspecular_zero_gives_rispec_highlights() {
     }
 }
 
+/// BMRT moved points only for primitives with `Attribute "render" "truedisplacement" [1]`;
+/// otherwise its displacement shaders were bump maps. A sphere of radius 1 pushed out by 0.5
+/// covers π·1.5² or π·1² of the frame: displaced without the attribute anywhere (PRMan, RISpec)
+/// or with it at 1; bump mapped with it at 0, or without it in a scene where another primitive
+/// sets it (a BMRT scene).
+#[test]
+fn bmrt_truedisplacement_decides_between_displacement_and_bump() {
+    let dir = common::scratch_dir("sl_compat_truedisp");
+    std::fs::write(
+        dir.join("pushout.sl"),
+        "displacement pushout() { P += 0.5 * normalize(N); N = calculatenormal(P); }\n",
+    )
+    .unwrap();
+    let sphere = |attr: &str| {
+        format!(
+            "AttributeBegin\n{attr}Displacement \"pushout\"\n\
+             Attribute \"displacementbound\" \"sphere\" [0.5]\nSphere 1 -1 1 360\nAttributeEnd\n"
+        )
+    };
+    // Off screen: only its attribute matters.
+    let elsewhere = "AttributeBegin\nTranslate 20 0 0\n\
+                     Attribute \"render\" \"truedisplacement\" [1]\nSphere 1 -1 1 360\nAttributeEnd\n";
+    let on = "Attribute \"render\" \"truedisplacement\" [1]\n";
+    let off = "Attribute \"render\" \"truedisplacement\" [0]\n";
+    for (world, radius) in [
+        (sphere(""), 1.5),
+        (sphere(on), 1.5),
+        (sphere(off), 1.0),
+        (format!("{elsewhere}{}", sphere("")), 1.0),
+    ] {
+        let rib = format!(
+            "Format 40 40 1\nPixelSamples 2 2\nProjection \"orthographic\"\n\
+             ScreenWindow -2 2 -2 2\nTranslate 0 0 5\nWorldBegin\n{world}WorldEnd\n"
+        );
+        let film = common::render_rib(&rib, &[dir.clone()]);
+        let a = film.channel("a").expect("alpha");
+        let mut covered = 0f32;
+        for y in 0..film.height {
+            for x in 0..film.width {
+                covered += film.pixel(x, y)[a] / 100.0;
+            }
+        }
+        let want = std::f32::consts::PI * radius * radius;
+        assert!(
+            (covered - want).abs() < 0.05 * want,
+            "{world}: covered {covered} units², want {want}"
+        );
+    }
+}
+
 /// `Deriv(P, s)` where s changes only along u: Dv(s) is rounding noise (the patch's s is
 /// interpolated from non-representable corner values), and dividing by it must not blow up.
 /// dP/ds is the patch width over the s range everywhere: 4 / 0.6.

@@ -832,6 +832,7 @@ impl<'a> Builder<'a> {
             source_dir: self.ctx.base_dir.clone(),
             texture_jobs: std::mem::take(&mut self.pending_texture_jobs),
             jobs_only: false,
+            bmrt_displacement: false,
         });
         self.light_handles.clear();
         self.gs.ctm = Mat4::IDENTITY;

@@ -125,6 +125,9 @@ impl Builder<'_> {
         };
         let motion = self.primitive_motion(deform).map(Arc::new);
         if let Some(scene) = self.world.as_mut() {
+            if attributes.user.contains_key("render:truedisplacement") {
+                scene.bmrt_displacement = true;
+            }
             scene.primitives.push(Primitive {
                 geometry,
                 primvars,

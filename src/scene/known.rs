@@ -112,7 +112,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("dice:offscreenstrategy", "uniform string", Ignored),
     ("dice:watertight", "uniform integer", Ignored),
     ("render:casts_shadows", "uniform string", Used),
-    ("render:truedisplacement", "uniform integer", Ignored),
+    ("render:truedisplacement", "uniform integer", Used),
     ("render:visibility", "uniform integer", Used),
     ("render:patch_multiplier", "uniform float", Ignored),
     ("render:patch_maxlevel", "uniform integer", Ignored),

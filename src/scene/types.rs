@@ -919,6 +919,10 @@ pub struct Scene {
     /// True for the scene that only carries texture jobs given after the last world block
     /// (nothing to render).
     pub jobs_only: bool,
+    /// Some primitive sets BMRT's `Attribute "render" "truedisplacement"`: the scene was
+    /// written for BMRT, where a displacement shader only bends the normals of a primitive
+    /// unless that attribute is 1 for it (PRMan always moves the points).
+    pub bmrt_displacement: bool,
 }
 
 /// Which texture-making request a [`TextureJob`] came from (RISpec §8).

@@ -337,7 +337,9 @@ impl<'a> ShadeSystem<'a> {
         self.library.get("defaultsurface", self.sources, self.diags)
     }
 
-    /// Runs the displacement shader, if any: moves P, updates N and Ng.
+    /// Runs the displacement shader, if any: moves P, updates N and Ng — or, in a BMRT scene
+    /// for a primitive without `"render" "truedisplacement"` 1, only takes its N (bump
+    /// mapping, see [`bump_only`]).
     pub fn displace(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
         let Some(p) = scene.primitives.get(prim) else {
             return;
@@ -350,8 +352,15 @@ impl<'a> ShadeSystem<'a> {
         };
         let ctx = self.ctx(scene, camera, prim);
         let n0 = grid.n.clone();
+        let bump = bump_only(scene, &p.attributes);
         let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None, None);
         if let Some(mut regs) = regs {
+            if bump {
+                if let Some(g) = prog.global("N") {
+                    grid.n = own_vt(&mut regs[g.reg as usize], grid.len());
+                }
+                return;
+            }
             if let Some(g) = prog.global("P") {
                 grid.p = own_vt(&mut regs[g.reg as usize], grid.len());
             }
@@ -1317,6 +1326,21 @@ fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
 }
 
 /// `Option "limits" "loopiterations"`: most iterations of one loop statement per grid.
+/// Whether a displacement shader only bends this primitive's normals: BMRT moved points only
+/// with `Attribute "render" "truedisplacement" [1]`. A primitive that sets it to 0 is bump
+/// mapped; one without it is bump mapped when some other primitive of the scene sets it (the
+/// scene was written for BMRT), and displaced as PRMan and RISpec do otherwise.
+fn bump_only(scene: &Scene, attrs: &Attributes) -> bool {
+    match attrs
+        .user
+        .get("render:truedisplacement")
+        .map(|p| p.data.floats())
+    {
+        Some([x, ..]) => *x == 0.0,
+        _ => scene.bmrt_displacement,
+    }
+}
+
 /// BMRT's `Option "render" "prmanspecular" [0]` asks for RISpec's `specular()` highlight
 /// (`1/roughness`); otherwise the tight one (see [`crate::shade::ops::spec_exponent`]).
 fn spec_scale(scene: &Scene) -> f32 {
