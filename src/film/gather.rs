@@ -431,18 +431,31 @@ fn weights_portable(pos: &[f32], q: i32, ax: &Axis, out: &mut [f32]) {
     let c = [(q - 1) as f32, q as f32, (q + 1) as f32];
     let mid = q as f32 + 0.5;
     for (s, &x) in pos.iter().enumerate() {
-        let (a, b) = (x - h - 0.5, x + h - 0.5);
-        let reached = c.map(|c| !(c < a) && c <= b);
         let w = if let Some(n) = &ax.narrow {
-            // Narrow: the sample reaches its own column and (but at x = q + ½) the nearer
-            // side; one record serves both.
-            let (own, side) = n.at((mid - x).abs());
-            [side, own, side]
+            // Narrow: the sample at distance v from its column's centre reaches that column
+            // when v ≤ h and the nearer side (both at x = q + ½) when 1 − v ≤ h; one record
+            // serves both weights. (NaN reaches nothing.)
+            let v = (mid - x).abs();
+            let (own, side) = n.at(v);
+            let side = if v >= 1.0 - h { side } else { 0.0 };
+            [
+                if x <= mid { side } else { 0.0 },
+                if v <= h { own } else { 0.0 },
+                if x >= mid { side } else { 0.0 },
+            ]
         } else {
-            c.map(|c| t.at(c + 0.5 - x))
+            let (a, b) = (x - h - 0.5, x + h - 0.5);
+            c.map(|c| {
+                let reached = !(c < a) && c <= b;
+                if reached {
+                    t.at(c + 0.5 - x)
+                } else {
+                    0.0
+                }
+            })
         };
         for o in 0..TAPS {
-            out[o * lanes + s] = if reached[o] { w[o] } else { 0.0 };
+            out[o * lanes + s] = w[o];
         }
     }
 }
@@ -902,25 +915,37 @@ mod avx2 {
             )
         };
         let c = [0, 1, 2].map(|o| _mm256_set1_ps((q - 1 + o as i32) as f32));
+        // The side's reach test `v ≥ 1 − h` holds for every v ≥ 0 when h ≥ 1 (and NaN
+        // fails the side's own compares).
+        let (one_h, side_always) = (_mm256_set1_ps(1.0 - ax.h), ax.h >= 1.0);
         for chunk in 0..lanes / LANES {
             // SAFETY: LANES floats at chunk · LANES < lanes = pos.len().
             let x = unsafe { _mm256_loadu_ps(pos.as_ptr().add(chunk * LANES)) };
-            let a = _mm256_sub_ps(_mm256_sub_ps(x, hv), half);
-            let b = _mm256_sub_ps(_mm256_add_ps(x, hv), half);
             let w = if let Some(n) = narrow {
-                let (own, side) = lookup2(_mm256_andnot_ps(sign, _mm256_sub_ps(mid, x)), n);
-                [side, own, side]
+                let v = _mm256_andnot_ps(sign, _mm256_sub_ps(mid, x));
+                let (own, mut side) = lookup2(v, n);
+                if !side_always {
+                    side = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(v, one_h), side);
+                }
+                [
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(x, mid), side),
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(v, hv), own),
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(x, mid), side),
+                ]
             } else {
-                c.map(|c| lookup(_mm256_sub_ps(_mm256_add_ps(c, half), x)))
+                let a = _mm256_sub_ps(_mm256_sub_ps(x, hv), half);
+                let b = _mm256_sub_ps(_mm256_add_ps(x, hv), half);
+                c.map(|c| {
+                    let reached = _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_NLT_UQ>(c, a),
+                        _mm256_cmp_ps::<_CMP_LE_OQ>(c, b),
+                    );
+                    _mm256_and_ps(reached, lookup(_mm256_sub_ps(_mm256_add_ps(c, half), x)))
+                })
             };
-            for o in 0..TAPS {
-                let reached = _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_NLT_UQ>(c[o], a),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(c[o], b),
-                );
-                let w = _mm256_and_ps(reached, w[o]);
+            for (o, w) in w.iter().enumerate() {
                 // SAFETY: LANES floats inside block o.
-                unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), w) };
+                unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), *w) };
             }
         }
     }
@@ -943,6 +968,7 @@ mod avx2 {
     /// [`super::own_depth`] for `Min` (`max` false) or `Max` of at least eight depths:
     /// lane-wise from ±∞ (a NaN depth is passed over, as `f32::min` and `max` do), then
     /// across the lanes, then the depths left over.
+    #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) fn depth(zs: &[f32], max: bool) -> f32 {
         let n = zs.len() / LANES * LANES;
@@ -962,11 +988,19 @@ mod avx2 {
                 _mm256_min_ps(z, acc)
             };
         }
-        let mut l = [0f32; LANES];
-        // SAFETY: LANES floats.
-        unsafe { _mm256_storeu_ps(l.as_mut_ptr(), acc) };
+        // Across the lanes in the register (no NaN left: the order does not matter).
+        let op = |a, b| {
+            if max {
+                _mm256_max_ps(a, b)
+            } else {
+                _mm256_min_ps(a, b)
+            }
+        };
+        let m = op(acc, _mm256_permute2f128_ps::<1>(acc, acc));
+        let m = op(m, _mm256_permute_ps::<0b01_00_11_10>(m));
+        let m = op(m, _mm256_permute_ps::<0b10_11_00_01>(m));
         let fold = |a: f32, b: f32| if max { a.max(b) } else { a.min(b) };
-        l.iter().chain(&zs[n..]).fold(start, |a, &b| fold(a, b))
+        zs[n..].iter().fold(_mm256_cvtss_f32(m), |a, &b| fold(a, b))
     }
 
     /// [`super::combine`] in AVX2.
