@@ -105,30 +105,97 @@ pub struct Prepared {
     w: Vec<f32>,
 }
 
-/// What preparing a pixel needs from the frame: the filter's half widths and tables, the
-/// depth filter, the kernel build to run, and the storage of filtered buckets for reuse.
+/// What preparing a pixel needs from the frame: the filter's axes, the depth filter, the
+/// kernel build to run, and the storage of filtered buckets for reuse.
 #[derive(Debug)]
 pub struct PrepareCtx<'a> {
-    h: (f32, f32),
-    t: &'a FilterTables,
-    /// Each table as pairs (t[i], t[i + 1]): one 64-bit gather per lookup.
-    pairs: [Vec<[f32; 2]>; 2],
+    axes: [Axis<'a>; 2],
     df: DepthFilter,
     kernel: Kernel,
     #[allow(clippy::type_complexity)]
     pool: std::sync::Mutex<Vec<(Vec<f32>, Vec<Contrib>)>>,
 }
 
+/// One axis of the filter as the weight kernels read it.
+#[derive(Debug)]
+struct Axis<'a> {
+    /// Half width.
+    h: f32,
+    t: &'a Table1d,
+    /// The table as pairs (t[i], t[i + 1]): one 64-bit load per lookup (wide filters).
+    pairs: Vec<[f32; 2]>,
+    /// Narrow filters (h ≤ 1): both weights of a sample from one record.
+    narrow: Option<Narrow>,
+}
+
+impl<'a> Axis<'a> {
+    fn new(h: f32, t: &'a Table1d) -> Axis<'a> {
+        let narrow = h <= 1.0;
+        let (tab, _, _) = t.parts();
+        Axis {
+            h,
+            t,
+            pairs: if narrow {
+                Vec::new()
+            } else {
+                tab.windows(2).map(|w| [w[0], w[1]]).collect()
+            },
+            narrow: narrow.then(|| Narrow::new(t)),
+        }
+    }
+}
+
+/// A narrow filter's weights by a sample's distance v ≤ ½ from its pixel's centre (along
+/// one axis): f(v) towards its own column, f(1 − v) towards the neighbour on its side
+/// (the one it is nearer). One record per node holds both, so a sample's two weights are
+/// one 16-byte load and one interpolation fraction (two table lookups before). The nodes
+/// are spaced like the table's; for the usual h = 1 (gaussian 2 × 2, triangle 2 × 2) they
+/// are the table's own nodes (v = j/2048, 1 − v = (2048 − j)/2048, exact), so the own
+/// weight is the scatter's bit for bit and the side one differs by rounding.
+#[derive(Debug)]
+struct Narrow {
+    /// Node j (v_j = j / scale): f(v_j), f(v_j+1), f(1 − v_j), f(1 − v_j+1), the last
+    /// node's values repeated past the end.
+    rec: Vec<[f32; 4]>,
+    scale: f32,
+    steps: i32,
+}
+
+impl Narrow {
+    fn new(t: &Table1d) -> Narrow {
+        let (_, tscale, _) = t.parts();
+        let steps = (0.5 * tscale).ceil().max(1.0) as i32;
+        let scale = 2.0 * steps as f32;
+        let node = |j: i32| {
+            let v = j.min(steps) as f32 / scale;
+            (t.at(v), t.at(1.0 - v))
+        };
+        let rec = (0..=steps)
+            .map(|j| {
+                let ((a, c), (b, d)) = (node(j), node(j + 1));
+                [a, b, c, d]
+            })
+            .collect();
+        Narrow { rec, scale, steps }
+    }
+
+    /// (own, side) weights at distance `v` (NaN gives NaN: unreached padding lanes).
+    #[inline(always)]
+    fn at(&self, v: f32) -> (f32, f32) {
+        let u = v * self.scale;
+        // `as` gives 0 for NaN, as the vector build's clamp does.
+        let i = (u as i32).clamp(0, self.steps);
+        let f = u - i as f32;
+        let r = self.rec[i as usize];
+        (r[0] + f * (r[1] - r[0]), r[2] + f * (r[3] - r[2]))
+    }
+}
+
 impl<'a> PrepareCtx<'a> {
     pub fn new(filter: &Filter, t: &'a FilterTables, df: DepthFilter) -> PrepareCtx<'a> {
-        let pairs = |t: &Table1d| {
-            let (tab, _, _) = t.parts();
-            tab.windows(2).map(|w| [w[0], w[1]]).collect()
-        };
+        let (hx, hy) = filter.radius();
         PrepareCtx {
-            h: filter.radius(),
-            t,
-            pairs: [pairs(&t.x), pairs(&t.y)],
+            axes: [Axis::new(hx, &t.x), Axis::new(hy, &t.y)],
             df,
             kernel: pick_kernel(),
             pool: Default::default(),
@@ -222,12 +289,12 @@ impl Prepared {
             }
         }
         let (wx, wy) = self.w.split_at_mut(TAPS * lanes);
-        ctx.kernel
-            .weights(&xs[..lanes], qx, ctx.h.0, &ctx.t.x, &ctx.pairs[0], wx);
-        ctx.kernel
-            .weights(&ys[..lanes], qy, ctx.h.1, &ctx.t.y, &ctx.pairs[1], wy);
         let out = &mut self.px[pix];
-        if !ctx.kernel.contrib(wx, wy, rgba, lanes, out) {
+        let (xs, ys) = (&xs[..lanes], &ys[..lanes]);
+        if !ctx
+            .kernel
+            .finish(ctx, (xs, ys), (qx, qy), rgba, (wx, wy), out)
+        {
             // A sum is not finite: a value is not (or the sums overflow). Again, leaving out
             // the products of weight 0, which must not poison the sums.
             contrib_portable(wx, wy, rgba, lanes, true, out);
@@ -238,7 +305,7 @@ impl Prepared {
             });
             out.finite = if finite { !0 } else { 0 };
         }
-        out.z = own_depth(zs[..spp].iter().copied(), ctx.df);
+        out.z = ctx.kernel.depth(&zs[..spp], ctx.df);
     }
 }
 
@@ -313,66 +380,82 @@ fn pick_kernel() -> Kernel {
 }
 
 impl Kernel {
-    /// Weights of samples at coordinates `pos` (one axis; `lanes` of them) in pixel `q`
-    /// towards the pixels q − 1, q, q + 1, into `out` (three blocks of `lanes`): the
-    /// scatter's reach test `sx − h − 0.5 ≤ c ≤ sx + h − 0.5` and its lookup at c + 0.5 − sx.
-    fn weights(
+    /// A pixel's weights into `wx`, `wy` (see [`weights_portable`]) and its contributions
+    /// from them (see [`contrib_portable`], without `skip_zero`): one call per pixel, so the
+    /// vector build runs it all inlined in one AVX2 function.
+    fn finish(
         self,
-        pos: &[f32],
-        q: i32,
-        h: f32,
-        t: &Table1d,
-        pairs: &[[f32; 2]],
-        out: &mut [f32],
-    ) {
+        ctx: &PrepareCtx,
+        (xs, ys): (&[f32], &[f32]),
+        (qx, qy): (i32, i32),
+        rgba: &[f32],
+        (wx, wy): (&mut [f32], &mut [f32]),
+        out: &mut Contrib,
+    ) -> bool {
+        let lanes = xs.len();
         match self {
-            Kernel::Portable => weights_portable(pos, q, h, t, out),
+            Kernel::Portable => {
+                weights_portable(xs, qx, &ctx.axes[0], wx);
+                weights_portable(ys, qy, &ctx.axes[1], wy);
+                contrib_portable(wx, wy, rgba, lanes, false, out)
+            }
             // SAFETY: chosen only where the CPU has AVX2.
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => unsafe { avx2::weights(pos, q, h, t, pairs, out) },
+            Kernel::Avx2 => unsafe {
+                avx2::finish(&ctx.axes, (xs, ys), (qx, qy), rgba, (wx, wy), out)
+            },
         }
     }
 
-    /// See [`contrib_portable`] (without `skip_zero`).
-    fn contrib(
-        self,
-        wx: &[f32],
-        wy: &[f32],
-        rgba: &[f32],
-        lanes: usize,
-        out: &mut Contrib,
-    ) -> bool {
-        match self {
-            Kernel::Portable => contrib_portable(wx, wy, rgba, lanes, false, out),
+    /// [`own_depth`] (the vector build takes eight samples at a time for `Min` and `Max`:
+    /// the same value, as min and max are exact).
+    fn depth(self, zs: &[f32], df: DepthFilter) -> f32 {
+        match (self, df) {
             // SAFETY: chosen only where the CPU has AVX2.
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => unsafe { avx2::contrib(wx, wy, rgba, lanes, out) },
+            (Kernel::Avx2, DepthFilter::Min | DepthFilter::Max) if zs.len() >= LANES => unsafe {
+                avx2::depth(zs, df == DepthFilter::Max)
+            },
+            _ => own_depth(zs.iter().copied(), df),
         }
     }
 }
 
-fn weights_portable(pos: &[f32], q: i32, h: f32, t: &Table1d, out: &mut [f32]) {
+/// Weights of samples at coordinates `pos` (one axis; `lanes` of them) in pixel `q` towards
+/// the pixels q − 1, q, q + 1, into `out` (three blocks of `lanes`): the scatter's reach test
+/// `sx − h − 0.5 ≤ c ≤ sx + h − 0.5`, and its lookup at c + 0.5 − sx (narrow filters: see
+/// [`Narrow`]).
+fn weights_portable(pos: &[f32], q: i32, ax: &Axis, out: &mut [f32]) {
+    let (h, t) = (ax.h, ax.t);
     let lanes = pos.len();
     let c = [(q - 1) as f32, q as f32, (q + 1) as f32];
     let mid = q as f32 + 0.5;
     for (s, &x) in pos.iter().enumerate() {
-        let (a, b) = (x - h - 0.5, x + h - 0.5);
-        let reached = c.map(|c| !(c < a) && c <= b);
-        let w = if h <= 1.0 {
-            // Narrow: the sample reaches its own column and (but at x = q + ½) one side;
-            // one lookup serves whichever side is reached.
-            let own = t.at(c[1] + 0.5 - x);
-            let side = t.at(if x < mid {
-                c[0] + 0.5 - x
-            } else {
-                c[2] + 0.5 - x
-            });
-            [side, own, side]
+        let w = if let Some(n) = &ax.narrow {
+            // Narrow: the sample at distance v from its column's centre reaches that column
+            // when v ≤ h and the nearer side (both at x = q + ½) when 1 − v ≤ h; one record
+            // serves both weights. (NaN reaches nothing.)
+            let v = (mid - x).abs();
+            let (own, side) = n.at(v);
+            let side = if v >= 1.0 - h { side } else { 0.0 };
+            [
+                if x <= mid { side } else { 0.0 },
+                if v <= h { own } else { 0.0 },
+                if x >= mid { side } else { 0.0 },
+            ]
         } else {
-            c.map(|c| t.at(c + 0.5 - x))
+            let (a, b) = (x - h - 0.5, x + h - 0.5);
+            c.map(|c| {
+                let reached = !(c < a) && c <= b;
+                if reached {
+                    t.at(c + 0.5 - x)
+                } else {
+                    0.0
+                }
+            })
         };
         for o in 0..TAPS {
-            out[o * lanes + s] = if reached[o] { w[o] } else { 0.0 };
+            out[o * lanes + s] = w[o];
         }
     }
 }
@@ -487,37 +570,39 @@ pub fn gather_tile(
     tile.w = w;
     tile.h = h;
     tile.data = vec![0f32; w * h * 5];
-    // Each pixel of the region grown by one: (bucket, pixel index), None outside the image.
+    // Each pixel of the region grown by one: its contributions, ABSENT outside the image
+    // (filled a row of a part at a time: no per-pixel lookup of which part holds it).
     let gw = w + 2;
-    let mut grid: Vec<Option<(usize, usize)>> = vec![None; gw * (h + 2)];
+    let mut nb: Vec<&Contrib> = vec![&ABSENT_PX; gw * (h + 2)];
     let (gx0, gy0) = (x0 as i64 - 1, y0 as i64 - 1);
     let (gx1, gy1) = (
         (x1 as i64 + 1).min(film.width as i64),
         (y1 as i64 + 1).min(film.height as i64),
     );
-    for (k, p) in parts.iter().enumerate() {
+    for p in parts {
         // The part's pixels inside the grown region and the image.
         let (px0, py0) = (p.x0 as i64, p.y0 as i64);
         let xa = px0.max(gx0).max(0);
         let xb = (px0 + p.width as i64).min(gx1);
         let ya = py0.max(gy0).max(0);
         let yb = (py0 + p.height as i64).min(gy1);
+        if xa >= xb {
+            continue;
+        }
+        let n = (xb - xa) as usize;
         for y in ya..yb {
-            for x in xa..xb {
-                let pi = (y - py0) as usize * p.width + (x - px0) as usize;
-                grid[(y - gy0) as usize * gw + (x - gx0) as usize] = Some((k, pi));
+            let pi = (y - py0) as usize * p.width + (xa - px0) as usize;
+            let gi = (y - gy0) as usize * gw + (xa - gx0) as usize;
+            for (d, c) in nb[gi..gi + n].iter_mut().zip(&p.px[pi..pi + n]) {
+                *d = c;
             }
         }
     }
-    let nb: Vec<&Contrib> = grid
-        .iter()
-        .map(|g| g.map_or(&ABSENT_PX, |(k, pi)| &parts[k].px[pi]))
-        .collect();
     let g = Grid {
         parts,
-        grid: &grid,
         nb: &nb,
         gw,
+        origin: (x0 as i32, y0 as i32),
     };
     match pick_kernel() {
         // SAFETY: chosen only where the CPU has AVX2.
@@ -531,12 +616,27 @@ pub fn gather_tile(
 /// The pixels around a tile, for [`gather_pixels`].
 struct Grid<'a> {
     parts: &'a [&'a Prepared],
-    /// (bucket, pixel) of each pixel of the tile grown by one, None outside the image.
-    grid: &'a [Option<(usize, usize)>],
-    /// The same pixels' contributions ([`ABSENT`] outside the image).
+    /// The contributions of each pixel of the tile grown by one ([`ABSENT_PX`] outside the
+    /// image).
     nb: &'a [&'a Contrib],
     /// Width of the grown tile.
     gw: usize,
+    /// Raster pixel of the tile's first pixel.
+    origin: (i32, i32),
+}
+
+impl Grid<'_> {
+    /// The r g b a blocks of raster pixel (x, y) and the bucket holding them.
+    fn own_samples(&self, (x, y): (i32, i32)) -> Option<(&Prepared, &[f32])> {
+        self.parts.iter().find_map(|p| {
+            let (i, j) = (x - p.x0, y - p.y0);
+            let inside = (0..p.width as i32).contains(&i) && (0..p.height as i32).contains(&j);
+            inside.then(|| {
+                let pix = j as usize * p.width + i as usize;
+                (*p, &p.rgba[pix * 4 * p.lanes..(pix + 1) * 4 * p.lanes])
+            })
+        })
+    }
 }
 
 /// [`gather_pixels`] built for AVX2, with [`avx2::combine`] (the same bits).
@@ -587,13 +687,14 @@ fn gather_pixels(
         let rows = [j * gw, (j + 1) * gw, (j + 2) * gw];
         for i in 0..w {
             let out = &mut data[(j * w + i) * 5..(j * w + i + 1) * 5];
-            let Some((ok, opi)) = g.grid[rows[1] + i + 1] else {
-                out[4] = f32::INFINITY;
-                continue;
-            };
             // Neighbour k at (k % 3 − 1, k / 3 − 1) from the pixel; the pixel is its
             // target 8 − k.
             let nb: [&Contrib; 9] = std::array::from_fn(|k| g.nb[rows[k / 3] + i + k % 3]);
+            if std::ptr::eq(nb[4], &ABSENT_PX) {
+                // Not in any bucket given.
+                out[4] = f32::INFINITY;
+                continue;
+            }
             let (s, range, finite) = combine(&nb);
             out[4] = nb[4].z;
             let ws = s[4];
@@ -604,11 +705,12 @@ fn gather_pixels(
             } else {
                 // Nothing (or weights cancelling) in the support: the plain mean of the
                 // pixel's own samples.
-                let own = g.parts[ok];
-                let b = &own.rgba[opi * 4 * own.lanes..];
-                for c in 0..4 {
-                    let s: f64 = (0..own.spp).map(|s| b[c * own.lanes + s] as f64).sum();
-                    out[c] = (s / own.spp as f64) as f32;
+                let q = (g.origin.0 + i as i32, g.origin.1 + j as i32);
+                if let Some((own, b)) = g.own_samples(q) {
+                    for c in 0..4 {
+                        let s: f64 = (0..own.spp).map(|s| b[c * own.lanes + s] as f64).sum();
+                        out[c] = (s / own.spp as f64) as f32;
+                    }
                 }
             }
             // Equal over the neighbourhood: exactly that value.
@@ -733,45 +835,41 @@ fn copy_into(tile: &mut Tile, part: &Tile) {
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::{Contrib, Table1d, LANES, NSUMS, SUMS, TAPS};
+    use super::{Axis, Contrib, LANES, NSUMS, SUMS, TAPS};
 
     /// [`super::weights_portable`], eight samples at a time.
+    #[inline]
     #[target_feature(enable = "avx2")]
-    pub(super) fn weights(
-        pos: &[f32],
-        q: i32,
-        h: f32,
-        t: &Table1d,
-        pairs: &[[f32; 2]],
-        out: &mut [f32],
-    ) {
+    pub(super) fn weights(pos: &[f32], q: i32, ax: &Axis, out: &mut [f32]) {
         let lanes = pos.len();
         assert!(lanes % LANES == 0 && out.len() >= TAPS * lanes);
-        let (_, scale, steps) = t.parts();
-        assert!(steps >= 0 && pairs.len() > steps as usize);
+        let (_, scale, steps) = ax.t.parts();
+        assert!(steps >= 0 && (ax.narrow.is_some() || ax.pairs.len() > steps as usize));
         let sign = _mm256_set1_ps(-0.0);
-        let (hv, half) = (_mm256_set1_ps(h), _mm256_set1_ps(0.5));
+        let (hv, half) = (_mm256_set1_ps(ax.h), _mm256_set1_ps(0.5));
         let (sc, st, zi) = (
             _mm256_set1_ps(scale),
             _mm256_set1_epi32(steps),
             _mm256_setzero_si256(),
         );
-        let narrow = h <= 1.0;
         let mid = _mm256_set1_ps(q as f32 + 0.5);
-        let lookup = |d: __m256| {
-            let u = _mm256_mul_ps(_mm256_andnot_ps(sign, d), sc);
-            // `u as i32` then min(steps); out-of-range lanes are clamped only to keep the
-            // gathers in bounds (they are not reached, so they weigh 0).
-            let i = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(u), st), zi);
-            let f = _mm256_sub_ps(u, _mm256_cvtepi32_ps(i));
-            // SAFETY: 0 ≤ i ≤ steps < pairs.len().
-            // Eight 64-bit loads (faster here than two gathers).
+        // Lanes as eight indices, clamped into [0, `top`] (NaN's index is out of range: 0).
+        let index = |u: __m256, top: __m256i| {
+            let i = _mm256_max_epi32(_mm256_min_epi32(_mm256_cvttps_epi32(u), top), zi);
             let mut k = [0i32; 8];
             // SAFETY: 8 lanes into 8 i32.
             unsafe { _mm256_storeu_si256(k.as_mut_ptr() as *mut __m256i, i) };
+            (_mm256_sub_ps(u, _mm256_cvtepi32_ps(i)), k)
+        };
+        let lookup = |d: __m256| {
+            let u = _mm256_mul_ps(_mm256_andnot_ps(sign, d), sc);
+            // Out-of-range lanes are clamped only to keep the loads in bounds (they are not
+            // reached, so they weigh 0).
+            let (f, k) = index(u, st);
+            // Eight 64-bit loads (faster here than two gathers).
             // SAFETY: 0 ≤ k ≤ steps < pairs.len().
             let (g0, g1) = unsafe {
-                let p = pairs.as_ptr() as *const f64;
+                let p = ax.pairs.as_ptr() as *const f64;
                 let two = |a: i32, b: i32| {
                     _mm_loadh_pd(_mm_load_sd(p.add(a as usize)), p.add(b as usize))
                 };
@@ -788,31 +886,121 @@ mod avx2 {
             let tb = order(_mm256_shuffle_ps::<0b11_01_11_01>(g0, g1));
             _mm256_add_ps(ta, _mm256_mul_ps(f, _mm256_sub_ps(tb, ta)))
         };
+        // [`super::Narrow::at`]: (own, side) from one 16-byte record per lane.
+        let narrow = ax.narrow.as_ref().map(|n| {
+            (
+                n.rec.as_ptr() as *const f32,
+                _mm256_set1_ps(n.scale),
+                _mm256_set1_epi32(n.steps),
+            )
+        });
+        let lookup2 = |v: __m256, (rec, nsc, nst): (*const f32, __m256, __m256i)| {
+            let (f, k) = index(_mm256_mul_ps(v, nsc), nst);
+            // SAFETY: 0 ≤ k ≤ steps < rec.len(), 4 floats each.
+            let r = |a: i32, b: i32| unsafe {
+                _mm256_loadu2_m128(rec.add(4 * b as usize), rec.add(4 * a as usize))
+            };
+            let (r0, r1, r2, r3) = (r(k[0], k[4]), r(k[1], k[5]), r(k[2], k[6]), r(k[3], k[7]));
+            // Transposed: t0 = a0 a1 b0 b1 | a4 a5 b4 b5, t1 = a2 a3 b2 b3 | …, t2, t3 the
+            // same of c and d.
+            let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpacklo_ps(r2, r3));
+            let (t2, t3) = (_mm256_unpackhi_ps(r0, r1), _mm256_unpackhi_ps(r2, r3));
+            let a = _mm256_shuffle_ps::<0b01_00_01_00>(t0, t1);
+            let b = _mm256_shuffle_ps::<0b11_10_11_10>(t0, t1);
+            let c = _mm256_shuffle_ps::<0b01_00_01_00>(t2, t3);
+            let d = _mm256_shuffle_ps::<0b11_10_11_10>(t2, t3);
+            (
+                _mm256_add_ps(a, _mm256_mul_ps(f, _mm256_sub_ps(b, a))),
+                _mm256_add_ps(c, _mm256_mul_ps(f, _mm256_sub_ps(d, c))),
+            )
+        };
+        let c = [0, 1, 2].map(|o| _mm256_set1_ps((q - 1 + o as i32) as f32));
+        // The side's reach test `v ≥ 1 − h` holds for every v ≥ 0 when h ≥ 1 (and NaN
+        // fails the side's own compares).
+        let (one_h, side_always) = (_mm256_set1_ps(1.0 - ax.h), ax.h >= 1.0);
         for chunk in 0..lanes / LANES {
             // SAFETY: LANES floats at chunk · LANES < lanes = pos.len().
             let x = unsafe { _mm256_loadu_ps(pos.as_ptr().add(chunk * LANES)) };
-            let a = _mm256_sub_ps(_mm256_sub_ps(x, hv), half);
-            let b = _mm256_sub_ps(_mm256_add_ps(x, hv), half);
-            let c = [0, 1, 2].map(|o| _mm256_set1_ps((q - 1 + o as i32) as f32));
-            let d = c.map(|c| _mm256_sub_ps(_mm256_add_ps(c, half), x));
-            let w = if narrow {
-                let own = lookup(d[1]);
-                let left = _mm256_cmp_ps::<_CMP_LT_OQ>(x, mid);
-                let side = lookup(_mm256_blendv_ps(d[2], d[0], left));
-                [side, own, side]
+            let w = if let Some(n) = narrow {
+                let v = _mm256_andnot_ps(sign, _mm256_sub_ps(mid, x));
+                let (own, mut side) = lookup2(v, n);
+                if !side_always {
+                    side = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(v, one_h), side);
+                }
+                [
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(x, mid), side),
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(v, hv), own),
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(x, mid), side),
+                ]
             } else {
-                d.map(lookup)
+                let a = _mm256_sub_ps(_mm256_sub_ps(x, hv), half);
+                let b = _mm256_sub_ps(_mm256_add_ps(x, hv), half);
+                c.map(|c| {
+                    let reached = _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_NLT_UQ>(c, a),
+                        _mm256_cmp_ps::<_CMP_LE_OQ>(c, b),
+                    );
+                    _mm256_and_ps(reached, lookup(_mm256_sub_ps(_mm256_add_ps(c, half), x)))
+                })
             };
-            for o in 0..TAPS {
-                let reached = _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_NLT_UQ>(c[o], a),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(c[o], b),
-                );
-                let w = _mm256_and_ps(reached, w[o]);
+            for (o, w) in w.iter().enumerate() {
                 // SAFETY: LANES floats inside block o.
-                unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), w) };
+                unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), *w) };
             }
         }
+    }
+
+    /// [`super::Kernel::finish`]: both axes' weights and the contributions, inlined.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn finish(
+        axes: &[Axis; 2],
+        (xs, ys): (&[f32], &[f32]),
+        (qx, qy): (i32, i32),
+        rgba: &[f32],
+        (wx, wy): (&mut [f32], &mut [f32]),
+        out: &mut Contrib,
+    ) -> bool {
+        weights(xs, qx, &axes[0], wx);
+        weights(ys, qy, &axes[1], wy);
+        contrib(wx, wy, rgba, xs.len(), out)
+    }
+
+    /// [`super::own_depth`] for `Min` (`max` false) or `Max` of at least eight depths:
+    /// lane-wise from ±∞ (a NaN depth is passed over, as `f32::min` and `max` do), then
+    /// across the lanes, then the depths left over.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn depth(zs: &[f32], max: bool) -> f32 {
+        let n = zs.len() / LANES * LANES;
+        let start = if max {
+            f32::NEG_INFINITY
+        } else {
+            f32::INFINITY
+        };
+        let mut acc = _mm256_set1_ps(start);
+        for chunk in zs[..n].chunks_exact(LANES) {
+            // SAFETY: LANES floats.
+            let z = unsafe { _mm256_loadu_ps(chunk.as_ptr()) };
+            // The second operand (acc, never NaN) when z is NaN.
+            acc = if max {
+                _mm256_max_ps(z, acc)
+            } else {
+                _mm256_min_ps(z, acc)
+            };
+        }
+        // Across the lanes in the register (no NaN left: the order does not matter).
+        let op = |a, b| {
+            if max {
+                _mm256_max_ps(a, b)
+            } else {
+                _mm256_min_ps(a, b)
+            }
+        };
+        let m = op(acc, _mm256_permute2f128_ps::<1>(acc, acc));
+        let m = op(m, _mm256_permute_ps::<0b01_00_11_10>(m));
+        let m = op(m, _mm256_permute_ps::<0b10_11_00_01>(m));
+        let fold = |a: f32, b: f32| if max { a.max(b) } else { a.min(b) };
+        zs[n..].iter().fold(_mm256_cvtss_f32(m), |a, &b| fold(a, b))
     }
 
     /// [`super::combine`] in AVX2.
@@ -949,6 +1137,7 @@ mod avx2 {
     }
 
     /// [`super::contrib_portable`] without `skip_zero`.
+    #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) fn contrib(
         wx: &[f32],
@@ -1166,8 +1355,8 @@ mod tests {
                     }
                     let mut w = vec![0f32; 2 * TAPS * lanes];
                     let (wx, wy) = w.split_at_mut(TAPS * lanes);
-                    weights_portable(&xs, qx, f.radius().0, &t.x, wx);
-                    weights_portable(&ys, qy, f.radius().1, &t.y, wy);
+                    weights_portable(&xs, qx, &ctx.axes[0], wx);
+                    weights_portable(&ys, qy, &ctx.axes[1], wy);
                     let mut a = ABSENT;
                     let fa = contrib_portable(wx, wy, &rgba, lanes, false, &mut a);
                     #[cfg(target_arch = "x86_64")]
@@ -1176,8 +1365,8 @@ mod tests {
                         let (vx, vy) = v.split_at_mut(TAPS * lanes);
                         // SAFETY: the CPU has AVX2.
                         unsafe {
-                            avx2::weights(&xs, qx, f.radius().0, &t.x, &ctx.pairs[0], vx);
-                            avx2::weights(&ys, qy, f.radius().1, &t.y, &ctx.pairs[1], vy);
+                            avx2::weights(&xs, qx, &ctx.axes[0], vx);
+                            avx2::weights(&ys, qy, &ctx.axes[1], vy);
                         }
                         assert_eq!(wx, vx);
                         assert_eq!(wy, vy);
@@ -1217,6 +1406,35 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn vector_depth_is_the_sample_fold() {
+        let zs: Vec<f32> = (0..19)
+            .map(|k| 3.0 + ((k * 7) % 11) as f32 * 0.25)
+            .collect();
+        let mut with_gaps = zs.clone();
+        with_gaps[3] = f32::NAN;
+        with_gaps[9] = f32::INFINITY;
+        with_gaps[17] = 1.5;
+        for z in [
+            &zs[..8],
+            &zs[..16],
+            &zs[..],
+            &with_gaps[..16],
+            &with_gaps[..],
+        ] {
+            for df in [DepthFilter::Min, DepthFilter::Max, DepthFilter::Average] {
+                let want = own_depth(z.iter().copied(), df);
+                assert_eq!(Kernel::Portable.depth(z, df).to_bits(), want.to_bits());
+                assert_eq!(pick_kernel().depth(z, df).to_bits(), want.to_bits());
+            }
+        }
+        assert_eq!(pick_kernel().depth(&with_gaps, DepthFilter::Min), 1.5);
+        assert_eq!(
+            pick_kernel().depth(&with_gaps, DepthFilter::Max),
+            f32::INFINITY
+        );
     }
 
     #[test]

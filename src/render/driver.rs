@@ -969,12 +969,12 @@ fn render_inner(
     for a in &opts.aovs {
         channel_names.extend(a.channel_names());
     }
-    let mut film = Film::new(
-        xres as usize,
-        yres as usize,
-        Film::standard_channels(&channel_names),
-    );
-    let film_bytes = film.data.len() * std::mem::size_of::<f32>();
+    let film_channels = Film::standard_channels(&channel_names);
+    // An empty film of the same channels answers the questions asked before the film is
+    // made (alongside the first row's surfaces, below).
+    let film_shape = Film::new(0, 0, film_channels.clone());
+    let film_bytes =
+        xres as usize * yres as usize * film_channels.len() * std::mem::size_of::<f32>();
     stats.alloc(film_bytes);
 
     // Place every surface in the first bucket row it reaches (in parallel, diagnostics in
@@ -1055,7 +1055,7 @@ fn render_inner(
                 Some(t),
                 hcfg.channels(),
                 frame.hider.samples_per_pixel(),
-                &film,
+                &film_shape,
             )
         })
         .map(|t| crate::film::gather::PrepareCtx::new(&pixel_filter, t, depth_filter));
@@ -1129,8 +1129,8 @@ fn render_inner(
                 )
             })
             .collect();
-        for tile in &tiles {
-            film.put_tile(tile);
+        film.put_tiles(&tiles);
+        for _ in &tiles {
             Stats::add(&stats.buckets, 1);
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             if let Some(p) = opts.progress {
@@ -1199,11 +1199,18 @@ fn render_inner(
             }
             kept
         };
-    let mut kept: Vec<Kept> = if buckets.rows > 0 {
-        process(0, &mut pending, &mut pending_prims)
-    } else {
-        Vec::new()
-    };
+    // The film is made (its pages first touched: ~10 ms at 1280 × 960) while the first row's
+    // surfaces are split, diced and shaded — before, it ran alone, the other thread idle.
+    let (mut film, mut kept): (Film, Vec<Kept>) = rayon::join(
+        || Film::new(xres as usize, yres as usize, film_channels),
+        || {
+            if buckets.rows > 0 {
+                process(0, &mut pending, &mut pending_prims)
+            } else {
+                Vec::new()
+            }
+        },
+    );
     // Hidden rows still needed by a row to filter, oldest first.
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
