@@ -433,8 +433,11 @@ impl RayTracer for Tracer<'_, '_> {
             .map(|k| active.get(k).copied().unwrap_or(false) && dir[k].length_squared() > 0.0)
             .collect();
         let mut travelled = vec![0f32; n];
+        // At most one hit a ray a layer: sized once (growing it copied the hits ~10 times a
+        // call).
+        let mut pending: Vec<PendingHit> = Vec::with_capacity(n);
         for _layer in 0..MAX_LAYERS {
-            let mut pending: Vec<PendingHit> = Vec::new();
+            pending.clear();
             for k in 0..n {
                 if !live[k] {
                     continue;
