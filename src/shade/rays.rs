@@ -320,46 +320,45 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
             strings: v.strings.clone(),
         })
         .collect();
-    for (h, (hit, (k, w))) in hits
-        .iter()
-        .flat_map(|hit| {
-            let rg = &rs.grids[hit.grid as usize];
-            let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
-            let mut pts = [(*hit, (k, w)); 3];
-            if triples {
-                let src = &rg.grid;
-                let qu = src.nu - 1;
-                let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
-                let (x, y) = (
-                    i as f32 + hit.a.clamp(0.0, 1.0),
-                    j as f32 + hit.b.clamp(0.0, 1.0),
-                );
-                let len = hit.i.length();
-                let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
-                let width = hit.cone.width;
-                let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
-                for (q, (x, y)) in [(1, (x + sa, y)), (2, (x, y + sb))] {
-                    let (k2, w2) = grid_weights(src, x, y);
-                    let p = mix3(&src.p, &k2, &w2);
-                    // The neighbouring ray of the cone through p: turned by the spread per
-                    // width of sideways offset.
-                    let off = p - hit.p;
-                    let side = off - d * off.dot(d);
-                    let turn = if width > 0.0 {
-                        side * (hit.cone.spread / width)
-                    } else {
-                        Vec3::ZERO
-                    };
-                    let mut aux = *hit;
-                    aux.p = p;
-                    aux.i = (d + turn) * len;
-                    pts[q] = (aux, (k2, w2));
-                }
+    // The points to shade with their interpolation weights, gathered first (a list, not an
+    // iterator of fixed arrays: those were copied whole per hit).
+    let mut pts: Vec<(PendingHit, ([usize; 4], [f32; 4]))> = Vec::with_capacity(n);
+    for hit in hits {
+        let rg = &rs.grids[hit.grid as usize];
+        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
+        pts.push((*hit, (k, w)));
+        if triples {
+            let src = &rg.grid;
+            let qu = src.nu - 1;
+            let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
+            let (x, y) = (
+                i as f32 + hit.a.clamp(0.0, 1.0),
+                j as f32 + hit.b.clamp(0.0, 1.0),
+            );
+            let len = hit.i.length();
+            let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
+            let width = hit.cone.width;
+            let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
+            for (x, y) in [(x + sa, y), (x, y + sb)] {
+                let (k2, w2) = grid_weights(src, x, y);
+                let p = mix3(&src.p, &k2, &w2);
+                // The neighbouring ray of the cone through p: turned by the spread per
+                // width of sideways offset.
+                let off = p - hit.p;
+                let side = off - d * off.dot(d);
+                let turn = if width > 0.0 {
+                    side * (hit.cone.spread / width)
+                } else {
+                    Vec3::ZERO
+                };
+                let mut aux = *hit;
+                aux.p = p;
+                aux.i = (d + turn) * len;
+                pts.push((aux, (k2, w2)));
             }
-            pts.into_iter().take(per)
-        })
-        .enumerate()
-    {
+        }
+    }
+    for (h, &(hit, (k, w))) in pts.iter().enumerate() {
         let rg = &rs.grids[hit.grid as usize];
         let src = &rg.grid;
         g.p[h] = hit.p;
@@ -434,8 +433,11 @@ impl RayTracer for Tracer<'_, '_> {
             .map(|k| active.get(k).copied().unwrap_or(false) && dir[k].length_squared() > 0.0)
             .collect();
         let mut travelled = vec![0f32; n];
+        // At most one hit a ray a layer: sized once (growing it copied the hits ~10 times a
+        // call).
+        let mut pending: Vec<PendingHit> = Vec::with_capacity(n);
         for _layer in 0..MAX_LAYERS {
-            let mut pending: Vec<PendingHit> = Vec::new();
+            pending.clear();
             for k in 0..n {
                 if !live[k] {
                     continue;
