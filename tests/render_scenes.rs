@@ -362,3 +362,36 @@ fn float_noise_in_the_projective_column_is_not_a_projective_transform() {
     // The sphere (radius 1 at distance 5, fov 40) covers the centre pixel.
     assert!(px(f, 8, 6)[3] > 0.99, "{:?}", px(f, 8, 6));
 }
+
+#[test]
+fn a_point_larger_than_a_grid_is_diced_coarser_not_dropped() {
+    // One particle 38 pixels across: more micropolygons than a grid may hold, and a lone
+    // point cannot be split (Aqsis's regression scene Bug1310740 lost all its particles).
+    let (films, report, errors) = render(
+        r#"Format 64 64 1
+        PixelSamples 4 4
+        PixelFilter "box" 1 1
+        Projection "orthographic"
+        ScreenWindow -1 1 -1 1
+        WorldBegin
+        Surface "constant"
+        Color [0 1 0]
+        Points "P" [0 0 1] "constantwidth" [1.2]
+        WorldEnd"#,
+        &Settings::default(),
+    );
+    assert!(!errors, "{report}");
+    assert!(!report.contains("dropped"), "{report}");
+    let f = &films[0];
+    assert_eq!(px(f, 32, 32), [0.0, 1.0, 0.0, 1.0]);
+    // Covered area in screen units against the disk's π r² (r = 0.6).
+    let mut cover = 0.0;
+    for y in 0..64 {
+        for x in 0..64 {
+            cover += px(f, x, y)[3];
+        }
+    }
+    let area = cover * (2.0f32 / 64.0).powi(2);
+    let want = std::f32::consts::PI * 0.36;
+    assert!((area - want).abs() < 0.03 * want, "{area} vs {want}");
+}
