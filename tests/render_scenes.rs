@@ -395,3 +395,48 @@ fn a_point_larger_than_a_grid_is_diced_coarser_not_dropped() {
     let want = std::f32::consts::PI * 0.36;
     assert!((area - want).abs() < 0.03 * want, "{area} vs {want}");
 }
+
+#[test]
+fn an_imager_that_sets_oi_sets_the_alpha() {
+    // RISpec's imager outputs are Ci and Oi: a watermark imager blends its opacity in with
+    // `Oi = 1 - (1 - Oi) * (1 - a)` and never names alpha.
+    let dir = std::env::temp_dir().join(format!("arbor-imager-oi-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("mark.sl"),
+        "imager mark() { float a = 0.5 * step(8, xcomp(P));\n  Ci = Ci * (1 - a) + color(0, 0, 1) * a;\n  Oi = 1 - (1 - Oi) * (1 - a); }",
+    )
+    .unwrap();
+    let settings = Settings {
+        shader_paths: vec![dir.display().to_string()],
+        ..Settings::default()
+    };
+    let (films, report, errors) = render(
+        r#"Format 16 16 1
+        Imager "mark"
+        Projection "orthographic"
+        ScreenWindow -1 1 -1 1
+        WorldBegin
+        Surface "constant"
+        Color [1 0 0]
+        Polygon "P" [-5 -5 1  5 -5 1  5 0 1  -5 0 1]
+        WorldEnd"#,
+        &settings,
+    );
+    assert!(!errors, "{report}");
+    let f = &films[0];
+    // Lower half: the red polygon (alpha 1 everywhere); upper half empty: alpha 0 on the
+    // left, the watermark's 0.5 on the right.
+    assert!((px(f, 2, 13)[3] - 1.0).abs() < 1e-6, "{:?}", px(f, 2, 13));
+    assert!(px(f, 2, 3)[3].abs() < 1e-6, "{:?}", px(f, 2, 3));
+    let w = px(f, 13, 3);
+    assert!(
+        (w[3] - 0.5).abs() < 1e-5 && (w[2] - 0.5).abs() < 1e-5,
+        "{w:?}"
+    );
+    let m = px(f, 13, 13);
+    assert!(
+        (m[3] - 1.0).abs() < 1e-5 && (m[0] - 0.5).abs() < 1e-5,
+        "{m:?}"
+    );
+}
