@@ -362,3 +362,81 @@ fn float_noise_in_the_projective_column_is_not_a_projective_transform() {
     // The sphere (radius 1 at distance 5, fov 40) covers the centre pixel.
     assert!(px(f, 8, 6)[3] > 0.99, "{:?}", px(f, 8, 6));
 }
+
+#[test]
+fn a_point_larger_than_a_grid_is_diced_coarser_not_dropped() {
+    // One particle 38 pixels across: more micropolygons than a grid may hold, and a lone
+    // point cannot be split (Aqsis's regression scene Bug1310740 lost all its particles).
+    let (films, report, errors) = render(
+        r#"Format 64 64 1
+        PixelSamples 4 4
+        PixelFilter "box" 1 1
+        Projection "orthographic"
+        ScreenWindow -1 1 -1 1
+        WorldBegin
+        Surface "constant"
+        Color [0 1 0]
+        Points "P" [0 0 1] "constantwidth" [1.2]
+        WorldEnd"#,
+        &Settings::default(),
+    );
+    assert!(!errors, "{report}");
+    assert!(!report.contains("dropped"), "{report}");
+    let f = &films[0];
+    assert_eq!(px(f, 32, 32), [0.0, 1.0, 0.0, 1.0]);
+    // Covered area in screen units against the disk's π r² (r = 0.6).
+    let mut cover = 0.0;
+    for y in 0..64 {
+        for x in 0..64 {
+            cover += px(f, x, y)[3];
+        }
+    }
+    let area = cover * (2.0f32 / 64.0).powi(2);
+    let want = std::f32::consts::PI * 0.36;
+    assert!((area - want).abs() < 0.03 * want, "{area} vs {want}");
+}
+
+#[test]
+fn an_imager_that_sets_oi_sets_the_alpha() {
+    // RISpec's imager outputs are Ci and Oi: a watermark imager blends its opacity in with
+    // `Oi = 1 - (1 - Oi) * (1 - a)` and never names alpha.
+    let dir = std::env::temp_dir().join(format!("arbor-imager-oi-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("mark.sl"),
+        "imager mark() { float a = 0.5 * step(8, xcomp(P));\n  Ci = Ci * (1 - a) + color(0, 0, 1) * a;\n  Oi = 1 - (1 - Oi) * (1 - a); }",
+    )
+    .unwrap();
+    let settings = Settings {
+        shader_paths: vec![dir.display().to_string()],
+        ..Settings::default()
+    };
+    let (films, report, errors) = render(
+        r#"Format 16 16 1
+        Imager "mark"
+        Projection "orthographic"
+        ScreenWindow -1 1 -1 1
+        WorldBegin
+        Surface "constant"
+        Color [1 0 0]
+        Polygon "P" [-5 -5 1  5 -5 1  5 0 1  -5 0 1]
+        WorldEnd"#,
+        &settings,
+    );
+    assert!(!errors, "{report}");
+    let f = &films[0];
+    // Lower half: the red polygon (alpha 1 everywhere); upper half empty: alpha 0 on the
+    // left, the watermark's 0.5 on the right.
+    assert!((px(f, 2, 13)[3] - 1.0).abs() < 1e-6, "{:?}", px(f, 2, 13));
+    assert!(px(f, 2, 3)[3].abs() < 1e-6, "{:?}", px(f, 2, 3));
+    let w = px(f, 13, 3);
+    assert!(
+        (w[3] - 0.5).abs() < 1e-5 && (w[2] - 0.5).abs() < 1e-5,
+        "{w:?}"
+    );
+    let m = px(f, 13, 13);
+    assert!(
+        (m[3] - 1.0).abs() < 1e-5 && (m[0] - 0.5).abs() < 1e-5,
+        "{m:?}"
+    );
+}

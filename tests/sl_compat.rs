@@ -637,3 +637,27 @@ fn an_ambiguous_call_inside_arithmetic_is_a_float_whatever_the_assignment() {
     let (ci, _) = run(&prog, 16);
     assert!(ci.iter().any(|c| (c.x - c.y).abs() > 1e-3), "{ci:?}");
 }
+
+#[test]
+fn triples_are_indexed_like_comp_and_setcomp() {
+    // PRMan 13's `c[i]` component access (published utility headers write `d[0] = pow(c[0],
+    // p)`): reads are comp(), writes and compound assignments setcomp().
+    let (prog, rendered) = compile_ok(
+        "surface idx() {\n  color c = color(0.25, 0.5, 0.75);\n  point p = point(s, 2, 3);\n  \
+         color d;\n  d[0] = c[2];\n  d[1] = p[0] * 2;\n  d[2] = 1;\n  d[2] += c[1];\n  \
+         float k = 1;\n  d[k] *= 3;\n  Ci = d;\n  Oi = p[1] - 1;\n}\n",
+    );
+    assert!(!rendered.contains("warning"), "{rendered}");
+    let (ci, oi) = run(&prog, 4);
+    for (i, (c, o)) in ci.iter().zip(&oi).enumerate() {
+        let s = i as f32 / 4.0;
+        assert_eq!(*c, Vec3::new(0.75, s * 2.0 * 3.0, 1.5), "point {i}");
+        assert_eq!(*o, Vec3::splat(1.0));
+    }
+    // Arrays keep their own indexing, and a float is still not indexable.
+    let (_, rendered, err) = compile("surface f() { float x = 1; Ci = x[0]; }\n");
+    assert!(
+        err && rendered.contains("only arrays can be indexed"),
+        "{rendered}"
+    );
+}

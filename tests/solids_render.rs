@@ -190,3 +190,47 @@ fn a_lone_primitive_solid_renders_as_its_surfaces() {
     let solid = render(&sphere(1.0, [0.0; 3]));
     assert_eq!(plain.data, solid.data);
 }
+
+/// A − B written inside `ObjectBegin` (Aqsis's regression scene Bug1013736 cuts a groove in a
+/// box this way, with the cutter itself an instanced object).
+fn difference_object(a: [f32; 3], b: [f32; 3]) -> String {
+    format!(
+        "ObjectBegin \"cutter\"\n{}ObjectEnd\nObjectBegin \"cut\"\nSolidBegin \"difference\"\n{}\
+         ObjectInstance \"cutter\"\nSolidEnd\nObjectEnd\n",
+        sphere(0.7, b),
+        sphere(1.0, a)
+    )
+}
+
+#[test]
+fn solids_inside_object_definitions_stay_solids_when_instanced() {
+    let (a, b) = ([0.0, 0.0, 0.0], [0.6, 0.0, -0.5]);
+    let f = render(&format!(
+        "{}ObjectInstance \"cut\"\n",
+        difference_object(a, b)
+    ));
+    // The same picture as the difference written out: B's cap outside A is removed.
+    check_coverage(&f, |x, y| disc(x, y, 1.0, a));
+    let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
+    let want = 5.0 + b[2] + (0.49 - (x - b[0]).powi(2) - y * y).sqrt();
+    let z = depth(&f, x, y);
+    assert!(
+        (z - want).abs() < 0.05,
+        "cut face at depth {z}, want {want}"
+    );
+}
+
+#[test]
+fn each_instance_of_a_solid_object_is_its_own_solid() {
+    // Two instances side by side, each A − B: were they one tree, the second A would be
+    // subtracted from the first (a difference keeps only its first child).
+    let (a, b) = ([0.0, 0.0, 0.0], [0.6, 0.0, -0.5]);
+    let f = render(&format!(
+        "{}Scale 0.5 0.5 0.5\nTransformBegin\nTranslate -1.2 0 0\nObjectInstance \"cut\"\n\
+         TransformEnd\nTransformBegin\nTranslate 1.2 0 0\nObjectInstance \"cut\"\nTransformEnd\n",
+        difference_object(a, b)
+    ));
+    check_coverage(&f, |x, y| {
+        disc(x, y, 0.5, [-0.6, 0.0, 0.0]).min(disc(x, y, 0.5, [0.6, 0.0, 0.0]))
+    });
+}

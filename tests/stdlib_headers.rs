@@ -96,6 +96,14 @@ surface u(float Kr = 1; DECLARE_DEFAULTED_ENVPARAMS;) {
 }"#,
     ),
     (
+        "rayserver.h",
+        r#"#include "rayserver.h"
+light u() {
+    vector axis = normalize(N);
+    solar(-axis, 0) { Cl = rs_indirect(Ps, axis); }
+}"#,
+    ),
+    (
         "raytrace.h",
         r#"#include "rayserver.h"
 #include "raytrace.h"

@@ -140,8 +140,8 @@ fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, F
                 Diag::warning(
                     "film::imager",
                     format!(
-                        "Imager shader `{}` is not run yet (only the standard `background` \
-                         imager is); the image is written without it",
+                        "Imager shader `{}` was not run (it was not found or did not \
+                         compile); the image is written without it",
                         imager.name
                     ),
                 )
@@ -217,8 +217,9 @@ fn plan(
                 );
                 Format::ZFile
             }
-            // PRMan's `it`, and the X11/Windows framebuffer drivers: windows too.
-            "framebuffer" | "it" | "x11" | "windows" => {
+            // PRMan's `it`, Aqsis's `piqsl`, and the X11/Windows framebuffer drivers: windows
+            // too.
+            "framebuffer" | "it" | "piqsl" | "x11" | "windows" => {
                 path = path.with_extension("png");
                 diags.report(
                     Diag::warning(
@@ -251,7 +252,7 @@ fn plan(
                     )
                     .maybe_label(d.span, "this Display")
                     .help(
-                        "display types: file, tiff, png, exr, zfile, shadow, framebuffer (it, x11)",
+                        "display types: file, tiff, png, exr, zfile, shadow, framebuffer (it, piqsl, x11)",
                     ),
                 );
                 f
@@ -429,6 +430,19 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
             "float" | "half" | "type" | "pixeltype" | "exrpixeltype" | "compression"
             | "exrcompression"
                 if t.format == Format::Exr => {}
+            // The TIFF drivers' file compression (PRMan, Aqsis: "lzw", "packbits", "deflate"…)
+            // changes the file's size, not the picture.
+            "compression" => diags.report(
+                Diag::note(
+                    "film::display",
+                    format!(
+                        "display parameter `compression` of the `{}` display: arbor writes \
+                         {:?} files its own way; ignored",
+                        t.kind, t.format
+                    ),
+                )
+                .maybe_label(p.span, "here"),
+            ),
             other => diags.report(
                 Diag::warning(
                     "film::display",
@@ -1131,6 +1145,30 @@ mod tests {
         // An override without a known extension is an error.
         let bad = write_displays(&f, &o, &d, Some(&dir.join("x.jpg")));
         assert_eq!(bad.unwrap_err().code, "film::output");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn tiff_compression_and_aqsis_piqsl_are_known() {
+        let dir = tmpdir("aqsis-displays");
+        let f = film();
+        let d = Diagnostics::new();
+        let tif = dir.join("a.tif");
+        let mut file = display(&tif, "file", "rgba");
+        file.params = ParamList(vec![string_param("compression", "lzw")]);
+        let o = opts(vec![file, display(&dir.join("render"), "piqsl", "rgb")]);
+        let out = write_displays(&f, &o, &d, None).unwrap();
+        assert_eq!(out, vec![tif.clone(), dir.join("render.png")]);
+        assert_eq!(image::open(&tif).unwrap().color(), image::ColorType::Rgba8);
+        let warnings: Vec<String> = d
+            .snapshot()
+            .into_iter()
+            .filter(|(w, _)| w.severity != crate::diag::Severity::Note)
+            .map(|(w, _)| w.message)
+            .collect();
+        // Only the window's own warning (no window here); compression is a -v note.
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(warnings[0].contains("framebuffer display"), "{warnings:?}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -114,6 +114,12 @@ pub trait Surface: Send + Sync + std::fmt::Debug {
     fn diceable(&self) -> bool {
         true
     }
+    /// False when [`Surface::split`] cannot make it smaller (a lone point of a `Points`
+    /// primitive): such a surface is diced however large it is on screen, at a coarser rate
+    /// that fits the grid size limit, instead of being split until the driver drops it.
+    fn splittable(&self) -> bool {
+        true
+    }
     /// Dices into a grid of `nu × nv` points (nu, nv ≥ 2) with every standard global and
     /// primitive variable filled in camera space.
     fn dice(&self, nu: usize, nv: usize) -> Grid;

@@ -116,6 +116,10 @@ impl Surface for MovingSurface {
         self.key0().diceable()
     }
 
+    fn splittable(&self) -> bool {
+        self.key0().splittable()
+    }
+
     fn dice(&self, nu: usize, nv: usize) -> Grid {
         let mut g = self.key0().dice(nu, nv);
         let p: Vec<Vec<Vec3>> = match &self.keys {

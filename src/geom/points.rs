@@ -200,6 +200,10 @@ impl Surface for PointBatch {
         self.range.len() <= LEAF_POINTS
     }
 
+    fn splittable(&self) -> bool {
+        self.range.len() > 1
+    }
+
     fn dice(&self, nu: usize, nv: usize) -> Grid {
         let d = &*self.data;
         let np = self.range.len();

@@ -189,7 +189,10 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
         .raster_bound_sharp(&surface.still_bound())
         .unwrap_or(rb);
     let (bw, bh) = ((own[2] - own[0]) / edge, (own[3] - own[1]) / edge);
-    if bw * bh > 64.0 * view.max_grid as f32 && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt() {
+    if surface.splittable()
+        && bw * bh > 64.0 * view.max_grid as f32
+        && bw.max(bh) > 8.0 * (view.max_grid as f32).sqrt()
+    {
         return Decision::Split { eye: false };
     }
     // Trial dice: the longest u-line and v-line on screen set the dicing rates. (Once the
@@ -220,10 +223,19 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
         ulen = ulen.max(lu);
         vlen = vlen.max(lv);
     }
-    let nu = (ulen / edge).ceil().max(1.0);
-    let nv = (vlen / edge).ceil().max(1.0);
-    if !(nu * nv).is_finite() || nu * nv > view.max_grid as f32 {
+    let mut nu = (ulen / edge).ceil().max(1.0);
+    let mut nv = (vlen / edge).ceil().max(1.0);
+    if !(nu * nv).is_finite() {
         return Decision::Split { eye: false };
+    }
+    if nu * nv > view.max_grid as f32 {
+        if surface.splittable() {
+            return Decision::Split { eye: false };
+        }
+        // Nothing smaller to split into: shade it coarser, within the grid limit.
+        let f = (view.max_grid as f32 / (nu * nv)).sqrt();
+        nu = (nu * f).floor().max(1.0);
+        nv = (nv * f).floor().max(1.0);
     }
     Decision::Dice {
         nu: nu as usize,

@@ -162,12 +162,32 @@ pub(super) struct ObjPrim {
     pub primvars: Arc<ParamList>,
     pub object_from_prim: Mat4,
     pub span: Span,
+    /// The innermost `SolidBegin` block of the definition around it: an index into the
+    /// object's `solids` (None outside every solid of the definition).
+    pub solid: Option<u32>,
+}
+
+/// A `SolidBegin` block inside an object definition. Its CSG tree is rebuilt at each
+/// `ObjectInstance` under the instance's own solid, so every instance is its own solid.
+#[derive(Clone, Debug)]
+pub(super) struct ObjSolid {
+    pub op: SolidOp,
+    /// Index of the enclosing block in the same definition (None: the definition's top).
+    pub parent: Option<u32>,
+    pub span: Span,
+}
+
+/// What `ObjectBegin … ObjectEnd` keeps: the primitives and the solids around them.
+#[derive(Debug, Default)]
+pub(super) struct ObjectShape {
+    pub prims: Vec<ObjPrim>,
+    pub solids: Vec<ObjSolid>,
 }
 
 #[derive(Debug)]
 pub(super) struct ObjectDef {
     pub handle: String,
-    pub prims: Vec<ObjPrim>,
+    pub shape: ObjectShape,
     /// inverse of the ctm at ObjectBegin.
     pub object_from_ctm: Mat4,
 }
@@ -213,7 +233,7 @@ pub struct Builder<'a> {
     pub(super) world_count: i32,
     pub(super) frame_active: bool,
     pub(super) light_handles: HashMap<String, usize>,
-    pub(super) objects: HashMap<String, Arc<Vec<ObjPrim>>>,
+    pub(super) objects: HashMap<String, Arc<ObjectShape>>,
     pub(super) defining: Option<ObjectDef>,
     /// Inside MotionBegin: the block's requests so far.
     pub(super) motion_block: Option<super::motion::MotionBlock>,
@@ -923,8 +943,20 @@ impl<'a> Builder<'a> {
         };
         self.push_block(BlockKind::Solid, call.span());
         let parent = self.gs.attrs.solid;
+        if let Some(def) = self.defining.as_mut() {
+            // Inside an object definition the attribute holds an index into the object's
+            // own solids; `ObjectInstance` builds the scene's nodes from them.
+            let id = def.shape.solids.len() as u32;
+            def.shape.solids.push(ObjSolid {
+                op: op.unwrap_or(SolidOp::Union),
+                parent,
+                span: call.span(),
+            });
+            self.attrs().solid = Some(id);
+            return;
+        }
         let Some(scene) = self.world.as_mut() else {
-            return; // solids in object definitions take the instance's solid
+            return;
         };
         let parent_op = parent
             .and_then(|p| scene.solids.get(p as usize))

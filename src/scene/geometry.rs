@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use crate::diag::{Diag, Span};
 
-use super::builder::{BlockKind, Builder, ObjPrim, ObjectDef};
+use super::builder::{BlockKind, Builder, ObjPrim, ObjSolid, ObjectDef, ObjectShape};
 use super::params::{validate_counts, Counts, ParamUse};
 use super::table::Call;
 use super::types::*;
@@ -106,11 +106,12 @@ impl Builder<'_> {
         deform: Option<Motion>,
     ) {
         if let Some(def) = self.defining.as_mut() {
-            def.prims.push(ObjPrim {
+            def.shape.prims.push(ObjPrim {
                 geometry,
                 primvars,
                 object_from_prim: def.object_from_ctm * self.gs.ctm,
                 span,
+                solid: self.gs.attrs.solid,
             });
             return;
         }
@@ -1074,14 +1075,18 @@ impl Builder<'_> {
         self.push_block(BlockKind::Object, call.span());
         self.defining = Some(ObjectDef {
             handle: call.pos[0].str().to_string(),
-            prims: Vec::new(),
+            shape: ObjectShape::default(),
             object_from_ctm: self.gs.ctm.inverse(),
         });
+        // Solids of the definition are numbered within it (ObjectEnd restores the attribute).
+        if self.gs.attrs.solid.is_some() {
+            self.attrs().solid = None;
+        }
     }
 
     pub(super) fn finish_object(&mut self) {
         if let Some(def) = self.defining.take() {
-            self.objects.insert(def.handle, Arc::new(def.prims));
+            self.objects.insert(def.handle, Arc::new(def.shape));
         }
     }
 
@@ -1094,7 +1099,7 @@ impl Builder<'_> {
 
     pub(super) fn object_instance(&mut self, call: &Call<'_>) {
         let handle = call.pos[0].str();
-        let Some(prims) = self.objects.get(handle).cloned() else {
+        let Some(shape) = self.objects.get(handle).cloned() else {
             let known: Vec<&str> = self.objects.keys().map(String::as_str).collect();
             let mut d = Diag::error(
                 "scene::handle",
@@ -1112,10 +1117,63 @@ impl Builder<'_> {
         }
         // Instances take the current transform and attributes (RISpec §5.7).
         let base = self.gs.ctm;
-        for p in prims.iter() {
+        let outer = self.gs.attrs.solid;
+        let solids = self.instance_solids(&shape.solids, outer);
+        for p in shape.prims.iter() {
+            let solid = p.solid.map_or(outer, |l| solids[l as usize]);
+            if self.gs.attrs.solid != solid {
+                self.attrs().solid = solid;
+            }
             self.gs.ctm = base * p.object_from_prim;
             self.emit(p.span, p.geometry.clone(), p.primvars.clone());
         }
+        if self.gs.attrs.solid != outer {
+            self.attrs().solid = outer;
+        }
         self.gs.ctm = base;
+    }
+
+    /// The scene's solid node for each `SolidBegin` block of an object definition, made
+    /// afresh for this instance under `outer` (the instance's own solid), with the rules of
+    /// `solid_begin`: a primitive solid outside any boolean needs no node, and a block inside
+    /// a primitive solid is part of that primitive.
+    fn instance_solids(&mut self, local: &[ObjSolid], outer: Option<u32>) -> Vec<Option<u32>> {
+        let mut ids: Vec<Option<u32>> = Vec::with_capacity(local.len());
+        if let Some(def) = self.defining.as_mut() {
+            // An instance inside another definition: its solids join that definition's.
+            for node in local {
+                let parent = node.parent.map_or(outer, |p| ids[p as usize]);
+                ids.push(Some(def.shape.solids.len() as u32));
+                def.shape.solids.push(ObjSolid {
+                    parent,
+                    ..node.clone()
+                });
+            }
+            return ids;
+        }
+        let Some(scene) = self.world.as_mut() else {
+            return vec![outer; local.len()];
+        };
+        for node in local {
+            let parent = node.parent.map_or(outer, |p| ids[p as usize]);
+            let parent_op = parent
+                .and_then(|p| scene.solids.get(p as usize))
+                .map(|n| n.op);
+            let id = match (node.op, parent_op) {
+                (SolidOp::Primitive, None) => None,
+                (_, Some(SolidOp::Primitive)) => parent,
+                (op, _) => {
+                    let id = scene.solids.len() as u32;
+                    scene.solids.push(SolidNode {
+                        op,
+                        parent,
+                        span: node.span,
+                    });
+                    Some(id)
+                }
+            };
+            ids.push(id);
+        }
+        ids
     }
 }

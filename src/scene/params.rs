@@ -522,7 +522,7 @@ pub fn validate_counts(
     request: &str,
     report: &mut dyn FnMut(Diag),
 ) {
-    list.0.retain(|p| {
+    list.0.retain_mut(|p| {
         let n = counts.of(p.decl.class);
         let want = n.saturating_mul(p.decl.width());
         if p.data.len() == want {
@@ -533,6 +533,29 @@ pub fn validate_counts(
         } else {
             "numbers"
         };
+        if want > 0 && p.data.len() > want {
+            // Exporters leave unused vertices after the last one a mesh indexes, and hand-
+            // written files a stray number; other renderers read the values they need.
+            report(
+                Diag::warning(
+                    "scene::count",
+                    format!(
+                        "`{request}`: \"{}\" ({}) needs {want} {unit}, found {}; the last {} \
+                         are ignored",
+                        p.name,
+                        decl_text(&p.decl),
+                        p.data.len(),
+                        p.data.len() - want
+                    ),
+                )
+                .label(p.span, format!("{} {unit}", p.data.len())),
+            );
+            match &mut p.data {
+                ParamData::Floats(f) => f.truncate(want),
+                ParamData::Strings(v) => v.truncate(want),
+            }
+            return true;
+        }
         report(
             Diag::error(
                 "scene::count",
@@ -677,6 +700,55 @@ mod tests {
         assert_eq!(errs.len(), 1);
         assert!(
             errs[0].message.contains("needs 12 numbers, found 9"),
+            "{}",
+            errs[0].message
+        );
+    }
+
+    #[test]
+    fn extra_values_are_ignored_with_a_warning() {
+        let dict = Dictionary::default();
+        let rest = vec![
+            arg(Value::Str("P".into()), 0),
+            arg(
+                Value::FloatArray(vec![
+                    0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0, 5.0, 5.0, 5.0,
+                ]),
+                2,
+            ),
+            arg(Value::Str("st".into()), 4),
+            arg(
+                Value::FloatArray(vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.5]),
+                6,
+            ),
+        ];
+        let mut errs = Vec::new();
+        let mut l = parse_params(
+            &rest,
+            &dict,
+            ParamUse::Primitive,
+            None,
+            "PointsPolygons",
+            &mut |d| errs.push(d),
+        );
+        let c = Counts {
+            uniform: 1,
+            varying: 3,
+            vertex: 3,
+            facevarying: 3,
+            facevertex: 3,
+        };
+        validate_counts(&mut l, &c, "PointsPolygons", &mut |d| errs.push(d));
+        assert_eq!(l.0.len(), 2, "both kept");
+        assert_eq!(
+            l.0[0].data.floats(),
+            &[0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0]
+        );
+        assert_eq!(l.0[1].data.floats(), &[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(errs.len(), 2);
+        assert!(errs.iter().all(|d| !d.is_error()), "{errs:?}");
+        assert!(
+            errs[0].message.contains("the last 3 are ignored"),
             "{}",
             errs[0].message
         );

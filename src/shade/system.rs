@@ -471,9 +471,18 @@ impl<'a> ShadeSystem<'a> {
                 let ci = prog
                     .global("Ci")
                     .map(|g| own_vt(&mut regs[g.reg as usize], n));
-                let al = prog
-                    .global("alpha")
-                    .map(|g| slot_vf(&regs[g.reg as usize], n));
+                // RISpec's imagers output Ci and Oi: an imager that sets Oi but not alpha
+                // (Aqsis's watermark test) sets the picture's alpha to its mean opacity.
+                let al = match (prog.global("alpha"), prog.global("Oi")) {
+                    (Some(g), _) if g.written => Some(slot_vf(&regs[g.reg as usize], n)),
+                    (_, Some(g)) if g.written => Some(
+                        own_vt(&mut regs[g.reg as usize], n)
+                            .iter()
+                            .map(|o| (o.x + o.y + o.z) / 3.0)
+                            .collect(),
+                    ),
+                    _ => None,
+                };
                 for j in 0..nv {
                     for i in 0..nu {
                         let k = j * nu + i;

@@ -1330,6 +1330,9 @@ impl<'a> Lowerer<'a> {
             ExprKind::Str(s) => self.const_val(Const::S(Arc::from(s.as_str())), BaseType::String),
             ExprKind::Ident(name) => self.ident(name, e.span),
             ExprKind::Index { base, index } => {
+                if let Some(get) = self.triple_component(base, index, e.span) {
+                    return self.expr(&get, hint);
+                }
                 let Some((var, _)) = self.array_var(base) else {
                     return self.error(
                         Diag::error("sl::type", "only arrays can be indexed")
@@ -1541,6 +1544,26 @@ impl<'a> Lowerer<'a> {
                 self.error(d)
             }
         }
+    }
+
+    /// `c[i]` with `c` a colour, point, vector or normal variable (not an array): PRMan's
+    /// (and 3Delight's) component access, the same as `comp(c, i)`, which is returned.
+    fn triple_component(&mut self, base: &Expr, index: &Expr, span: Span) -> Option<Expr> {
+        let ExprKind::Ident(n) = &base.kind else {
+            return None;
+        };
+        let v = self.lookup(n)?;
+        if v.array.is_some() || !v.ty.is_triple() {
+            return None;
+        }
+        Some(Expr {
+            kind: ExprKind::Call {
+                name: "comp".into(),
+                name_span: span,
+                args: vec![base.clone(), index.clone()],
+            },
+            span,
+        })
     }
 
     fn array_var(&mut self, e: &Expr) -> Option<(Var, Span)> {
@@ -2025,6 +2048,36 @@ impl<'a> Lowerer<'a> {
                 }
             }
             ExprKind::Index { base, index } => {
+                if let Some(get) = self.triple_component(base, index, target.span) {
+                    // `c[i] op= v` is `setcomp(c, i, comp(c, i) op v)`; its value is the new
+                    // component.
+                    let new = match op {
+                        AssignOp::Set => value.clone(),
+                        _ => Expr {
+                            kind: ExprKind::Binary {
+                                op: match op {
+                                    AssignOp::Add => BinOp::Add,
+                                    AssignOp::Sub => BinOp::Sub,
+                                    AssignOp::Mul => BinOp::Mul,
+                                    _ => BinOp::Div,
+                                },
+                                lhs: Box::new(get.clone()),
+                                rhs: Box::new(value.clone()),
+                            },
+                            span,
+                        },
+                    };
+                    let set = Expr {
+                        kind: ExprKind::Call {
+                            name: "setcomp".into(),
+                            name_span: target.span,
+                            args: vec![(**base).clone(), (**index).clone(), new],
+                        },
+                        span,
+                    };
+                    self.expr(&set, None);
+                    return self.expr(&get, None);
+                }
                 let Some((var, _)) = self.array_var(base) else {
                     return self.error(
                         Diag::error("sl::type", "only arrays can be indexed")

@@ -19,4 +19,10 @@
 
 #include "arborrays.h"
 
+/* The ray server's radiosity lookup (K-3D's `indirect` light asks it for the indirect light
+ * arriving at Ps about Ns): arbor's traced indirect diffuse light there. */
+#ifndef rs_indirect
+#define rs_indirect(Ps, Ns) indirectdiffuse(Ps, normalize(Ns), 64)
+#endif
+
 #endif /* RAYSERVER_H */
