@@ -261,7 +261,7 @@ fn a_missing_light_shader_is_reported_even_when_unused() {
 #[test]
 fn ignored_renderer_settings_show_only_with_verbose() {
     let dir = tmpdir("notes");
-    let rib = "Format 8 8 1\nWorldBegin\nAttribute \"render\" \"truedisplacement\" [1]\nSphere 1 -1 1 360\nWorldEnd\n";
+    let rib = "Format 8 8 1\nWorldBegin\nAttribute \"dice\" \"rasterorient\" [0]\nSphere 1 -1 1 360\nWorldEnd\n";
     std::fs::write(dir.join("n.rib"), rib).unwrap();
     let quiet = arbor()
         .args(["check", "n.rib"])
@@ -270,7 +270,7 @@ fn ignored_renderer_settings_show_only_with_verbose() {
         .unwrap();
     assert!(quiet.status.success());
     let q = String::from_utf8_lossy(&quiet.stderr);
-    assert!(!q.contains("truedisplacement"), "{q}");
+    assert!(!q.contains("rasterorient"), "{q}");
     let loud = arbor()
         .args(["-v", "check", "n.rib"])
         .current_dir(&dir)
@@ -279,7 +279,7 @@ fn ignored_renderer_settings_show_only_with_verbose() {
     assert!(loud.status.success());
     let l = String::from_utf8_lossy(&loud.stderr);
     assert!(
-        l.contains("truedisplacement") && l.contains("scene::ignored-setting"),
+        l.contains("rasterorient") && l.contains("scene::ignored-setting"),
         "{l}"
     );
     // A geometry-only archive: one warning, exit 0.
