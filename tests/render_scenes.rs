@@ -305,30 +305,32 @@ fn golden_quadrics_and_polygons() {
     check_golden("quadrics", &f);
 }
 
-#[test]
-fn a_user_imager_shader_runs_over_the_image() {
-    let dir = std::env::temp_dir().join(format!("arbor-imager-{}", std::process::id()));
+/// Renders a 16 × 16 orthographic frame of a red polygon at `polygon` (RIB point list) under
+/// the imager `name`, whose source is written to a scratch shader folder.
+fn render_with_imager(name: &str, source: &str, polygon: &str) -> (Vec<Film>, String, bool) {
+    let dir = std::env::temp_dir().join(format!("arbor-imager-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(
-        dir.join("fill.sl"),
-        "imager fill(color bg = color(0, 0.5, 1);) { Ci += (1 - alpha) * bg; alpha = 1; }",
-    )
-    .unwrap();
+    std::fs::write(dir.join(format!("{name}.sl")), source).unwrap();
     let settings = Settings {
         shader_paths: vec![dir.display().to_string()],
         ..Settings::default()
     };
-    let (films, report, errors) = render(
-        r#"Format 16 16 1
-        Imager "fill"
-        Projection "orthographic"
-        ScreenWindow -1 1 -1 1
-        WorldBegin
-        Surface "constant"
-        Color [1 0 0]
-        Polygon "P" [0 -5 1  5 -5 1  5 5 1  0 5 1]
-        WorldEnd"#,
+    render(
+        &format!(
+            "Format 16 16 1\nImager \"{name}\"\nProjection \"orthographic\"\n\
+             ScreenWindow -1 1 -1 1\nWorldBegin\nSurface \"constant\"\nColor [1 0 0]\n\
+             Polygon \"P\" [{polygon}]\nWorldEnd\n"
+        ),
         &settings,
+    )
+}
+
+#[test]
+fn a_user_imager_shader_runs_over_the_image() {
+    let (films, report, errors) = render_with_imager(
+        "fill",
+        "imager fill(color bg = color(0, 0.5, 1);) { Ci += (1 - alpha) * bg; alpha = 1; }",
+        "0 -5 1  5 -5 1  5 5 1  0 5 1",
     );
     assert!(!errors, "{report}");
     let f = &films[0];
@@ -400,28 +402,10 @@ fn a_point_larger_than_a_grid_is_diced_coarser_not_dropped() {
 fn an_imager_that_sets_oi_sets_the_alpha() {
     // RISpec's imager outputs are Ci and Oi: a watermark imager blends its opacity in with
     // `Oi = 1 - (1 - Oi) * (1 - a)` and never names alpha.
-    let dir = std::env::temp_dir().join(format!("arbor-imager-oi-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(
-        dir.join("mark.sl"),
+    let (films, report, errors) = render_with_imager(
+        "mark",
         "imager mark() { float a = 0.5 * step(8, xcomp(P));\n  Ci = Ci * (1 - a) + color(0, 0, 1) * a;\n  Oi = 1 - (1 - Oi) * (1 - a); }",
-    )
-    .unwrap();
-    let settings = Settings {
-        shader_paths: vec![dir.display().to_string()],
-        ..Settings::default()
-    };
-    let (films, report, errors) = render(
-        r#"Format 16 16 1
-        Imager "mark"
-        Projection "orthographic"
-        ScreenWindow -1 1 -1 1
-        WorldBegin
-        Surface "constant"
-        Color [1 0 0]
-        Polygon "P" [-5 -5 1  5 -5 1  5 0 1  -5 0 1]
-        WorldEnd"#,
-        &settings,
+        "-5 -5 1  5 -5 1  5 0 1  -5 0 1",
     );
     assert!(!errors, "{report}");
     let f = &films[0];
