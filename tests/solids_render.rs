@@ -96,6 +96,18 @@ fn depth(f: &Film, x: f32, y: f32) -> f32 {
     f.pixel(i, j)[4]
 }
 
+/// On the axis of sphere B (radius 0.7 at `b`, cut out of A): the cut face is B's back, at
+/// camera depth 5 + b.z + the sphere's half-chord there, not A's front.
+fn assert_cut_face(f: &Film, b: [f32; 3]) {
+    let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
+    let want = 5.0 + b[2] + (0.49 - (x - b[0]).powi(2) - y * y).sqrt();
+    let z = depth(f, x, y);
+    assert!(
+        (z - want).abs() < 0.05,
+        "cut face at depth {z}, want {want}"
+    );
+}
+
 #[test]
 fn a_difference_of_spheres_shows_the_cut_face_facing_out() {
     let a = [0.0, 0.0, 0.0];
@@ -110,13 +122,7 @@ fn a_difference_of_spheres_shows_the_cut_face_facing_out() {
     check_coverage(&f, |x, y| disc(x, y, 1.0, a));
     // On the axis of B: the cut face, B's back, at z = −0.5 + 0.7 (camera depth 5.2), not A's
     // front (4.2).
-    let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
-    let want = 5.0 + b[2] + (0.49 - (x - b[0]).powi(2) - y * y).sqrt();
-    let z = depth(&f, x, y);
-    assert!(
-        (z - want).abs() < 0.05,
-        "cut face at depth {z}, want {want}"
-    );
+    assert_cut_face(&f, b);
     // Away from B: A's front.
     let (x, y) = centre(pixel_at(-0.6, 0.0).0, pixel_at(-0.6, 0.0).1);
     let want = 5.0 - (1.0 - x * x - y * y).sqrt();
@@ -211,13 +217,7 @@ fn solids_inside_object_definitions_stay_solids_when_instanced() {
     ));
     // The same picture as the difference written out: B's cap outside A is removed.
     check_coverage(&f, |x, y| disc(x, y, 1.0, a));
-    let (x, y) = centre(pixel_at(0.6, 0.0).0, pixel_at(0.6, 0.0).1);
-    let want = 5.0 + b[2] + (0.49 - (x - b[0]).powi(2) - y * y).sqrt();
-    let z = depth(&f, x, y);
-    assert!(
-        (z - want).abs() < 0.05,
-        "cut face at depth {z}, want {want}"
-    );
+    assert_cut_face(&f, b);
 }
 
 #[test]
