@@ -418,23 +418,25 @@ WorldEnd
     }
 }
 
-/// Builds the ray geometry of a one-primitive world seen by a 60° perspective camera.
-fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
+/// Builds the first frame of `rib` with shaders compiled by `options`, and hands `f` a ray
+/// tracer over it (camera depth 0, every light).
+fn with_tracer<R>(
+    rib: &str,
+    options: arbor::sl::CompileOptions,
+    f: impl FnOnce(&arbor::shade::rays::Tracer) -> R,
+) -> R {
     use arbor::diag::{Diagnostics, SourceMap};
     use arbor::render::Camera;
     use arbor::scene::{build_scenes, BuildContext};
     use arbor::shade::rays::Tracer;
     use arbor::shade::system::ShadeSystem;
-    use arbor::sl::{CompileOptions, ShaderLibrary};
-    let rib = format!(
-        "Format 640 480 1\nProjection \"perspective\" \"fov\" [60]\nWorldBegin\n{prim}\nWorldEnd\n"
-    );
+    use arbor::sl::ShaderLibrary;
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
     let ctx = BuildContext::new(&sources, &diags);
     let scene = build_scenes(reqs, &ctx).remove(0);
-    let library = ShaderLibrary::new(CompileOptions::default());
+    let library = ShaderLibrary::new(options);
     let camera = Camera::new(&scene);
     let sys = ShadeSystem {
         library: &library,
@@ -444,14 +446,23 @@ fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
         aovs: vec![],
         rays: Default::default(),
     };
-    let tracer = Tracer {
+    f(&Tracer {
         sys: &sys,
         scene: &scene,
         camera: &camera,
         depth: 0,
         skip_light: None,
-    };
-    let rs = tracer.geometry().expect("ray geometry");
+    })
+}
+
+/// Builds the ray geometry of a one-primitive world seen by a 60° perspective camera.
+fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
+    let rib = format!(
+        "Format 640 480 1\nProjection \"perspective\" \"fov\" [60]\nWorldBegin\n{prim}\nWorldEnd\n"
+    );
+    let rs = with_tracer(&rib, Default::default(), |t| {
+        t.geometry().expect("ray geometry")
+    });
     let mut rates: Vec<(usize, usize)> = rs.grids.iter().map(|g| (g.grid.nu, g.grid.nv)).collect();
     rates.sort();
     rates.dedup();
@@ -503,47 +514,21 @@ fn ray_geometry_is_watertight_where_grids_of_different_rates_meet() {
 /// Traces rays with explicit cones at a 20 × 20 bilinear patch in the plane z = 10 (s along
 /// x, t along y) shaded by `footprint`; returns each ray's colour.
 fn footprint_hits(rays: &[(glam::Vec3, arbor::ray::Cone)]) -> Vec<glam::Vec3> {
-    use arbor::diag::{Diagnostics, SourceMap};
-    use arbor::render::Camera;
-    use arbor::scene::{build_scenes, BuildContext};
     use arbor::shade::exec::RayTracer;
-    use arbor::shade::rays::Tracer;
-    use arbor::shade::system::ShadeSystem;
-    use arbor::sl::ShaderLibrary;
     use glam::Vec3;
     let rib = "Format 64 64 1\nProjection \"perspective\" \"fov\" [60]\nWorldBegin\n\
                Surface \"footprint\"\n\
                Patch \"bilinear\" \"P\" [-10 -10 10  10 -10 10  -10 10 10  10 10 10]\nWorldEnd\n";
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let reqs = arbor::rib::parse_bytes("scene.rib", rib.as_bytes(), &sources, &diags);
-    let ctx = BuildContext::new(&sources, &diags);
-    let scene = build_scenes(reqs, &ctx).remove(0);
-    let library = ShaderLibrary::new(common::stdlib_options(&[shaders()]));
-    let camera = Camera::new(&scene);
-    let sys = ShadeSystem {
-        library: &library,
-        sources: &sources,
-        diags: &diags,
-        textures: None,
-        aovs: vec![],
-        rays: Default::default(),
-    };
-    let tracer = Tracer {
-        sys: &sys,
-        scene: &scene,
-        camera: &camera,
-        depth: 0,
-        skip_light: None,
-    };
-    let n = rays.len();
-    let org = vec![Vec3::ZERO; n];
-    let dir: Vec<Vec3> = rays.iter().map(|r| r.0).collect();
-    let cones: Vec<arbor::ray::Cone> = rays.iter().map(|r| r.1).collect();
-    let mut ci = vec![Vec3::ZERO; n];
-    let mut dist = vec![0f32; n];
-    tracer.trace(&org, &dir, &cones, &vec![true; n], &mut ci, &mut dist);
-    ci
+    with_tracer(rib, common::stdlib_options(&[shaders()]), |tracer| {
+        let n = rays.len();
+        let org = vec![Vec3::ZERO; n];
+        let dir: Vec<Vec3> = rays.iter().map(|r| r.0).collect();
+        let cones: Vec<arbor::ray::Cone> = rays.iter().map(|r| r.1).collect();
+        let mut ci = vec![Vec3::ZERO; n];
+        let mut dist = vec![0f32; n];
+        tracer.trace(&org, &dir, &cones, &vec![true; n], &mut ci, &mut dist);
+        ci
+    })
 }
 
 #[test]

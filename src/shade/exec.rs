@@ -498,8 +498,8 @@ pub static SPARSE_LANES: std::sync::atomic::AtomicBool = std::sync::atomic::Atom
 pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
 
 /// `specular()`'s exponent times `roughness` by default: the tight highlight of BMRT with its
-/// `"prmanspecular"` on (Aqsis's `roughness/8` emulates the same), which the published BMRT and
-/// PRMan pictures show.
+/// `"prmanspecular"` on (Aqsis's `roughness/8` emulates the same), which most published
+/// pictures show (early PRMan's were broader; see README's compatibility table).
 pub const SPEC_SCALE_TIGHT: f32 = 8.0;
 /// RISpec's reference `specular()`: `pow(N·H, 1/roughness)`, BMRT's with
 /// `Option "render" "prmanspecular" [0]`.

@@ -338,8 +338,8 @@ impl<'a> ShadeSystem<'a> {
     }
 
     /// Runs the displacement shader, if any: moves P, updates N and Ng — or, in a BMRT scene
-    /// for a primitive without `"render" "truedisplacement"` 1, only takes its N (bump
-    /// mapping, see [`bump_only`]).
+    /// for a primitive without `"render" "truedisplacement"` 1, keeps P and Ng (bump mapping,
+    /// see [`bump_only`]).
     pub fn displace(&self, scene: &Scene, camera: &Camera, prim: usize, grid: &mut Grid) {
         let Some(p) = scene.primitives.get(prim) else {
             return;
@@ -351,45 +351,43 @@ impl<'a> ShadeSystem<'a> {
             return;
         };
         let ctx = self.ctx(scene, camera, prim);
-        let n0 = grid.n.clone();
+        // Bump mapping keeps the points, and so the geometric normal; the shader's N, s and t
+        // are taken either way. The undisplaced N orients the new Ng.
         let bump = bump_only(scene, &p.attributes);
-        let regs = self.run(&prog, &sref, grid, &ctx, &[], None, None, None);
-        if let Some(mut regs) = regs {
-            if bump {
-                if let Some(g) = prog.global("N") {
-                    grid.n = own_vt(&mut regs[g.reg as usize], grid.len());
-                }
-                return;
+        let n0 = (!bump).then(|| grid.n.clone());
+        let Some(mut regs) = self.run(&prog, &sref, grid, &ctx, &[], None, None, None) else {
+            return;
+        };
+        if let Some(g) = prog.global("P").filter(|_| !bump) {
+            grid.p = own_vt(&mut regs[g.reg as usize], grid.len());
+        }
+        if let Some(g) = prog.global("N") {
+            grid.n = own_vt(&mut regs[g.reg as usize], grid.len());
+        }
+        for (name, slot) in ["s", "t"]
+            .iter()
+            .filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize])))
+        {
+            let v = slot_vf(slot, grid.len());
+            if name == "s" {
+                grid.s = v;
+            } else {
+                grid.t = v;
             }
-            if let Some(g) = prog.global("P") {
-                grid.p = own_vt(&mut regs[g.reg as usize], grid.len());
+        }
+        let Some(n0) = n0 else {
+            return;
+        };
+        // Ng follows the displaced surface, oriented like the undisplaced normal.
+        let ng = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 0, 1.0);
+        let ng2 = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 1, 1.0);
+        for i in 0..grid.len() {
+            let mut c = ng[i].cross(ng2[i]);
+            if c.dot(n0[i]) < 0.0 {
+                c = -c;
             }
-            if let Some(g) = prog.global("N") {
-                let nn = own_vt(&mut regs[g.reg as usize], grid.len());
-                grid.n = nn;
-            }
-            for (name, slot) in ["s", "t"]
-                .iter()
-                .filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize])))
-            {
-                let v = slot_vf(slot, grid.len());
-                if name == "s" {
-                    grid.s = v;
-                } else {
-                    grid.t = v;
-                }
-            }
-            // Ng follows the displaced surface, oriented like the undisplaced normal.
-            let ng = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 0, 1.0);
-            let ng2 = crate::shade::ops::deriv_t(&grid.p, grid.nu, grid.nv, 1, 1.0);
-            for i in 0..grid.len() {
-                let mut c = ng[i].cross(ng2[i]);
-                if c.dot(n0[i]) < 0.0 {
-                    c = -c;
-                }
-                if c.length_squared() > 0.0 {
-                    grid.ng[i] = c;
-                }
+            if c.length_squared() > 0.0 {
+                grid.ng[i] = c;
             }
         }
     }
