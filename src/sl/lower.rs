@@ -2051,16 +2051,11 @@ impl<'a> Lowerer<'a> {
                 if let Some(get) = self.triple_component(base, index, target.span) {
                     // `c[i] op= v` is `setcomp(c, i, comp(c, i) op v)`; its value is the new
                     // component.
-                    let new = match op {
-                        AssignOp::Set => value.clone(),
-                        _ => Expr {
+                    let new = match compound_op(op) {
+                        None => value.clone(),
+                        Some(op) => Expr {
                             kind: ExprKind::Binary {
-                                op: match op {
-                                    AssignOp::Add => BinOp::Add,
-                                    AssignOp::Sub => BinOp::Sub,
-                                    AssignOp::Mul => BinOp::Mul,
-                                    _ => BinOp::Div,
-                                },
+                                op,
                                 lhs: Box::new(get.clone()),
                                 rhs: Box::new(value.clone()),
                             },
@@ -2146,12 +2141,8 @@ impl<'a> Lowerer<'a> {
     }
 
     fn assign_value(&mut self, op: AssignOp, current: &Val, value: &Expr, span: Span) -> Val {
-        let bop = match op {
-            AssignOp::Set => return self.expr(value, Some(current.ty)),
-            AssignOp::Add => BinOp::Add,
-            AssignOp::Sub => BinOp::Sub,
-            AssignOp::Mul => BinOp::Mul,
-            AssignOp::Div => BinOp::Div,
+        let Some(bop) = compound_op(op) else {
+            return self.expr(value, Some(current.ty));
         };
         let rhs = self.expr(value, Some(current.ty));
         self.binary_vals(bop, *current, rhs, span)
@@ -3296,6 +3287,17 @@ fn var_val(v: &Var) -> Val {
 /// AST; this keeps one place to change if that ever differs.
 fn flatten_formals(f: &[Formal]) -> Vec<&Formal> {
     f.iter().collect()
+}
+
+/// The arithmetic of a compound assignment (`+=` is `+`); None for plain `=`.
+fn compound_op(op: AssignOp) -> Option<BinOp> {
+    match op {
+        AssignOp::Set => None,
+        AssignOp::Add => Some(BinOp::Add),
+        AssignOp::Sub => Some(BinOp::Sub),
+        AssignOp::Mul => Some(BinOp::Mul),
+        AssignOp::Div => Some(BinOp::Div),
+    }
 }
 
 fn resolve_code(c: char, tvar: Option<BaseType>) -> Option<BaseType> {
