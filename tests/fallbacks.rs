@@ -155,8 +155,10 @@ fn a_missing_sky_dome_shader_shows_the_dome_colour() {
 
 /// A displacement that leaves the surface's declared displacement bound is cut off at the
 /// bound (so that every bucket size gives the same picture): arbor says so once, naming the
-/// shader and the attribute that fixes it. With no bound declared (as BMRT-era scenes do),
-/// arbor estimates one by displacing test grids: no warning and no crack.
+/// shader and the attribute that fixes it. BMRT's `truedisplacement` without a bound gets one
+/// estimated by displacing test grids: no warning and no crack. With neither (as BMRT-era
+/// scenes are written) the primitive is bump mapped, with a warning naming the shader and the
+/// attribute that would move it.
 #[test]
 fn displacement_past_its_bound_is_reported() {
     let dir = common::scratch_dir("fallbacks_dispbound");
@@ -178,9 +180,18 @@ fn displacement_past_its_bound_is_reported() {
         log.contains("render::displacementbound") && log.contains("`bumpy`"),
         "{log}"
     );
-    for bound in ["Attribute \"displacementbound\" \"sphere\" [0.2]\n", ""] {
+    for bound in [
+        "Attribute \"displacementbound\" \"sphere\" [0.2]\n",
+        "Attribute \"render\" \"truedisplacement\" [1]\n",
+        "",
+    ] {
         let (log, px, _) = render(&dir, &scene(bound), None);
         assert!(!log.contains("render::displacementbound"), "{bound}: {log}");
+        assert_eq!(
+            log.contains("shade::displacement"),
+            bound.is_empty(),
+            "{bound}: {log}"
+        );
         // Every pixel is covered by the (white, constant) plane: no cracks.
         assert!(
             px.iter().all(|&v| v == 255),

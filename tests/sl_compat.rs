@@ -535,10 +535,12 @@ fn prmanspecular_zero_gives_rispec_highlights() {
 }
 
 /// BMRT moved points only for primitives with `Attribute "render" "truedisplacement" [1]`;
-/// otherwise its displacement shaders were bump maps. A sphere of radius 1 pushed out by 0.5
-/// covers π·1.5² or π·1² of the frame: displaced without the attribute anywhere (PRMan, RISpec)
-/// or with it at 1; bump mapped with it at 0, or without it in a scene where another primitive
-/// sets it (a BMRT scene).
+/// otherwise its displacement shaders were bump maps, and its scenes declare no
+/// `displacementbound` (PRMan needs one to move points). A sphere of radius 1 pushed out by
+/// 0.5 covers π·1.5² or π·1² of the frame: displaced with a bound and without the attribute
+/// anywhere (PRMan, RISpec) or with the attribute at 1 (with or without a bound); bump mapped
+/// with it at 0, without it in a scene where another primitive sets it (a BMRT scene), or with
+/// neither the attribute nor a bound.
 #[test]
 fn bmrt_truedisplacement_decides_between_displacement_and_bump() {
     let dir = common::scratch_dir("sl_compat_truedisp");
@@ -547,10 +549,11 @@ fn bmrt_truedisplacement_decides_between_displacement_and_bump() {
         "displacement pushout() { P += 0.5 * normalize(N); N = calculatenormal(P); }\n",
     )
     .unwrap();
-    let sphere = |attr: &str| {
+    let bound = "Attribute \"displacementbound\" \"sphere\" [0.5]\n";
+    let sphere = |attr: &str, bound: &str| {
         format!(
             "AttributeBegin\n{attr}Displacement \"pushout\"\n\
-             Attribute \"displacementbound\" \"sphere\" [0.5]\nSphere 1 -1 1 360\nAttributeEnd\n"
+             {bound}Sphere 1 -1 1 360\nAttributeEnd\n"
         )
     };
     // Off screen: only its attribute matters.
@@ -559,10 +562,12 @@ fn bmrt_truedisplacement_decides_between_displacement_and_bump() {
     let on = "Attribute \"render\" \"truedisplacement\" [1]\n";
     let off = "Attribute \"render\" \"truedisplacement\" [0]\n";
     for (world, radius) in [
-        (sphere(""), 1.5),
-        (sphere(on), 1.5),
-        (sphere(off), 1.0),
-        (format!("{elsewhere}{}", sphere("")), 1.0),
+        (sphere("", bound), 1.5),
+        (sphere(on, bound), 1.5),
+        (sphere(on, ""), 1.5),
+        (sphere(off, bound), 1.0),
+        (format!("{elsewhere}{}", sphere("", bound)), 1.0),
+        (sphere("", ""), 1.0),
     ] {
         let rib = format!(
             "Format 40 40 1\nPixelSamples 2 2\nProjection \"orthographic\"\n\

@@ -5,8 +5,9 @@
 //!
 //! Why: a grid is sampled only inside its surface's (widened) bound, so that every bucket
 //! layout gives the same picture; a displacement past the bound is cut off and shows as cracks
-//! along grid edges. RISpec asks scenes to declare `Attribute "displacementbound"`, but many
-//! published scenes (BMRT-era ones above all, as BMRT never needed it) do not. Before bucketing,
+//! along grid edges. RISpec asks scenes to declare `Attribute "displacementbound"`; a primitive
+//! that declares none is only bump mapped (see `shade::system::bump_only`) unless it asks for
+//! BMRT's `Attribute "render" "truedisplacement" [1]`, which never needed a bound. Before bucketing,
 //! a few coarse test grids of the primitive are displaced and the largest movement, with a
 //! margin, becomes the bound. The estimate depends only on the primitive and the camera, so
 //! the picture stays identical for any bucket size or thread count.

@@ -345,9 +345,11 @@ fn estimate_displacement_bounds(
     }
 }
 
-/// A displaced primitive that declares no displacement bound.
+/// A primitive whose points are displaced (see `bump_only`) but that declares no
+/// displacement bound (BMRT's `truedisplacement` never needed one).
 fn needs_estimate(scene: &Scene, prims: &[PrimInfo], i: usize) -> bool {
-    prims[i].disp == 0.0 && scene.primitives[i].attributes.displacement.is_some()
+    let a = &scene.primitives[i].attributes;
+    prims[i].disp == 0.0 && a.displacement.is_some() && !crate::shade::system::bump_only(scene, a)
 }
 
 /// A surface waiting to be split or diced.

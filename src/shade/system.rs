@@ -354,6 +354,27 @@ impl<'a> ShadeSystem<'a> {
         // Bump mapping keeps the points, and so the geometric normal; the shader's N, s and t
         // are taken either way. The undisplaced N orients the new Ng.
         let bump = bump_only(scene, &p.attributes);
+        if bump
+            && prog.global("P").is_some_and(|g| g.written)
+            && bump_for_want_of_bound(scene, &p.attributes)
+        {
+            self.diags.report(
+                Diag::warning(
+                    "shade::displacement",
+                    format!(
+                        "displacement shader `{}` moves P, but the primitive declares no \
+                         displacement bound: it is bump mapped (normals only, the points stay), \
+                         as BMRT-era scenes expect",
+                        sref.name
+                    ),
+                )
+                .label(sref.span, "displacement shader named here")
+                .help(
+                    "to move the surface, declare the largest displacement: Attribute \
+                     \"displacementbound\" \"sphere\" [d] (PRMan needs it too)",
+                ),
+            );
+        }
         let n0 = (!bump).then(|| grid.n.clone());
         let Some(mut regs) = self.run(&prog, &sref, grid, &ctx, &[], None, None, None) else {
             return;
@@ -1333,19 +1354,32 @@ fn encloses_eye(prim: &Primitive, camera: &Camera) -> bool {
 }
 
 /// `Option "limits" "loopiterations"`: most iterations of one loop statement per grid.
-/// Whether a displacement shader only bends this primitive's normals: BMRT moved points only
-/// with `Attribute "render" "truedisplacement" [1]`. A primitive that sets it to 0 is bump
-/// mapped; one without it is bump mapped when some other primitive of the scene sets it (the
-/// scene was written for BMRT), and displaced as PRMan and RISpec do otherwise.
-fn bump_only(scene: &Scene, attrs: &Attributes) -> bool {
+/// Whether a displacement shader only bends this primitive's normals (its points stay where
+/// they are, so the surface shader sees the undisplaced P).
+///
+/// BMRT moved points only with `Attribute "render" "truedisplacement" [1]`; PRMan moves them
+/// within the declared `displacementbound` and loses what goes beyond it (BMRT never needed
+/// one). So: a primitive that sets `truedisplacement` gets what it asks for; in a scene where
+/// some primitive sets it, the others are bump mapped (the scene was written for BMRT); and
+/// otherwise a primitive is displaced when it declares a displacement bound, and bump mapped
+/// when it declares none (BMRT-era scenes do not; PRMan scenes that move points do).
+pub(crate) fn bump_only(scene: &Scene, attrs: &Attributes) -> bool {
     match attrs
         .user
         .get("render:truedisplacement")
         .map(|p| p.data.floats())
     {
         Some([x, ..]) => *x == 0.0,
-        _ => scene.bmrt_displacement,
+        _ => scene.bmrt_displacement || !(attrs.displacement_bound > 0.0),
     }
+}
+
+/// Bump mapped only for want of a `displacementbound` (see [`bump_only`]): the case a user
+/// who meant to move the surface needs to hear about.
+fn bump_for_want_of_bound(scene: &Scene, attrs: &Attributes) -> bool {
+    !scene.bmrt_displacement
+        && !attrs.user.contains_key("render:truedisplacement")
+        && !(attrs.displacement_bound > 0.0)
 }
 
 /// BMRT's `Option "render" "prmanspecular" [0]` asks for RISpec's `specular()` highlight
