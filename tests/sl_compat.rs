@@ -589,6 +589,46 @@ fn bmrt_truedisplacement_decides_between_displacement_and_bump() {
     }
 }
 
+/// A primitive that names no surface shader gets RISpec's `defaultsurface` (`Ka + Kd·|N·I|`,
+/// whatever the lights), except in a frame written for BMRT (a displacement without a bound or
+/// `truedisplacement`), where it gets `plastic`, as BMRT's pictures of such primitives show.
+/// Face-on under a half-intensity light from the eye: defaultsurface gives 0.2 + 0.8 = 1,
+/// plastic at most Kd·0.5 + Ks·0.5 = 0.5 (its narrow highlight is blurred by the pixel filter
+/// to about 0.37).
+#[test]
+fn bmrt_scene_default_surface_is_plastic() {
+    let dir = common::scratch_dir("sl_compat_bmrt_default");
+    std::fs::write(dir.join("keep.sl"), "displacement keep() { N = N; }\n").unwrap();
+    let defaultsurface = 0.97..1.01;
+    let plastic = 0.3..0.5;
+    for (attrs, want) in [
+        ("", &defaultsurface),
+        (
+            "Displacement \"keep\"\nAttribute \"displacementbound\" \"sphere\" [0.1]\n",
+            &defaultsurface,
+        ),
+        ("Displacement \"keep\"\n", &plastic),
+        (
+            "Attribute \"render\" \"truedisplacement\" [1]\nDisplacement \"keep\"\n",
+            &plastic,
+        ),
+    ] {
+        let rib = format!(
+            "Format 21 21 1\nPixelSamples 2 2\nProjection \"orthographic\"\n\
+             ScreenWindow -2 2 -2 2\nTranslate 0 0 5\nWorldBegin\n\
+             LightSource \"distantlight\" 1 \"intensity\" 0.5 \"from\" [0 0 -5] \"to\" [0 0 0]\n\
+             AttributeBegin\n{attrs}Sphere 1 -1 1 360\nAttributeEnd\nWorldEnd\n"
+        );
+        let film = common::render_rib(&rib, &[dir.clone()]);
+        let r = film.channel("r").expect("red");
+        let centre = film.pixel(10, 10)[r];
+        assert!(
+            want.contains(&centre),
+            "{attrs}: centre {centre}, want {want:?}"
+        );
+    }
+}
+
 /// `Deriv(P, s)` where s changes only along u: Dv(s) is rounding noise (the patch's s is
 /// interpolated from non-representable corner values), and dividing by it must not blow up.
 /// dP/ds is the patch width over the s range everywhere: 4 / 0.6.

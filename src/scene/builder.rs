@@ -853,6 +853,7 @@ impl<'a> Builder<'a> {
             texture_jobs: std::mem::take(&mut self.pending_texture_jobs),
             jobs_only: false,
             bmrt_displacement: false,
+            displaced_without_bound: false,
         });
         self.light_handles.clear();
         self.gs.ctm = Mat4::IDENTITY;

@@ -128,6 +128,8 @@ impl Builder<'_> {
         if let Some(scene) = self.world.as_mut() {
             if attributes.user.contains_key("render:truedisplacement") {
                 scene.bmrt_displacement = true;
+            } else if attributes.displacement.is_some() && !(attributes.displacement_bound > 0.0) {
+                scene.displaced_without_bound = true;
             }
             scene.primitives.push(Primitive {
                 geometry,

@@ -923,6 +923,10 @@ pub struct Scene {
     /// written for BMRT, where a displacement shader only bends the normals of a primitive
     /// unless that attribute is 1 for it (PRMan always moves the points).
     pub bmrt_displacement: bool,
+    /// Some primitive has a displacement shader but declares neither a `displacementbound`
+    /// nor `truedisplacement`: how BMRT scenes were written (PRMan needs the bound to move
+    /// points), so the frame is taken as written for BMRT.
+    pub displaced_without_bound: bool,
 }
 
 /// Which texture-making request a [`TextureJob`] came from (RISpec §8).

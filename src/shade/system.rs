@@ -333,8 +333,16 @@ impl<'a> ShadeSystem<'a> {
         Some((prog, s.clone()))
     }
 
-    fn default_surface(&self) -> Option<Arc<Program>> {
-        self.library.get("defaultsurface", self.sources, self.diags)
+    /// The surface of a primitive that names none: RISpec's `defaultsurface` (as PRMan, Aqsis
+    /// and Pixie), or `plastic` in a frame written for BMRT, whose pictures of such primitives
+    /// show plastic's highlight (its displacement demos `dented`, `stucco`, `background`).
+    fn default_surface(&self, scene: &Scene) -> Option<Arc<Program>> {
+        let name = if scene.bmrt_displacement || scene.displaced_without_bound {
+            "plastic"
+        } else {
+            "defaultsurface"
+        };
+        self.library.get(name, self.sources, self.diags)
     }
 
     /// Runs the displacement shader, if any: moves P, updates N and Ng — or, in a BMRT scene
@@ -587,11 +595,11 @@ impl<'a> ShadeSystem<'a> {
         };
         let (prog, sref) = match surface {
             Some(x) => x,
-            None => match self.default_surface() {
+            None => match self.default_surface(scene) {
                 Some(prog) => (
-                    prog,
+                    prog.clone(),
                     Arc::new(ShaderRef {
-                        name: "defaultsurface".into(),
+                        name: prog.name.clone(),
                         params: Default::default(),
                         span: p.span,
                         world_from_shader: *p.world_from_object,
