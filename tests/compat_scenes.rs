@@ -362,3 +362,84 @@ fn option_shadow_bias_is_the_default_bias_of_shadow() {
     assert!(centre(&near) < 60, "bias 0.05: {}", centre(&near));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn prman3_bound_displacement_sets_the_displacement_bound_quietly() {
+    // PRMan 3's spelling, used by the RenderMan Companion's scenes.
+    let b = build(
+        "Format 8 8 1\nWorldBegin\nAttribute \"bound\" \"displacement\" 0.1\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Warning).is_empty(),
+        "{:#?}",
+        b.of(Severity::Warning)
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let a = &b.scenes[0].primitives[0].attributes;
+    assert_eq!(a.displacement_bound, 0.1);
+    assert_eq!(a.displacement_bound_space, "object");
+}
+
+#[test]
+fn rsl2_classes_and_slim_palettes_get_one_diagnostic_each() {
+    let (n, text, err) = compile(
+        "spot.sl",
+        "class myspot(float intensity = 1;)\n{\n  public void light(output vector L; output color Cl) { Cl = intensity; }\n}\n",
+    );
+    assert!(err && n == 0);
+    assert_eq!(text.matches('×').count(), 1, "{text}");
+    assert!(text.contains("RenderMan Shading Language 2.0"), "{text}");
+    let (n, text, err) = compile(
+        "pal.sl",
+        "slim 1 appearance slim {\n instance surface \"x\" \"x.slo\" {\n  description {don't}\n }\n}\n",
+    );
+    assert!(err && n == 0);
+    assert_eq!(text.matches('×').count(), 1, "{text}");
+    assert!(text.contains("Slim appearance file"), "{text}");
+}
+
+#[test]
+fn an_unknown_function_mentions_dso_shadeops() {
+    let (_, text, err) = compile("d.sl", "surface d() { frobnicatebox(P); Ci = 1; }");
+    assert!(err);
+    assert!(text.contains("DSO shadeop"), "{text}");
+}
+
+#[test]
+fn shader_and_archive_names_that_differ_in_case_are_found() {
+    // Scenes written on case-insensitive file systems (NeXT, Mac OS, Windows) name
+    // `Surface "MyOrange"` for `myorange.sl`, and `ReadArchive "Quad.RIB"` for `quad.rib`.
+    let dir = common::scratch_dir("name-case");
+    std::fs::write(
+        dir.join("myorange.sl"),
+        "surface myorange() { Oi = 1; Ci = color(1, 0.5, 0); }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("quad.rib"),
+        "Polygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\n",
+    )
+    .unwrap();
+    let out = dir.join("case.tif");
+    let _ = std::fs::remove_file(&out);
+    let rib = format!(
+        "Format 8 8 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\n\
+         Projection \"perspective\" \"fov\" 40\nWorldBegin\nSurface \"MyOrange\"\n\
+         ReadArchive \"Quad.RIB\"\nWorldEnd\n",
+        out.display()
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err, "{text}");
+    assert!(text.contains("differ only in letter case"), "{text}");
+    assert!(!text.contains("not found"), "{text}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let p = img.get_pixel(4, 4);
+    assert!(
+        p[0] > 250 && (120..=136).contains(&p[1]) && p[2] < 5,
+        "{p:?}"
+    );
+}

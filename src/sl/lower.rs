@@ -2248,6 +2248,13 @@ impl<'a> Lowerer<'a> {
                 .label(name_span, "not defined");
             if let Some(m) = did_you_mean(name, candidates.iter().map(String::as_str)) {
                 d = d.help(format!("did you mean `{m}`?"));
+            } else {
+                // Published shaders call compiled C plug-ins (PRMan DSO shadeops) this way.
+                d = d.help(format!(
+                    "define it as a shading-language function, or include the header that \
+                     does; if `{name}` is a DSO shadeop (a compiled C plug-in), arbor cannot \
+                     load those"
+                ));
             }
             for a in args {
                 self.expr(a, None);
