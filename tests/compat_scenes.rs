@@ -443,3 +443,67 @@ fn shader_and_archive_names_that_differ_in_case_are_found() {
         "{p:?}"
     );
 }
+
+/// Renders `shader_src` (saved as `name.sl`) on a full-frame square lit by the given lights;
+/// the colour at the centre.
+fn centre_colour(name: &str, shader_src: &str, lights: &str) -> [f32; 3] {
+    let dir = common::scratch_dir(name);
+    std::fs::write(dir.join(format!("{name}.sl")), shader_src).unwrap();
+    let rib = format!(
+        "Format 8 8 1\nPixelSamples 1 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n{lights}\n\
+         Surface \"{name}\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n"
+    );
+    let film = common::render_rib(&rib, &[dir]);
+    let rgb = common::film_rgb(&film);
+    let k = (4 * film.width + 4) * 3;
+    [rgb[k], rgb[k + 1], rgb[k + 2]]
+}
+
+#[test]
+fn cl_scaled_inside_illuminance_holds_for_that_light_only() {
+    // Pixar's Slim templates do `Cl *= 1 - nonspec` in surface shaders (PRMan allows it).
+    let c = centre_colour(
+        "halfcl",
+        "surface halfcl() { color c = 0; illuminance(P, N, PI) { Cl *= 0.5; c += Cl; } Oi = 1; Ci = c; }",
+        "LightSource \"distantlight\" 1 \"intensity\" 1 \"from\" [0 0 0] \"to\" [0 0 1]\n\
+         LightSource \"distantlight\" 2 \"intensity\" 0.5 \"from\" [0 0 0] \"to\" [0 0 1]",
+    );
+    // 0.5 * 1 + 0.5 * 0.5: each light's Cl is scaled once, not twice.
+    for ch in c {
+        assert!((ch - 0.75).abs() < 1e-4, "{c:?}");
+    }
+}
+
+#[test]
+fn slim_headers_are_in_the_standard_library() {
+    let src = r#"
+#define SLIM_TYPEID_surface 0
+#define SLIM_TYPEID_displacement 1
+#define SLIM_SHADERTYPEID SLIM_TYPEID_surface
+#include "pxslRayUtil.h"
+#include "pxslUtil.h"
+surface slimmy()
+{
+    normal Ns = pxslUtilShadingNormal(N);
+    vector v1, v2, v3, v4;
+    pxslBuildEnvironmentVectors(pxslCalculateEnvSampleArea(PI, 4), vector(0, 0, 1), v1, v2, v3, v4);
+    uniform float ns, ms;
+    pxslShapeSamples("rectangle", pxslGetRaySamples(16), 1, 1, ns, ms);
+    point q = pxslPointOnShape("disk", 1, 1, 0, ns, 0, ms);
+    color n = pxslFilteredCNoise(P, dPdu * du, dPdv * dv) + pxslFilteredFNoise(P, dPdu, dPdv)
+        + color pxslFilteredVNoise(P, dPdu, dPdv) + pxslVaryColor(color(0.5), 0.1, 3);
+    vector e = pxslEnvDirCorrect("XtoY", vector(1, 0, 0));
+    Oi = 1;
+    Ci = pxslBimix(color(1, 0, 0), color(0, 1, 0), color(0, 0, 1), color(1, 1, 1), 0.25, 0.5)
+        * pxslLuminance(color(1)) + 0 * (n + Ns + v1 + v4 + q + e) + pxslCmix(0, 0, 0.5);
+}
+"#;
+    let (n, log, err) = compile("slimmy.sl", src);
+    assert!(!err && n == 1, "{log}");
+    // mix(mix(c2, c0, 0.5), mix(c3, c1, 0.5), 0.25) with c0..c3 red, green, blue, white.
+    let c = centre_colour("slimmy", src, "");
+    let want = [0.5, 0.25, 0.5];
+    for (got, want) in c.iter().zip(want) {
+        assert!((got - want).abs() < 1e-4, "{c:?}");
+    }
+}
