@@ -507,3 +507,24 @@ surface slimmy()
         assert!((got - want).abs() < 1e-4, "{c:?}");
     }
 }
+
+#[test]
+fn eye_space_is_camera_space() {
+    // The RenderMan Companion's slideprojector light: `up = point "eye" (0,1,0)`.
+    let dir = common::scratch_dir("eyespace");
+    std::fs::write(
+        dir.join("eyecheck.sl"),
+        "surface eyecheck() { point a = transform(\"eye\", P); point b = transform(\"camera\", P);\n\
+         Oi = 1; Ci = (distance(a, b) < 1e-5) ? color(0, 1, 0) : color(1, 0, 0); }\n",
+    )
+    .unwrap();
+    let rib = "Format 8 8 1\nPixelSamples 1 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n\
+               Translate 0.3 0 0\nSurface \"eyecheck\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n";
+    let (film, diags, sources) = common::render_rib_with(rib, &[dir], &Default::default());
+    let text: Vec<String> = diags.iter().map(|(d, _)| d.to_line(&sources)).collect();
+    assert!(
+        !text.iter().any(|t| t.contains("coordinate system")),
+        "{text:#?}"
+    );
+    assert_eq!(common::film_mean(&film)[1], 1.0);
+}
