@@ -11,6 +11,7 @@ pub mod film;
 pub mod geom;
 pub mod lsp;
 pub mod num;
+pub mod pathcase;
 pub mod pattern;
 pub mod pipeline;
 pub mod ray;

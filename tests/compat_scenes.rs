@@ -362,3 +362,169 @@ fn option_shadow_bias_is_the_default_bias_of_shadow() {
     assert!(centre(&near) < 60, "bias 0.05: {}", centre(&near));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn prman3_bound_displacement_sets_the_displacement_bound_quietly() {
+    // PRMan 3's spelling, used by the RenderMan Companion's scenes.
+    let b = build(
+        "Format 8 8 1\nWorldBegin\nAttribute \"bound\" \"displacement\" 0.1\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Warning).is_empty(),
+        "{:#?}",
+        b.of(Severity::Warning)
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let a = &b.scenes[0].primitives[0].attributes;
+    assert_eq!(a.displacement_bound, 0.1);
+    assert_eq!(a.displacement_bound_space, "object");
+}
+
+#[test]
+fn rsl2_classes_and_slim_palettes_get_one_diagnostic_each() {
+    let (n, text, err) = compile(
+        "spot.sl",
+        "class myspot(float intensity = 1;)\n{\n  public void light(output vector L; output color Cl) { Cl = intensity; }\n}\n",
+    );
+    assert!(err && n == 0);
+    assert_eq!(text.matches('×').count(), 1, "{text}");
+    assert!(text.contains("RenderMan Shading Language 2.0"), "{text}");
+    let (n, text, err) = compile(
+        "pal.sl",
+        "slim 1 appearance slim {\n instance surface \"x\" \"x.slo\" {\n  description {don't}\n }\n}\n",
+    );
+    assert!(err && n == 0);
+    assert_eq!(text.matches('×').count(), 1, "{text}");
+    assert!(text.contains("Slim appearance file"), "{text}");
+}
+
+#[test]
+fn an_unknown_function_mentions_dso_shadeops() {
+    let (_, text, err) = compile("d.sl", "surface d() { frobnicatebox(P); Ci = 1; }");
+    assert!(err);
+    assert!(text.contains("DSO shadeop"), "{text}");
+}
+
+#[test]
+fn shader_and_archive_names_that_differ_in_case_are_found() {
+    // Scenes written on case-insensitive file systems (NeXT, Mac OS, Windows) name
+    // `Surface "MyOrange"` for `myorange.sl`, and `ReadArchive "Quad.RIB"` for `quad.rib`.
+    let dir = common::scratch_dir("name-case");
+    std::fs::write(
+        dir.join("myorange.sl"),
+        "surface myorange() { Oi = 1; Ci = color(1, 0.5, 0); }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("quad.rib"),
+        "Polygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\n",
+    )
+    .unwrap();
+    let out = dir.join("case.tif");
+    let _ = std::fs::remove_file(&out);
+    let rib = format!(
+        "Format 8 8 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\n\
+         Projection \"perspective\" \"fov\" 40\nWorldBegin\nSurface \"MyOrange\"\n\
+         ReadArchive \"Quad.RIB\"\nWorldEnd\n",
+        out.display()
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err, "{text}");
+    assert!(text.contains("differ only in letter case"), "{text}");
+    assert!(!text.contains("not found"), "{text}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let p = img.get_pixel(4, 4);
+    assert!(
+        p[0] > 250 && (120..=136).contains(&p[1]) && p[2] < 5,
+        "{p:?}"
+    );
+}
+
+/// Renders `shader_src` (saved as `name.sl`) on a full-frame square lit by the given lights;
+/// the colour at the centre.
+fn centre_colour(name: &str, shader_src: &str, lights: &str) -> [f32; 3] {
+    let dir = common::scratch_dir(name);
+    std::fs::write(dir.join(format!("{name}.sl")), shader_src).unwrap();
+    let rib = format!(
+        "Format 8 8 1\nPixelSamples 1 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n{lights}\n\
+         Surface \"{name}\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n"
+    );
+    let film = common::render_rib(&rib, &[dir]);
+    let rgb = common::film_rgb(&film);
+    let k = (4 * film.width + 4) * 3;
+    [rgb[k], rgb[k + 1], rgb[k + 2]]
+}
+
+#[test]
+fn cl_scaled_inside_illuminance_holds_for_that_light_only() {
+    // Pixar's Slim templates do `Cl *= 1 - nonspec` in surface shaders (PRMan allows it).
+    let c = centre_colour(
+        "halfcl",
+        "surface halfcl() { color c = 0; illuminance(P, N, PI) { Cl *= 0.5; c += Cl; } Oi = 1; Ci = c; }",
+        "LightSource \"distantlight\" 1 \"intensity\" 1 \"from\" [0 0 0] \"to\" [0 0 1]\n\
+         LightSource \"distantlight\" 2 \"intensity\" 0.5 \"from\" [0 0 0] \"to\" [0 0 1]",
+    );
+    // 0.5 * 1 + 0.5 * 0.5: each light's Cl is scaled once, not twice.
+    for ch in c {
+        assert!((ch - 0.75).abs() < 1e-4, "{c:?}");
+    }
+}
+
+#[test]
+fn slim_headers_are_in_the_standard_library() {
+    let src = r#"
+#define SLIM_TYPEID_surface 0
+#define SLIM_TYPEID_displacement 1
+#define SLIM_SHADERTYPEID SLIM_TYPEID_surface
+#include "pxslRayUtil.h"
+#include "pxslUtil.h"
+surface slimmy()
+{
+    normal Ns = pxslUtilShadingNormal(N);
+    vector v1, v2, v3, v4;
+    pxslBuildEnvironmentVectors(pxslCalculateEnvSampleArea(PI, 4), vector(0, 0, 1), v1, v2, v3, v4);
+    uniform float ns, ms;
+    pxslShapeSamples("rectangle", pxslGetRaySamples(16), 1, 1, ns, ms);
+    point q = pxslPointOnShape("disk", 1, 1, 0, ns, 0, ms);
+    color n = pxslFilteredCNoise(P, dPdu * du, dPdv * dv) + pxslFilteredFNoise(P, dPdu, dPdv)
+        + color pxslFilteredVNoise(P, dPdu, dPdv) + pxslVaryColor(color(0.5), 0.1, 3);
+    vector e = pxslEnvDirCorrect("XtoY", vector(1, 0, 0));
+    Oi = 1;
+    Ci = pxslBimix(color(1, 0, 0), color(0, 1, 0), color(0, 0, 1), color(1, 1, 1), 0.25, 0.5)
+        * pxslLuminance(color(1)) + 0 * (n + Ns + v1 + v4 + q + e) + pxslCmix(0, 0, 0.5);
+}
+"#;
+    let (n, log, err) = compile("slimmy.sl", src);
+    assert!(!err && n == 1, "{log}");
+    // mix(mix(c2, c0, 0.5), mix(c3, c1, 0.5), 0.25) with c0..c3 red, green, blue, white.
+    let c = centre_colour("slimmy", src, "");
+    let want = [0.5, 0.25, 0.5];
+    for (got, want) in c.iter().zip(want) {
+        assert!((got - want).abs() < 1e-4, "{c:?}");
+    }
+}
+
+#[test]
+fn eye_space_is_camera_space() {
+    // The RenderMan Companion's slideprojector light: `up = point "eye" (0,1,0)`.
+    let dir = common::scratch_dir("eyespace");
+    std::fs::write(
+        dir.join("eyecheck.sl"),
+        "surface eyecheck() { point a = transform(\"eye\", P); point b = transform(\"camera\", P);\n\
+         Oi = 1; Ci = (distance(a, b) < 1e-5) ? color(0, 1, 0) : color(1, 0, 0); }\n",
+    )
+    .unwrap();
+    let rib = "Format 8 8 1\nPixelSamples 1 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n\
+               Translate 0.3 0 0\nSurface \"eyecheck\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n";
+    let (film, diags, sources) = common::render_rib_with(rib, &[dir], &Default::default());
+    let text: Vec<String> = diags.iter().map(|(d, _)| d.to_line(&sources)).collect();
+    assert!(
+        !text.iter().any(|t| t.contains("coordinate system")),
+        "{text:#?}"
+    );
+    assert_eq!(common::film_mean(&film)[1], 1.0);
+}

@@ -227,3 +227,21 @@ fn a_parameter_the_shader_lacks_is_named_in_a_warning() {
         &px[..4]
     );
 }
+
+#[test]
+fn a_map_named_with_other_letter_case_is_found() {
+    // A scene written on a case-insensitive file system names `MixedCase.tx` for the picture
+    // `mixedcase.tiff` beside it.
+    let dir = common::scratch_dir("fallbacks_texture_case");
+    grey_picture(&dir.join("mixedcase.tiff"), 96);
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         Surface \"casemap\"\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let shader = "surface casemap() { Oi = 1; Ci = float texture(\"MixedCase.tx\"); }";
+    let (log, px, _) = render(&dir, &rib, Some(("casemap", shader)));
+    assert!(log.contains("mixedcase.tiff"), "{log}");
+    assert!(px.iter().all(|&v| (95..=97).contains(&v)), "{:?}", &px[..8]);
+}

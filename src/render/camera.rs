@@ -69,7 +69,7 @@ impl Camera {
     pub fn raster_from_camera(&self) -> Mat4 {
         self.raster_from_screen * self.screen_from_camera
     }
-    /// camera_from_space for "camera"/"current", "world", "screen", "NDC", "raster" and named
+    /// camera_from_space for "camera"/"current" (and "eye"), "world", "screen", "NDC", "raster" and named
     /// coordinate systems ("object" and "shader" depend on the primitive and are handled by the
     /// shading context).
     pub fn camera_from_space(&self, name: &str) -> Option<Mat4> {
@@ -79,7 +79,13 @@ impl Camera {
             "screen" => Some(self.screen_from_camera.inverse()),
             "NDC" => Some((self.ndc_from_screen * self.screen_from_camera).inverse()),
             "raster" => Some(self.raster_from_camera().inverse()),
-            _ => self.named.get(name).copied(),
+            // The RenderMan Companion's name for camera space (its slideprojector light and
+            // the shaders built on it say `point "eye" (0,1,0)`); a scene's own "eye" wins.
+            _ => self
+                .named
+                .get(name)
+                .copied()
+                .or_else(|| (name == "eye").then_some(Mat4::IDENTITY)),
         }
     }
 }

@@ -120,7 +120,16 @@ impl Builder<'_> {
             dirs.push(b.clone());
         }
         let searched = dirs.iter().map(|d| d.display().to_string()).collect();
-        let found = dirs.iter().map(|d| d.join(name)).find(|c| c.is_file());
+        // Exact names first; then one differing only in case (a scene written on a file system
+        // that ignores case, where its `ReadArchive "Cube.rib"` found `cube.rib`).
+        let found = dirs
+            .iter()
+            .map(|d| d.join(name))
+            .find(|c| c.is_file())
+            .or_else(|| {
+                dirs.iter()
+                    .find_map(|d| crate::pathcase::find_file_ignoring_case(&d.join(name)))
+            });
         (found, searched)
     }
 

@@ -425,7 +425,9 @@ impl Builder<'_> {
             self.note_if_ignored("Attribute", &cat, &p);
             let key = format!("{cat}:{}", p.name);
             match key.as_str() {
-                "displacementbound:sphere" => {
+                // PRMan 3's spelling (the RenderMan Companion's scenes): the same radius,
+                // in object space.
+                "displacementbound:sphere" | "bound:displacement" => {
                     if let Some(&r) = p.data.floats().first() {
                         self.attrs().displacement_bound = r;
                     }

@@ -101,6 +101,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("displacementbound:sphere", "uniform float", Used),
     ("displacementbound:coordinatesystem", "uniform string", Used),
     ("displacementbound:offscreen", "uniform integer", Ignored),
+    ("bound:displacement", "uniform float", Used),
     ("trimcurve:sense", "uniform string", Used),
     ("dice:binary", "uniform integer", Used),
     ("dice:rasterorient", "uniform integer", Ignored),

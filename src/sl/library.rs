@@ -129,6 +129,11 @@ pub fn compile_with(
         ast: None,
         programs: Vec::new(),
     };
+    // RSL 2.0 classes and Slim palettes get one diagnostic saying what they are.
+    if let Some(d) = crate::sl::foreign::foreign_language(file, text) {
+        diags.report(d);
+        return done;
+    }
     let before = diags.snapshot().len();
     let pre = preprocess(file, path, sources, &opts.defines, resolver, diags);
     // A missing header leaves names undefined everywhere; its one diagnostic says it all, so
@@ -337,6 +342,21 @@ impl ShaderLibrary {
                 return p;
             }
         }
+        if let Some((c, p)) =
+            self.load_ignoring_case(&candidates, &base, name, opts, sources, diags)
+        {
+            diags.report(
+                Diag::warning(
+                    "shade::name-case",
+                    format!(
+                        "shader `{name}` found as {}: the names differ only in letter case",
+                        c.describe()
+                    ),
+                )
+                .help("the scene was written on a file system that ignores case; rename the file or the request to match"),
+            );
+            return p;
+        }
         diags.report(
             Diag::warning(
                 "shade::missing",
@@ -344,6 +364,40 @@ impl ShaderLibrary {
             )
             .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
         );
+        None
+    }
+
+    /// The first candidate that exists under a name differing only in ASCII case (a scene from
+    /// a case-insensitive file system), compiled; None when there is none.
+    fn load_ignoring_case(
+        &self,
+        candidates: &[Candidate],
+        base: &str,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<(Candidate, Option<Arc<Program>>)> {
+        let mut alternatives: Vec<Candidate> = candidates
+            .iter()
+            .filter_map(|c| match c {
+                Candidate::File(p) => {
+                    crate::pathcase::find_file_ignoring_case(p).map(Candidate::File)
+                }
+                Candidate::Stdlib(_) => None,
+            })
+            .collect();
+        if let Some(k) = stdlib_shaders().iter().position(|(n, _)| {
+            n.strip_suffix(".sl")
+                .is_some_and(|n| n.eq_ignore_ascii_case(base))
+        }) {
+            alternatives.push(Candidate::Stdlib(k));
+        }
+        for c in alternatives {
+            if let Some(p) = self.compile_candidate(&c, base, name, opts, sources, diags) {
+                return Some((c, p));
+            }
+        }
         None
     }
 
@@ -457,7 +511,11 @@ fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Opt
         ));
         return None;
     }
-    let idx = progs.iter().position(|p| p.name == base).unwrap_or(0);
+    let idx = progs
+        .iter()
+        .position(|p| p.name == base)
+        .or_else(|| progs.iter().position(|p| p.name.eq_ignore_ascii_case(base)))
+        .unwrap_or(0);
     progs.into_iter().nth(idx).map(Arc::new)
 }
 

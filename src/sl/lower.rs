@@ -2001,7 +2001,24 @@ impl<'a> Lowerer<'a> {
                     _ => None,
                 };
                 let is_global = self.scopes[0].get(name.as_str()).map(|g| g.reg) == Some(var.reg);
+                // PRMan lets a surface or volume shader scale the light it is looking at inside
+                // `illuminance` (Pixar's own Slim templates do `Cl *= 1 - nonspec`); the value
+                // is the current light's and is set afresh for the next one.
+                let per_light = matches!(name.as_str(), "Cl" | "L")
+                    && matches!(self.kind, ShaderKind::Surface | ShaderKind::Volume)
+                    && self.in_illuminance > 0;
                 let var = match light_local {
+                    _ if per_light && !var.writable && is_global => {
+                        self.warn_extension(
+                            if name == "Cl" { "illuminance-Cl" } else { "illuminance-L" },
+                            target.span,
+                            &format!("assigning `{name}` inside `illuminance` is a PRMan extension; the new value holds for this light only"),
+                        );
+                        Var {
+                            writable: true,
+                            ..var
+                        }
+                    }
                     Some(key) if !var.writable && is_global && self.kind == ShaderKind::Light => {
                         self.warn_extension(
                             key,
@@ -2248,6 +2265,13 @@ impl<'a> Lowerer<'a> {
                 .label(name_span, "not defined");
             if let Some(m) = did_you_mean(name, candidates.iter().map(String::as_str)) {
                 d = d.help(format!("did you mean `{m}`?"));
+            } else {
+                // Published shaders call compiled C plug-ins (PRMan DSO shadeops) this way.
+                d = d.help(format!(
+                    "define it as a shading-language function, or include the header that \
+                     does; if `{name}` is a DSO shadeop (a compiled C plug-in), arbor cannot \
+                     load those"
+                ));
             }
             for a in args {
                 self.expr(a, None);

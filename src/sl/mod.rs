@@ -5,6 +5,7 @@
 
 pub mod ast;
 pub mod builtins;
+pub mod foreign;
 pub mod ir;
 pub mod library;
 pub mod lower;

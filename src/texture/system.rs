@@ -154,8 +154,12 @@ impl<'a> TextureSystem<'a> {
         }
         for d in &dirs {
             for n in &names {
-                let c = d.join(n);
-                if !c.is_file() || (n == &file && self.search.contains(d)) {
+                // A name that differs only in case is found too (scenes from case-insensitive
+                // file systems); the exact name on the search path was tried already.
+                let Some(c) = crate::pathcase::find_file_ignoring_case(&d.join(n)) else {
+                    continue;
+                };
+                if c == d.join(n) && n == &file && self.search.contains(d) {
                     continue;
                 }
                 if let Ok(t) = self.load(name, &c, false) {
