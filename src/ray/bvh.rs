@@ -620,22 +620,13 @@ impl Bvh {
             return;
         }
         const LANES: usize = 8;
-        let mut lanes: Vec<Lane> = Vec::with_capacity(LANES);
-        let mut next_ray = 0usize;
-        let start = |k: usize| Lane {
-            ray: k,
-            wt: LeafRay::new(o[k], d[k]),
-            rb: SlabRay::new(o[k], d[k]),
-            tmin: tmin[k],
-            tmax,
-            best: None,
-            stack: Stack::new(),
-            step: Step::Node(0),
-        };
-        while lanes.len() < LANES && next_ray < n {
-            lanes.push(start(next_ray));
-            next_ray += 1;
+        // The lanes are made once and restarted in place (a lane is about 1 KB, mostly its
+        // stack: moving a new one in cost more than a node visit).
+        let mut lanes: Vec<Lane> = (0..LANES.min(n)).map(|_| Lane::new()).collect();
+        for (k, l) in lanes.iter_mut().enumerate() {
+            l.start(k, o[k], d[k], tmin[k], tmax);
         }
+        let mut next_ray = lanes.len();
         self.prefetch(0, 0);
         while !lanes.is_empty() {
             let mut i = 0;
@@ -646,7 +637,8 @@ impl Bvh {
                 }
                 out[lanes[i].ray] = lanes[i].best;
                 if next_ray < n {
-                    lanes[i] = start(next_ray);
+                    let k = next_ray;
+                    lanes[i].start(k, o[k], d[k], tmin[k], tmax);
                     next_ray += 1;
                     i += 1;
                 } else {
@@ -772,6 +764,34 @@ struct Lane {
     step: Step,
 }
 
+impl Lane {
+    fn new() -> Lane {
+        Lane {
+            ray: 0,
+            wt: LeafRay::new(Vec3::ZERO, Vec3::Z),
+            rb: SlabRay::new(Vec3::ZERO, Vec3::Z),
+            tmin: 0.0,
+            tmax: 0.0,
+            best: None,
+            stack: Stack::new(),
+            step: Step::Node(0),
+        }
+    }
+
+    /// Starts the walk of ray `ray` from the root, in place.
+    #[inline(always)]
+    fn start(&mut self, ray: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) {
+        self.ray = ray;
+        self.wt = LeafRay::new(o, d);
+        self.rb = SlabRay::new(o, d);
+        self.tmin = tmin;
+        self.tmax = tmax;
+        self.best = None;
+        self.stack.clear();
+        self.step = Step::Node(0);
+    }
+}
+
 /// The pending children of a walk: (child, quad count (0: interior), entry distance), last
 /// in first out. Deeper than the array (a degenerate tree), they spill to the heap.
 struct Stack {
@@ -789,6 +809,11 @@ impl Stack {
             sp: 0,
             spill: Vec::new(),
         }
+    }
+    #[inline(always)]
+    fn clear(&mut self) {
+        self.sp = 0;
+        self.spill.clear();
     }
     #[inline(always)]
     fn push(&mut self, e: (u32, u32, f32)) {
