@@ -1,12 +1,15 @@
 //! A compact binned-SAH bounding volume hierarchy over micropolygon quads.
 //!
 //! Input: quads (four corners each, as `v00 v10 v01 v11` of a diced grid, in a shared vertex
-//! array) with the grid and quad index they came from. Output: closest-hit and all-hits queries along a ray segment.
+//! array) with the grid and quad index they came from. Output: closest-hit and all-hits
+//! queries along a ray segment, and closest hits of many rays with their walks interleaved
+//! (`interleave`).
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
 //! every hit) is the same whatever the thread count; nodes are 4 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to four
-//! children, tested together; leaves of up to 8 quads, their SAH cost counted in groups of
-//! four, the groups the leaf test takes at once on x86-64, see `quad4`); a quad is
+//! children, tested together, quantised to one 64-byte cache line, see `qbox`; leaves of up
+//! to 8 quads, their SAH cost counted in groups of four, the groups the leaf test takes at
+//! once on x86-64, see `quad4`); a quad is
 //! intersected, watertight, as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)` and
 //! reports bilinear-style coordinates `(a, b)` in `[0, 1]²` across the quad. Traversal visits
 //! the nearest child in reach first (ties by lane), pushing the others farthest first.
@@ -20,6 +23,10 @@
 //! watertight test they need (see `benches/rays.rs` for its speed).
 
 use glam::Vec3;
+
+use super::qbox;
+
+mod interleave;
 
 /// One micropolygon, its corners in the shared vertex array: `v00 = verts[k]`,
 /// `v10 = verts[k + 1]`, `v01 = verts[k + row]`, `v11 = verts[k + row + 1]` (a grid's points
@@ -44,31 +51,35 @@ impl Quad {
     }
 }
 
-/// A 4-wide node: the boxes of up to four children side by side (lane `i` of each array),
+/// A 4-wide node in one 64-byte cache line: the boxes of up to four children side by side
+/// (lane `i` of each row), quantised to 8-bit steps of a power-of-two quantum per axis from
+/// the node's low corner (see `qbox`: the dequantised planes enclose each child's exact box),
 /// so one ray tests all four with the same few vector instructions.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node4 {
-    /// Box corners per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones (a
-    /// ray picks its near and far row per axis once, by its direction's signs). Empty lanes
-    /// hold an inverted box.
-    b: [[f32; 4]; 6],
+    /// The node's low corner: step 0 on each axis.
+    origin: [f32; 3],
+    /// Per axis the quantum's biased exponent (`qbox::quantum`).
+    exp: [u8; 3],
+    /// A bit per lane holding a child (the others are never visited).
+    valid: u8,
+    /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
+    q: [[u8; 4]; 6],
     /// Interior child: node index. Leaf child: its first quad.
     child: [u32; 4],
-    /// Quads in a leaf child; 0 for an interior child (and an empty lane).
-    count: [u32; 4],
+    /// Quads in a leaf child (at most `MAX_LEAF`); 0 for an interior child and an empty lane.
+    count: [u8; 4],
 }
+
+const _: () = assert!(std::mem::size_of::<Node4>() == 64 && MAX_LEAF <= u8::MAX as usize);
 
 impl Node4 {
     const EMPTY: Node4 = Node4 {
-        b: [
-            [f32::INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-        ],
+        origin: [0.0; 3],
+        exp: [1; 3],
+        valid: 0,
+        q: [[0; 4]; 6],
         child: [0; 4],
         count: [0; 4],
     };
@@ -346,15 +357,25 @@ impl Bvh {
         let me = self.nodes.len();
         self.nodes.push(Node4::EMPTY);
         let mut node = Node4::EMPTY;
+        let mut bb = Aabb::EMPTY;
+        for &k in &kids {
+            bb.grow(&nodes[k].bb);
+        }
+        node.origin = bb.min.to_array();
+        for axis in 0..3 {
+            node.exp[axis] = qbox::exponent(bb.min[axis], bb.max[axis]);
+        }
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
             for axis in 0..3 {
-                node.b[axis][lane] = c.bb.min[axis];
-                node.b[3 + axis][lane] = c.bb.max[axis];
+                let (o, e) = (node.origin[axis], node.exp[axis]);
+                node.q[axis][lane] = qbox::step_down(o, e, c.bb.min[axis]);
+                node.q[3 + axis][lane] = qbox::step_up(o, e, c.bb.max[axis]);
             }
+            node.valid |= 1 << lane;
             if c.count > 0 {
                 node.child[lane] = c.first;
-                node.count[lane] = c.count;
+                node.count[lane] = c.count as u8;
             } else {
                 node.child[lane] = self.collapse(nodes, k);
                 node.count[lane] = 0;
@@ -467,6 +488,68 @@ impl Bvh {
         let _ = (child, count);
     }
 
+    /// Visits node `n`: pushes the children in reach other than the one to visit now
+    /// (farthest first, each prefetched) and returns that one as (child, quad count), if
+    /// any. With `ORDERED` the nearest child in reach is visited first (ties by lane).
+    #[inline(always)]
+    fn visit<const ORDERED: bool>(
+        &self,
+        n: &Node4,
+        rb: &SlabRay,
+        tmin: f32,
+        tmax: f32,
+        stack: &mut Stack,
+    ) -> Option<(u32, u32)> {
+        let (mask, tnear) = slab4(n, rb, tmin, tmax);
+        let first = if mask == 0 {
+            return None;
+        } else if mask & (mask - 1) == 0 {
+            // One child in reach (the common case deep in the tree): no ordering.
+            mask.trailing_zeros() as usize & 3
+        } else if mask.count_ones() == 2 {
+            // Two (most of the rest): one comparison of the sort keys below, (distance
+            // bits, lane); the farther one is pushed.
+            let i = mask.trailing_zeros() as usize & 3;
+            let j = (mask & (mask - 1)).trailing_zeros() as usize & 3;
+            let (near, far) = if ORDERED && tnear[j].to_bits() < tnear[i].to_bits() {
+                (j, i)
+            } else {
+                (i, j)
+            };
+            let e = (n.child[far], u32::from(n.count[far]), tnear[far]);
+            self.prefetch(e.0, e.1);
+            stack.push(e);
+            near
+        } else {
+            // Sort keys (a sorting network, branch-free): the entry distance's bits
+            // (distances are ≥ tmin ≥ 0, whose bits order as the numbers do) above the
+            // lane when `ordered`, the lane alone otherwise; lanes out of reach sort last.
+            let key = sort4(std::array::from_fn(|i| {
+                let t = if ORDERED {
+                    u64::from(tnear[i].to_bits()) << 2
+                } else {
+                    0
+                };
+                if mask & (1 << i) != 0 {
+                    t | i as u64
+                } else {
+                    u64::MAX
+                }
+            }));
+            // Push all but the first, farthest first; visit the first now (as if pushed
+            // and popped at once: the same order).
+            let c = mask.count_ones() as usize;
+            for &kk in key[1..c].iter().rev() {
+                let i = (kk & 3) as usize;
+                let e = (n.child[i], u32::from(n.count[i]), tnear[i]);
+                self.prefetch(e.0, e.1);
+                stack.push(e);
+            }
+            (key[0] & 3) as usize
+        };
+        Some((n.child[first], u32::from(n.count[first])))
+    }
+
     /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
     /// shrink `tmax`; returning true stops the walk.
     fn walk<const ORDERED: bool>(
@@ -485,102 +568,24 @@ impl Bvh {
             self.leaf(0, self.root_leaf, &wt, tmin, tmax, on_hit);
             return;
         }
-        let safe = |x: f32| {
-            if x.abs() < 1e-30 {
-                1e-30f32.copysign(x)
-            } else {
-                x
-            }
-        };
-        let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
-        let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
-        let rb = SlabRay::new(inv, oi);
-        // Pending children: (child, quad count (0: interior), entry distance). Deeper than
-        // the array (a degenerate tree), they spill to the heap.
-        // Not initialised: only entries below `sp` are ever read (no memset per ray).
-        let mut stack = [std::mem::MaybeUninit::<(u32, u32, f32)>::uninit(); 64];
-        let mut spill: Vec<(u32, u32, f32)> = Vec::new();
-        let mut sp = 0usize;
+        let rb = SlabRay::new(o, d);
+        let mut stack = Stack::new();
         let mut cur = 0u32;
         loop {
             let n = &self.nodes[cur as usize];
-            let (mask, tnear) = slab4(n, &rb, tmin, *tmax);
-            // The child to visit now (lane), if any; the others in reach are pushed.
-            let first = if mask == 0 {
-                None
-            } else if mask & (mask - 1) == 0 {
-                // One child in reach (the common case deep in the tree): no ordering.
-                Some(mask.trailing_zeros() as usize & 3)
-            } else if mask.count_ones() == 2 {
-                // Two (most of the rest): one comparison of the sort keys below, (distance
-                // bits, lane); the farther one is pushed.
-                let i = mask.trailing_zeros() as usize & 3;
-                let j = (mask & (mask - 1)).trailing_zeros() as usize & 3;
-                let (near, far) = if ORDERED && tnear[j].to_bits() < tnear[i].to_bits() {
-                    (j, i)
-                } else {
-                    (i, j)
-                };
-                let e = (n.child[far], n.count[far], tnear[far]);
-                self.prefetch(e.0, e.1);
-                if sp < stack.len() {
-                    stack[sp].write(e);
-                    sp += 1;
-                } else {
-                    spill.push(e);
-                }
-                Some(near)
-            } else {
-                // Sort keys (a sorting network, branch-free): the entry distance's bits
-                // (distances are ≥ tmin ≥ 0, whose bits order as the numbers do) above the
-                // lane when `ordered`, the lane alone otherwise; lanes out of reach sort last.
-                let key = sort4(std::array::from_fn(|i| {
-                    let t = if ORDERED {
-                        u64::from(tnear[i].to_bits()) << 2
-                    } else {
-                        0
-                    };
-                    if mask & (1 << i) != 0 {
-                        t | i as u64
-                    } else {
-                        u64::MAX
-                    }
-                }));
-                // Push all but the first, farthest first; visit the first now (as if pushed
-                // and popped at once: the same order).
-                let c = mask.count_ones() as usize;
-                for &kk in key[1..c].iter().rev() {
-                    let i = (kk & 3) as usize;
-                    let e = (n.child[i], n.count[i], tnear[i]);
-                    self.prefetch(e.0, e.1);
-                    if sp < stack.len() {
-                        stack[sp].write(e);
-                        sp += 1;
-                    } else {
-                        spill.push(e);
-                    }
-                }
-                Some((key[0] & 3) as usize)
-            };
-            if let Some(i) = first {
-                if n.count[i] == 0 {
-                    cur = n.child[i];
+            if let Some((c, count)) = self.visit::<ORDERED>(n, &rb, tmin, *tmax, &mut stack) {
+                if count == 0 {
+                    cur = c;
                     continue;
                 }
-                if self.leaf(n.child[i], n.count[i], &wt, tmin, tmax, on_hit) {
+                if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
                     return;
                 }
             }
             // Pop: leaves are tested as they come; the first interior node still in reach
             // is visited next.
             loop {
-                let (c, count, t) = if let Some(e) = spill.pop() {
-                    e
-                } else if sp > 0 {
-                    sp -= 1;
-                    // SAFETY: entries below `sp` were written by the pushes above.
-                    unsafe { stack[sp].assume_init() }
-                } else {
+                let Some((c, count, t)) = stack.pop() else {
                     return;
                 };
                 if t > *tmax {
@@ -595,6 +600,52 @@ impl Bvh {
                 cur = c;
                 break;
             }
+        }
+    }
+}
+
+/// The pending children of a walk: (child, quad count (0: interior), entry distance), last
+/// in first out. Deeper than the array (a degenerate tree), they spill to the heap.
+struct Stack {
+    /// Not initialised: only entries below `sp` are ever read (no memset per ray).
+    items: [std::mem::MaybeUninit<(u32, u32, f32)>; 64],
+    sp: usize,
+    spill: Vec<(u32, u32, f32)>,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn new() -> Stack {
+        Stack {
+            items: [std::mem::MaybeUninit::uninit(); 64],
+            sp: 0,
+            spill: Vec::new(),
+        }
+    }
+    #[inline(always)]
+    fn clear(&mut self) {
+        self.sp = 0;
+        self.spill.clear();
+    }
+    #[inline(always)]
+    fn push(&mut self, e: (u32, u32, f32)) {
+        if self.sp < self.items.len() {
+            self.items[self.sp].write(e);
+            self.sp += 1;
+        } else {
+            self.spill.push(e);
+        }
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(u32, u32, f32)> {
+        if let Some(e) = self.spill.pop() {
+            Some(e)
+        } else if self.sp > 0 {
+            self.sp -= 1;
+            // SAFETY: entries below `sp` were written by `push`.
+            Some(unsafe { self.items[self.sp].assume_init() })
+        } else {
+            None
         }
     }
 }
@@ -636,21 +687,99 @@ impl LeafRay {
     }
 }
 
-/// A ray prepared for the slab test: per axis its near and far row of a node's boxes (low
-/// or high, by the direction's sign) and the reciprocal direction and origin scaled by it.
+/// A ray prepared for the slab test: the reciprocal direction and the origin scaled by it
+/// (a plane `p` is crossed at `p · inv − oi`).
 struct SlabRay {
-    near: [usize; 3],
-    far: [usize; 3],
     inv: [f32; 3],
     oi: [f32; 3],
 }
 
 impl SlabRay {
     #[inline(always)]
-    fn new(inv: [f32; 3], oi: [f32; 3]) -> SlabRay {
-        let near: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { 3 + a } else { a });
-        let far: [usize; 3] = std::array::from_fn(|a| if inv[a] < 0.0 { a } else { 3 + a });
-        SlabRay { near, far, inv, oi }
+    fn new(o: Vec3, d: Vec3) -> SlabRay {
+        // A zero component becomes a tiny one of its sign: its reciprocal stays finite.
+        let safe = |x: f32| {
+            if x.abs() < 1e-30 {
+                1e-30f32.copysign(x)
+            } else {
+                x
+            }
+        };
+        let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
+        let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
+        SlabRay { inv, oi }
+    }
+}
+
+/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
+/// SSE (baseline on x86-64): the same operations in the same order as the portable form
+/// (`minps`/`maxps` return their second operand exactly where `vmin`/`vmax` do), so the
+/// same children are visited.
+///
+/// Each box side is first dequantised to the `f32` plane the build checked (`qbox::plane`),
+/// then crossed as an exact box's side would be (`p · inv − oi`, both rounded monotonically
+/// in `p`), so a quantised box, enclosing the exact one, is entered no later and left no
+/// earlier. Per axis the near side is the smaller crossing and the far side the larger (for
+/// a box with `lo ≤ hi` that is picking the low or high side by the direction's sign; empty
+/// lanes are masked out by the node's `valid` bits instead).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86-64 baseline; the loads read inside the 64-byte node
+    // (origin and exponents: bytes 0–15, steps: bytes 16–39) and the store writes a
+    // [f32; 4], all unaligned-safe.
+    unsafe {
+        let base: *const u8 = (n as *const Node4).cast();
+        let z = _mm_setzero_si128();
+        // Origin in lanes 0–2; the exponents (and `valid`) as the bytes of lane 3.
+        let head = _mm_loadu_si128(base.cast());
+        let origin = _mm_castsi128_ps(head);
+        let exps = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_srli_si128::<12>(head), z), z);
+        let quantum = _mm_castsi128_ps(_mm_slli_epi32::<23>(exps));
+        let q03 = _mm_loadu_si128(base.add(16).cast());
+        let q45 = _mm_loadl_epi64(base.add(32).cast());
+        let (r01, r23, r45) = (
+            _mm_unpacklo_epi8(q03, z),
+            _mm_unpackhi_epi8(q03, z),
+            _mm_unpacklo_epi8(q45, z),
+        );
+        let steps = [
+            _mm_unpacklo_epi16(r01, z), // low x
+            _mm_unpackhi_epi16(r01, z), // low y
+            _mm_unpacklo_epi16(r23, z), // low z
+            _mm_unpackhi_epi16(r23, z), // high x
+            _mm_unpacklo_epi16(r45, z), // high y
+            _mm_unpackhi_epi16(r45, z), // high z
+        ];
+        let splat = |v: __m128, a: usize| match a {
+            0 => _mm_shuffle_ps::<0x00>(v, v),
+            1 => _mm_shuffle_ps::<0x55>(v, v),
+            _ => _mm_shuffle_ps::<0xaa>(v, v),
+        };
+        let cross = |row: usize, a: usize| {
+            let p = _mm_add_ps(
+                splat(origin, a),
+                _mm_mul_ps(_mm_cvtepi32_ps(steps[row]), splat(quantum, a)),
+            );
+            _mm_sub_ps(_mm_mul_ps(p, _mm_set1_ps(r.inv[a])), _mm_set1_ps(r.oi[a]))
+        };
+        let (lx, hx) = (cross(0, 0), cross(3, 0));
+        let (ly, hy) = (cross(1, 1), cross(4, 1));
+        let (lz, hz) = (cross(2, 2), cross(5, 2));
+        let t0 = _mm_max_ps(
+            _mm_max_ps(_mm_min_ps(lx, hx), _mm_min_ps(ly, hy)),
+            _mm_max_ps(_mm_min_ps(lz, hz), _mm_set1_ps(tmin)),
+        );
+        let f = _mm_min_ps(
+            _mm_min_ps(_mm_max_ps(lx, hx), _mm_max_ps(ly, hy)),
+            _mm_max_ps(lz, hz),
+        );
+        let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
+        let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32 & u32::from(n.valid);
+        let mut out = [0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), t0);
+        (mask, out)
     }
 }
 
@@ -665,70 +794,31 @@ fn vmin(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
 fn vmax(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
     std::array::from_fn(|i| if a[i] > b[i] { a[i] } else { b[i] })
 }
-#[cfg(not(target_arch = "x86_64"))]
-#[inline(always)]
-fn vslab(p: &[f32; 4], inv: f32, oi: f32) -> [f32; 4] {
-    std::array::from_fn(|i| p[i] * inv - oi)
-}
-
-/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
-/// SSE (baseline on x86-64): the same operations in the same order as the portable form
-/// (`minps`/`maxps` return their second operand exactly where `vmin`/`vmax` do), so the
-/// same children are visited.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
-    use std::arch::x86_64::*;
-    // SAFETY: SSE is part of the x86-64 baseline; the loads read [f32; 4] rows of the node
-    // (row indices < 6 by construction in SlabRay::new) and the store writes a [f32; 4], all
-    // unaligned-safe.
-    unsafe {
-        let row = |i: usize| n.b.get_unchecked(i).as_ptr();
-        let slab = |i: usize, a: usize| {
-            _mm_sub_ps(
-                _mm_mul_ps(_mm_loadu_ps(row(i)), _mm_set1_ps(r.inv[a])),
-                _mm_set1_ps(r.oi[a]),
-            )
-        };
-        let (near, far) = (r.near, r.far);
-        let t0 = _mm_max_ps(
-            _mm_max_ps(slab(near[0], 0), slab(near[1], 1)),
-            _mm_max_ps(slab(near[2], 2), _mm_set1_ps(tmin)),
-        );
-        let f = _mm_min_ps(
-            _mm_min_ps(slab(far[0], 0), slab(far[1], 1)),
-            slab(far[2], 2),
-        );
-        let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
-        let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32;
-        let mut out = [0f32; 4];
-        _mm_storeu_ps(out.as_mut_ptr(), t0);
-        (mask, out)
-    }
-}
 
 /// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
-    let (inv, oi) = (r.inv, r.oi);
-    let near = |a: usize| &n.b[r.near[a]];
-    let far = |a: usize| &n.b[r.far[a]];
+    let cross = |row: usize, a: usize| -> [f32; 4] {
+        std::array::from_fn(|i| {
+            qbox::plane(n.origin[a], n.exp[a], n.q[row][i]) * r.inv[a] - r.oi[a]
+        })
+    };
+    let (lx, hx) = (cross(0, 0), cross(3, 0));
+    let (ly, hy) = (cross(1, 1), cross(4, 1));
+    let (lz, hz) = (cross(2, 2), cross(5, 2));
     let t0 = vmax(
-        vmax(vslab(near(0), inv[0], oi[0]), vslab(near(1), inv[1], oi[1])),
-        vmax(vslab(near(2), inv[2], oi[2]), [tmin; 4]),
+        vmax(vmin(lx, hx), vmin(ly, hy)),
+        vmax(vmin(lz, hz), [tmin; 4]),
     );
-    let f = vmin(
-        vmin(vslab(far(0), inv[0], oi[0]), vslab(far(1), inv[1], oi[1])),
-        vslab(far(2), inv[2], oi[2]),
-    );
+    let f = vmin(vmin(vmax(lx, hx), vmax(ly, hy)), vmax(lz, hz));
     // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
     let t1 = vmin(std::array::from_fn(|i| f[i] * 1.000_000_24), [tmax; 4]);
     let mut mask = 0;
     for i in 0..4 {
         mask |= u32::from(t0[i] <= t1[i]) << i;
     }
-    (mask, t0)
+    (mask & u32::from(n.valid), t0)
 }
 
 /// A ray prepared for the watertight test (Woop, Benthin & Wald 2013): the axis where the
@@ -942,6 +1032,7 @@ mod tests {
         }
         let bvh = Bvh::build(quads.clone(), verts.clone());
         let mut hits = 0;
+        let mut rays = Vec::new();
         for r in 0..3000 {
             // Aimed near a random corner, so most rays hit (some through shared edges).
             let o = Vec3::new(rnd(), rnd(), rnd()) * 5.0;
@@ -975,8 +1066,92 @@ mod tests {
             all.sort_unstable();
             assert_eq!(each, all, "ray {r}");
             hits += usize::from(got.is_some());
+            rays.push((o, d, tmax));
         }
         assert!(hits > 1000, "{hits} rays hit");
+        // The interleaved walks give each ray's single walk, bit for bit (batches of each
+        // tmax, more rays than lanes, and a partial last round).
+        for tmax in [4.0, f32::INFINITY] {
+            let (o, d): (Vec<Vec3>, Vec<Vec3>) = rays
+                .iter()
+                .filter(|r| r.2 == tmax)
+                .map(|r| (r.0, r.1))
+                .unzip();
+            let tmin: Vec<f32> = (0..o.len()).map(|k| (k % 3) as f32 * 0.5).collect();
+            let mut out = vec![None; o.len()];
+            bvh.closest_many(&o, &d, &tmin, tmax, &mut out);
+            for k in 0..o.len() {
+                assert_eq!(out[k], bvh.closest(o[k], d[k], tmin[k], tmax), "ray {k}");
+            }
+        }
+    }
+
+    /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to
+    /// lie inside every dequantised box on the way down.
+    fn enclosed(bvh: &Bvh, n: usize, lane: usize) -> Aabb {
+        let node = &bvh.nodes[n];
+        let mut exact = Aabb::EMPTY;
+        if node.count[lane] > 0 {
+            let s = node.child[lane] as usize;
+            for q in &bvh.quads[s..s + node.count[lane] as usize] {
+                for p in q.corners(&bvh.verts) {
+                    exact.grow_point(p);
+                }
+            }
+        } else {
+            let c = node.child[lane] as usize;
+            for l in 0..4 {
+                if bvh.nodes[c].valid & (1 << l) != 0 {
+                    exact.grow(&enclosed(bvh, c, l));
+                }
+            }
+        }
+        for a in 0..3 {
+            let (o, e) = (node.origin[a], node.exp[a]);
+            let lo = qbox::plane(o, e, node.q[a][lane]);
+            let hi = qbox::plane(o, e, node.q[3 + a][lane]);
+            assert!(
+                lo <= exact.min[a] && hi >= exact.max[a],
+                "node {n} lane {lane} axis {a}"
+            );
+        }
+        exact
+    }
+
+    /// Every quad lies inside the dequantised boxes of all its ancestors, in a tree over
+    /// quads from tiny to huge, flat ones and ones far from the origin.
+    #[test]
+    fn quantised_boxes_enclose_their_quads() {
+        let mut h = 99u32;
+        let mut rnd = || {
+            h = crate::pattern::hash::hash_u32(h);
+            h as f32 / u32::MAX as f32 - 0.5
+        };
+        let mut quads = Vec::new();
+        let mut verts = Vec::new();
+        for k in 0..3000u32 {
+            let size = 10f32.powi((k % 13) as i32 - 6);
+            let far = if k % 7 == 0 { 1e6 } else { 1.0 };
+            let c = Vec3::new(rnd(), rnd(), rnd()) * 100.0 * far;
+            let u = Vec3::new(rnd(), rnd(), rnd()) * size;
+            // Every fifth quad flat in z (an axis-aligned micropolygon).
+            let v = Vec3::new(rnd(), rnd(), if k % 5 == 0 { 0.0 } else { rnd() }) * size;
+            let u = if k % 5 == 0 {
+                Vec3::new(u.x, u.y, 0.0)
+            } else {
+                u
+            };
+            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
+        }
+        let bvh = Bvh::build(quads, verts);
+        assert!(bvh.nodes.len() > 100);
+        let mut total = Aabb::EMPTY;
+        for l in 0..4 {
+            if bvh.nodes[0].valid & (1 << l) != 0 {
+                total.grow(&enclosed(&bvh, 0, l));
+            }
+        }
+        assert!(total.max.x - total.min.x > 1e7);
     }
 
     #[test]

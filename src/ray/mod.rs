@@ -8,13 +8,15 @@
 //! the camera; sample directions are hashes of the shading point and the sample index, never of
 //! a thread or a bucket.
 //!
-//! Files: `bvh` (binned-SAH BVH over micropolygons), `quad4` (its leaves' quad test four
-//! quads at a time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area
+//! Files: `bvh` (binned-SAH BVH over micropolygons; `bvh/interleave` walks many rays at
+//! once), `qbox` (its nodes' 8-bit quantised child boxes), `quad4` (its leaves' quad test
+//! four quads at a time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area
 //! lights' geometry, sampled by area).
 
 pub mod area;
 pub mod bvh;
 pub mod geometry;
+mod qbox;
 #[cfg(target_arch = "x86_64")]
 mod quad4;
 

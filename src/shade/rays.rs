@@ -438,12 +438,24 @@ impl RayTracer for Tracer<'_, '_> {
         let mut pending: Vec<PendingHit> = Vec::with_capacity(n);
         for _layer in 0..MAX_LAYERS {
             pending.clear();
-            for k in 0..n {
-                if !live[k] {
-                    continue;
-                }
+            // The live rays' closest hits, traced together (their walks interleave, see
+            // `Bvh::closest_many`); a hit on a grid rays do not see falls back to the
+            // filtered search, as `closest_where` does.
+            let rays: Vec<usize> = (0..n).filter(|&k| live[k]).collect();
+            let ro: Vec<Vec3> = rays.iter().map(|&k| o[k]).collect();
+            let rd: Vec<Vec3> = rays.iter().map(|&k| dir[k]).collect();
+            let rt: Vec<f32> = rd.iter().map(|d| bias / d.length()).collect();
+            let mut found = vec![None; rays.len()];
+            rs.bvh
+                .closest_many(&ro, &rd, &rt, f32::INFINITY, &mut found);
+            for (j, &k) in rays.iter().enumerate() {
                 let d = dir[k];
-                let hit = closest_where(&rs, o[k], d, bias / d.length(), |g| g.trace);
+                let hit = match found[j] {
+                    Some(h) if !rs.grids[h.grid as usize].trace => {
+                        closest_where(&rs, o[k], d, rt[j], |g| g.trace)
+                    }
+                    h => h,
+                };
                 match hit {
                     Some(h) => {
                         let p = o[k] + d * h.t;
