@@ -271,6 +271,7 @@ pub fn render_paths(
             if let Some(b) = &bar {
                 b.finish_and_clear();
             }
+            let output_clock = settings.stats.then(crate::render::stats::PhaseClock::now);
             let mut options = crate::render::driver::effective_options(&scene.options, &opts);
             // Imager shaders (the film applies the standard `background` itself).
             let mut film = film;
@@ -311,6 +312,7 @@ pub fn render_paths(
                     diags,
                 ));
             }
+            stats.phase(crate::render::stats::Phase::Output, output_clock);
             if settings.stats {
                 eprintln!(
                     "frame {}: {:.3} s",

@@ -36,7 +36,7 @@ use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
 use super::sampler::mix64;
-use super::stats::{Stage, Stats};
+use super::stats::{Phase, PhaseClock, Stage, Stats};
 use super::GridShader;
 use crate::film::{DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
@@ -862,6 +862,12 @@ fn render_inner(
     let wall = Instant::now();
     let local_stats = Stats::new();
     let stats = opts.stats.unwrap_or(&local_stats);
+    // Where the wall time goes, thread by thread (`--stats` only: it reads /proc).
+    let mut clock = opts.stats.map(|s| {
+        s.threads
+            .store(rayon::current_num_threads() as u64, Ordering::Relaxed);
+        PhaseClock::now()
+    });
     let (xres, yres) = (camera.xres, camera.yres);
     let image = PixelRect {
         x0: 0,
@@ -1199,6 +1205,7 @@ fn render_inner(
             }
             kept
         };
+    clock = stats.phase(Phase::Setup, clock);
     // The film is made (its pages first touched: ~10 ms at 1280 × 960) while the first row's
     // surfaces are split, diced and shaded — before, it ran alone, the other thread idle.
     let (mut film, mut kept): (Film, Vec<Kept>) = rayon::join(
@@ -1211,6 +1218,7 @@ fn render_inner(
             }
         },
     );
+    clock = stats.phase(Phase::FirstRow, clock);
     // Hidden rows still needed by a row to filter, oldest first.
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
@@ -1280,6 +1288,7 @@ fn render_inner(
         } else {
             (hide_row(), Vec::new())
         };
+        clock = stats.phase(Phase::Rows, clock);
         kept.extend(next);
         hidden.push_back((row, bufs));
         // Filter the rows whose neighbours are now all hidden, while their samples are
@@ -1288,6 +1297,7 @@ fn render_inner(
             filter_row(&mut film, next_filter, &mut hidden);
             next_filter += 1;
         }
+        clock = stats.phase(Phase::Filter, clock);
         // Drop the rows no row left to filter needs.
         while hidden.front().is_some_and(|(r, _)| r + ky < next_filter) {
             if let Some((_, hs)) = hidden.pop_front() {
@@ -1307,15 +1317,18 @@ fn render_inner(
             }
             keep
         });
+        clock = stats.phase(Phase::Other, clock);
     }
     while next_filter < buckets.rows {
         filter_row(&mut film, next_filter, &mut hidden);
         next_filter += 1;
     }
+    clock = stats.phase(Phase::Filter, clock);
     for (_, hs) in hidden.drain(..) {
         hs.iter().for_each(|h| stats.free(h.bytes()));
     }
     frame.hider.finish(diags);
+    stats.phase(Phase::Other, clock);
     stats.free(film_bytes);
     stats
         .wall_ns
