@@ -271,7 +271,10 @@ pub fn render_paths(
             if let Some(b) = &bar {
                 b.finish_and_clear();
             }
-            let output_clock = settings.stats.then(crate::render::stats::PhaseClock::now);
+            let output_clock = settings.stats.then(|| {
+                let me = crate::render::stats::this_thread();
+                crate::render::stats::PhaseClock::now(std::sync::Arc::new(me.into_iter().collect()))
+            });
             let mut options = crate::render::driver::effective_options(&scene.options, &opts);
             // Imager shaders (the film applies the standard `background` itself).
             let mut film = film;

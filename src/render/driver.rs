@@ -864,9 +864,9 @@ fn render_inner(
     let stats = opts.stats.unwrap_or(&local_stats);
     // Where the wall time goes, thread by thread (`--stats` only: it reads /proc).
     let mut clock = opts.stats.map(|s| {
-        s.threads
-            .store(rayon::current_num_threads() as u64, Ordering::Relaxed);
-        PhaseClock::now()
+        let tids = super::stats::pool_threads();
+        s.threads.store(tids.len() as u64, Ordering::Relaxed);
+        PhaseClock::now(std::sync::Arc::new(tids))
     });
     let (xres, yres) = (camera.xres, camera.yres);
     let image = PixelRect {

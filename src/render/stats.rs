@@ -43,7 +43,7 @@ pub struct Stats {
     /// Bytes held now / at most by the film, shaded grids and sample buffers.
     pub live_bytes: AtomicU64,
     pub peak_bytes: AtomicU64,
-    /// Render threads, for the idle time of the [`Phase`]s.
+    /// Render threads, for the idle time of the [`Phase`]s (the output phase has one).
     pub threads: AtomicU64,
     /// Per [`Phase`]: wall-clock nanoseconds, and the nanoseconds the process's threads
     /// ran and waited for a CPU in it (summed over threads; see [`PhaseClock`]).
@@ -66,7 +66,8 @@ pub enum Phase {
     Filter = 3,
     /// Freeing rows and grids no longer needed, and the end of the frame.
     Other = 4,
-    /// Imager, quantising and writing the displays (after the render).
+    /// Imager, quantising and writing the displays (after the render; the thread that
+    /// writes).
     Output = 5,
 }
 
@@ -80,36 +81,53 @@ const PHASE_NAMES: [&str; PHASES] = [
     "output",
 ];
 
-/// The start of a [`Phase`]: the wall clock and the process's CPU time so far (Linux
-/// `/proc/self/task/*/schedstat`: time run and time waiting for a CPU, summed over the
-/// threads — the waiting shows how much other processes took). Reading it costs a few
-/// system calls, so the driver makes one only under `--stats`.
-#[derive(Clone, Copy, Debug)]
+/// The start of a [`Phase`]: the wall clock and the CPU time so far of the threads doing
+/// the phase's work (Linux `/proc/self/task/TID/schedstat`: time run and time waiting for a
+/// CPU — the waiting shows how much other processes took). Reading it costs a few system
+/// calls per thread, so the driver makes one only under `--stats`.
+#[derive(Clone, Debug)]
 pub struct PhaseClock {
     wall: Instant,
+    tids: std::sync::Arc<Vec<u32>>,
     run: u64,
     wait: u64,
 }
 
 impl PhaseClock {
-    pub fn now() -> PhaseClock {
-        let (run, wait) = sched_times().unwrap_or((0, 0));
+    /// Now, for the threads `tids` (see [`pool_threads`], [`this_thread`]).
+    pub fn now(tids: std::sync::Arc<Vec<u32>>) -> PhaseClock {
+        let (run, wait) = sched_times(&tids);
         PhaseClock {
             wall: Instant::now(),
+            tids,
             run,
             wait,
         }
     }
 }
 
-/// Nanoseconds run and waited for a CPU by every thread of this process.
-fn sched_times() -> Option<(u64, u64)> {
+/// The calling thread's id (None where `/proc/thread-self` does not exist).
+pub fn this_thread() -> Option<u32> {
+    let link = std::fs::read_link("/proc/thread-self").ok()?;
+    link.file_name()?.to_str()?.parse().ok()
+}
+
+/// The ids of the current rayon pool's threads (one call on each).
+pub fn pool_threads() -> Vec<u32> {
+    let mut tids: Vec<u32> = rayon::broadcast(|_| this_thread())
+        .into_iter()
+        .flatten()
+        .collect();
+    tids.sort_unstable();
+    tids
+}
+
+/// Nanoseconds run and waited for a CPU by the threads `tids` (a thread that has ended
+/// counts nothing).
+fn sched_times(tids: &[u32]) -> (u64, u64) {
     let mut total = (0u64, 0u64);
-    for task in std::fs::read_dir("/proc/self/task").ok()? {
-        let mut path = task.ok()?.path();
-        path.push("schedstat");
-        // A thread may end between the listing and the read: skip it.
-        let Ok(text) = std::fs::read_to_string(&path) else {
+    for tid in tids {
+        let Ok(text) = std::fs::read_to_string(format!("/proc/self/task/{tid}/schedstat")) else {
             continue;
         };
         let mut f = text
@@ -118,7 +136,7 @@ fn sched_times() -> Option<(u64, u64)> {
         total.0 += f.next().unwrap_or(0);
         total.1 += f.next().unwrap_or(0);
     }
-    Some(total)
+    total
 }
 
 impl Stats {
@@ -148,7 +166,7 @@ impl Stats {
     /// that starts the next one.
     pub fn phase(&self, phase: Phase, since: Option<PhaseClock>) -> Option<PhaseClock> {
         let since = since?;
-        let now = PhaseClock::now();
+        let now = PhaseClock::now(since.tids.clone());
         let i = phase as usize;
         let wall = now.wall.duration_since(since.wall).as_nanos() as u64;
         self.phase_wall[i].fetch_add(wall, Relaxed);
@@ -208,7 +226,12 @@ impl fmt::Display for Stats {
                     g(&self.phase_run[i]),
                     g(&self.phase_wait[i]),
                 );
-                let idle = (threads * w).saturating_sub(r + q);
+                let n = if i == Phase::Output as usize {
+                    1
+                } else {
+                    threads
+                };
+                let idle = (n * w).saturating_sub(r + q);
                 write!(
                     f,
                     "\n    {name:<11} wall {:>7.3} s  run {:>7.3}  wait {:>7.3}  idle {:>7.3}",
