@@ -1713,6 +1713,19 @@ mod tests {
         assert!(Stats::get(&stats.samples_hit) > 0);
         assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
         assert!(Stats::get(&stats.peak_bytes) > 0);
+        // The phases: every render thread counted, the phases' wall times within the
+        // frame's, each thread's CPU time within its share of a phase's wall time.
+        let threads = Stats::get(&stats.threads);
+        assert_eq!(threads as usize, rayon::current_num_threads());
+        let walls: Vec<u64> = stats.phase_wall.iter().map(Stats::get).collect();
+        assert!(walls[Phase::Rows as usize] > 0);
+        assert!(walls.iter().sum::<u64>() <= Stats::get(&stats.wall_ns));
+        let run: u64 = stats.phase_run.iter().map(Stats::get).sum();
+        let wait: u64 = stats.phase_wait.iter().map(Stats::get).sum();
+        // (The kernel's per-thread times run ahead of the wall clock by at most a tick.)
+        let slack = 10_000_000 * threads;
+        assert!(run + wait <= threads * walls.iter().sum::<u64>() + slack);
+        assert!(stats.to_string().contains("hide rows"));
     }
 
     fn string_param(name: &str, value: &str) -> crate::scene::Param {
