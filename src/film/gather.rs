@@ -293,7 +293,7 @@ impl Prepared {
         let (xs, ys) = (&xs[..lanes], &ys[..lanes]);
         if !ctx
             .kernel
-            .finish(ctx, (xs, ys), (qx, qy), rgba, (wx, wy), out)
+            .finish(ctx, (xs, ys), (qx, qy), rgba, (wx, wy), &zs[..spp], out)
         {
             // A sum is not finite: a value is not (or the sums overflow). Again, leaving out
             // the products of weight 0, which must not poison the sums.
@@ -305,7 +305,6 @@ impl Prepared {
             });
             out.finite = if finite { !0 } else { 0 };
         }
-        out.z = ctx.kernel.depth(&zs[..spp], ctx.df);
     }
 }
 
@@ -380,9 +379,13 @@ fn pick_kernel() -> Kernel {
 }
 
 impl Kernel {
-    /// A pixel's weights into `wx`, `wy` (see [`weights_portable`]) and its contributions
-    /// from them (see [`contrib_portable`], without `skip_zero`): one call per pixel, so the
-    /// vector build runs it all inlined in one AVX2 function.
+    /// A pixel's contributions: through [`quad_portable`] where it applies, else its weights
+    /// into `wx`, `wy` (see [`weights_portable`]) and its contributions from them (see
+    /// [`contrib_portable`], without `skip_zero`); and its depth from `zs` ([`own_depth`])
+    /// into `out.z`. One call per pixel, so the vector build runs the quadrant path and the
+    /// depth inlined in one AVX2 function. Returns whether the sums are finite (when not, the
+    /// weights are in `wx`, `wy` for the caller's careful sums).
+    #[allow(clippy::too_many_arguments)]
     fn finish(
         self,
         ctx: &PrepareCtx,
@@ -390,15 +393,24 @@ impl Kernel {
         (qx, qy): (i32, i32),
         rgba: &[f32],
         (wx, wy): (&mut [f32], &mut [f32]),
+        zs: &[f32],
         out: &mut Contrib,
     ) -> bool {
         let lanes = xs.len();
         if lanes == QUAD_LANES {
             let quad = match self {
-                Kernel::Portable => quad_portable(&ctx.axes, (xs, ys), (qx, qy), rgba, out),
+                Kernel::Portable => {
+                    let q = quad_portable(&ctx.axes, (xs, ys), (qx, qy), rgba, out);
+                    if q.is_some() {
+                        out.z = own_depth(zs.iter().copied(), ctx.df);
+                    }
+                    q
+                }
                 // SAFETY: chosen only where the CPU has AVX2.
                 #[cfg(target_arch = "x86_64")]
-                Kernel::Avx2 => unsafe { avx2::quad(&ctx.axes, (xs, ys), (qx, qy), rgba, out) },
+                Kernel::Avx2 => unsafe {
+                    avx2::quad_and_depth(&ctx.axes, (xs, ys), (qx, qy), rgba, zs, ctx.df, out)
+                },
             };
             match quad {
                 Some(true) => return true,
@@ -411,6 +423,7 @@ impl Kernel {
                 None => {}
             }
         }
+        out.z = self.depth(zs, ctx.df);
         match self {
             Kernel::Portable => {
                 weights_portable(xs, qx, &ctx.axes[0], wx);
@@ -961,7 +974,7 @@ fn copy_into(tile: &mut Tile, part: &Tile) {
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::{Axis, Contrib, Narrow, LANES, NSUMS, QUAD_LANES, SUMS, TAPS};
+    use super::{Axis, Contrib, DepthFilter, Narrow, LANES, NSUMS, QUAD_LANES, SUMS, TAPS};
 
     /// [`super::weights_portable`], eight samples at a time.
     #[inline]
@@ -1263,6 +1276,29 @@ mod avx2 {
         let finite = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(bad, bad)) == 0;
         out.finite = if finite { !0 } else { 0 };
         Some(finite)
+    }
+
+    /// [`quad`] and, where it applies, the depth of `zs` into `out.z` ([`depth`] for `Min`
+    /// and `Max`, else [`super::own_depth`]), inlined together.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn quad_and_depth(
+        axes: &[Axis; 2],
+        xy: (&[f32], &[f32]),
+        q: (i32, i32),
+        rgba: &[f32],
+        zs: &[f32],
+        df: DepthFilter,
+        out: &mut Contrib,
+    ) -> Option<bool> {
+        let r = quad(axes, xy, q, rgba, out)?;
+        out.z = match df {
+            DepthFilter::Min | DepthFilter::Max if zs.len() >= LANES => {
+                depth(zs, df == DepthFilter::Max)
+            }
+            _ => super::own_depth(zs.iter().copied(), df),
+        };
+        Some(r)
     }
 
     /// [`super::ranges_portable`].
