@@ -271,6 +271,10 @@ pub fn render_paths(
             if let Some(b) = &bar {
                 b.finish_and_clear();
             }
+            let output_clock = settings.stats.then(|| {
+                let me = crate::render::stats::this_thread();
+                crate::render::stats::PhaseClock::now(std::sync::Arc::new(me.into_iter().collect()))
+            });
             let mut options = crate::render::driver::effective_options(&scene.options, &opts);
             // Imager shaders (the film applies the standard `background` itself).
             let mut film = film;
@@ -311,6 +315,7 @@ pub fn render_paths(
                     diags,
                 ));
             }
+            stats.phase(crate::render::stats::Phase::Output, output_clock);
             if settings.stats {
                 eprintln!(
                     "frame {}: {:.3} s",

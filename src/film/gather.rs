@@ -293,7 +293,7 @@ impl Prepared {
         let (xs, ys) = (&xs[..lanes], &ys[..lanes]);
         if !ctx
             .kernel
-            .finish(ctx, (xs, ys), (qx, qy), rgba, (wx, wy), out)
+            .finish(ctx, (xs, ys), (qx, qy), rgba, (wx, wy), &zs[..spp], out)
         {
             // A sum is not finite: a value is not (or the sums overflow). Again, leaving out
             // the products of weight 0, which must not poison the sums.
@@ -305,7 +305,6 @@ impl Prepared {
             });
             out.finite = if finite { !0 } else { 0 };
         }
-        out.z = ctx.kernel.depth(&zs[..spp], ctx.df);
     }
 }
 
@@ -380,9 +379,13 @@ fn pick_kernel() -> Kernel {
 }
 
 impl Kernel {
-    /// A pixel's weights into `wx`, `wy` (see [`weights_portable`]) and its contributions
-    /// from them (see [`contrib_portable`], without `skip_zero`): one call per pixel, so the
-    /// vector build runs it all inlined in one AVX2 function.
+    /// A pixel's contributions: through [`quad_portable`] where it applies, else its weights
+    /// into `wx`, `wy` (see [`weights_portable`]) and its contributions from them (see
+    /// [`contrib_portable`], without `skip_zero`); and its depth from `zs` ([`own_depth`])
+    /// into `out.z`. One call per pixel, so the vector build runs the quadrant path and the
+    /// depth inlined in one AVX2 function. Returns whether the sums are finite (when not, the
+    /// weights are in `wx`, `wy` for the caller's careful sums).
+    #[allow(clippy::too_many_arguments)]
     fn finish(
         self,
         ctx: &PrepareCtx,
@@ -390,9 +393,37 @@ impl Kernel {
         (qx, qy): (i32, i32),
         rgba: &[f32],
         (wx, wy): (&mut [f32], &mut [f32]),
+        zs: &[f32],
         out: &mut Contrib,
     ) -> bool {
         let lanes = xs.len();
+        if lanes == QUAD_LANES {
+            let quad = match self {
+                Kernel::Portable => {
+                    let q = quad_portable(&ctx.axes, (xs, ys), (qx, qy), rgba, out);
+                    if q.is_some() {
+                        out.z = own_depth(zs.iter().copied(), ctx.df);
+                    }
+                    q
+                }
+                // SAFETY: chosen only where the CPU has AVX2.
+                #[cfg(target_arch = "x86_64")]
+                Kernel::Avx2 => unsafe {
+                    avx2::quad_and_depth(&ctx.axes, (xs, ys), (qx, qy), rgba, zs, ctx.df, out)
+                },
+            };
+            match quad {
+                Some(true) => return true,
+                Some(false) => {
+                    // Not finite: the caller redoes the sums from the weights, carefully.
+                    weights_portable(xs, qx, &ctx.axes[0], wx);
+                    weights_portable(ys, qy, &ctx.axes[1], wy);
+                    return false;
+                }
+                None => {}
+            }
+        }
+        out.z = self.depth(zs, ctx.df);
         match self {
             Kernel::Portable => {
                 weights_portable(xs, qx, &ctx.axes[0], wx);
@@ -505,8 +536,6 @@ fn contrib_portable(
     out: &mut Contrib,
 ) -> bool {
     let mut acc = [[0f32; LANES]; NSUMS];
-    let mut lo = [[0f32; LANES]; 4];
-    let mut hi = lo;
     for chunk in 0..lanes / LANES {
         for l in 0..LANES {
             let s = chunk * LANES + l;
@@ -521,27 +550,137 @@ fn contrib_portable(
                 }
                 acc[5 * t + 4][l] += w;
             }
-            for c in 0..4 {
-                if chunk == 0 {
-                    (lo[c][l], hi[c][l]) = (v[c], v[c]);
-                } else {
-                    lo[c][l] = vmin(lo[c][l], v[c]);
-                    hi[c][l] = vmax(hi[c][l], v[c]);
-                }
-            }
         }
     }
     for (s, a) in out.sums.iter_mut().zip(&acc) {
         *s = reduce(*a, |a, b| a + b);
     }
     out.sums[NSUMS..].fill(0.0);
-    for c in 0..4 {
-        out.range[c] = reduce(lo[c], vmin);
-        out.range[4 + c] = -reduce(hi[c], vmax);
-    }
+    ranges_portable(rgba, lanes, out);
     let finite = out.sums.iter().all(|s| s.is_finite());
     out.finite = if finite { !0 } else { 0 };
     finite
+}
+
+/// Samples per pixel of the quadrant fast path ([`quad_portable`]): a 4 × 4 pattern.
+const QUAD_LANES: usize = 2 * LANES;
+
+/// Half sums of the eight lanes of a vector as the quadrant path forms them: lanes 0, 1,
+/// 4, 5 (left of the pixel's centre) and lanes 2, 3, 6, 7 (right): ((v0 + v1) + (v4 + v5),
+/// (v2 + v3) + (v6 + v7)) — the order of the vector build's horizontal adds.
+#[inline(always)]
+fn halves(v: &[f32; LANES]) -> (f32, f32) {
+    ((v[0] + v[1]) + (v[4] + v[5]), (v[2] + v[3]) + (v[6] + v[7]))
+}
+
+/// The contributions of a pixel of 16 samples in the 4 × 4 pattern's order (stratum rows
+/// of four, top to bottom), under a narrow filter on both axes, when each sample lies in
+/// its stratum's quadrant of the pixel — samples 0, 1, 4, 5 of each chunk of eight strictly
+/// left of the centre, 2, 3, 6, 7 strictly right, the first chunk strictly above, the second
+/// strictly below (a jittered 4 × 4 pattern always, short of a sample exactly on a
+/// midline). Then every sample reaches its own pixel and at most the neighbours on its
+/// quadrant's sides, so a chunk's lanes split into a left and a right half reaching known
+/// targets: the products known to be 0 are never formed (about half of
+/// [`contrib_portable`]'s), and the weights never stored. Per sum, the two chunks' products
+/// lane by lane where both reach the target, then [`halves`] (and L + R for the targets both
+/// halves reach). Returns None when the samples are not so placed (or the filter is not
+/// narrow): the general path runs. Some(finite) otherwise; the weights are those of
+/// [`weights_portable`], so the sums agree with [`contrib_portable`]'s to float rounding.
+fn quad_portable(
+    axes: &[Axis; 2],
+    (xs, ys): (&[f32], &[f32]),
+    (qx, qy): (i32, i32),
+    rgba: &[f32],
+    out: &mut Contrib,
+) -> Option<bool> {
+    let (Some(nx), Some(ny)) = (&axes[0].narrow, &axes[1].narrow) else {
+        return None;
+    };
+    let (mx, my) = (qx as f32 + 0.5, qy as f32 + 0.5);
+    for s in 0..QUAD_LANES {
+        let (x, y) = (xs[s], ys[s]);
+        let x_ok = if s & 2 != 0 { mx < x } else { x < mx };
+        let y_ok = if s >= LANES { my < y } else { y < my };
+        if !(x_ok && y_ok) {
+            return None;
+        }
+    }
+    // (own, side) weights along an axis, masked by the reach as [`weights_portable`] does.
+    let wt = |ax: &Axis, n: &Narrow, p: f32, mid: f32| {
+        let v = (mid - p).abs();
+        let (own, side) = n.at(v);
+        (
+            if v <= ax.h { own } else { 0.0 },
+            if v >= 1.0 - ax.h { side } else { 0.0 },
+        )
+    };
+    // Products per chunk, kind (own; x side; y side; diagonal), sum (r g b a w), lane.
+    let mut prod = [[[[0f32; LANES]; 5]; 4]; 2];
+    for (c, pc) in prod.iter_mut().enumerate() {
+        for l in 0..LANES {
+            let s = c * LANES + l;
+            let (ox, sx) = wt(&axes[0], nx, xs[s], mx);
+            let (oy, sy) = wt(&axes[1], ny, ys[s], my);
+            let w = [ox * oy, sx * oy, ox * sy, sx * sy];
+            for (k, &w) in w.iter().enumerate() {
+                for ch in 0..4 {
+                    pc[k][ch][l] = w * rgba[ch * QUAD_LANES + s];
+                }
+                pc[k][4][l] = w;
+            }
+        }
+    }
+    let both = |k: usize, ch: usize| -> [f32; LANES] {
+        std::array::from_fn(|l| prod[0][k][ch][l] + prod[1][k][ch][l])
+    };
+    for ch in 0..5 {
+        let own = halves(&both(0, ch));
+        let xside = halves(&both(1, ch));
+        let (ya, yb) = (halves(&prod[0][2][ch]), halves(&prod[1][2][ch]));
+        let (da, db) = (halves(&prod[0][3][ch]), halves(&prod[1][3][ch]));
+        // Targets row by row: (−1, −1) … (1, 1).
+        let t = [
+            da.0,
+            ya.0 + ya.1,
+            da.1,
+            xside.0,
+            own.0 + own.1,
+            xside.1,
+            db.0,
+            yb.0 + yb.1,
+            db.1,
+        ];
+        for (k, v) in t.iter().enumerate() {
+            out.sums[5 * k + ch] = *v;
+        }
+    }
+    out.sums[NSUMS..].fill(0.0);
+    ranges_portable(rgba, QUAD_LANES, out);
+    let finite = out.sums.iter().all(|s| s.is_finite());
+    out.finite = if finite { !0 } else { 0 };
+    Some(finite)
+}
+
+/// The least and greatest r g b a over a pixel's samples into `out.range` (see
+/// [`Contrib`]): lane by lane over the chunks with [`vmin`], [`vmax`], then [`reduce`].
+fn ranges_portable(rgba: &[f32], lanes: usize, out: &mut Contrib) {
+    for c in 0..4 {
+        let mut lo = [0f32; LANES];
+        let mut hi = lo;
+        for chunk in 0..lanes / LANES {
+            for l in 0..LANES {
+                let v = rgba[c * lanes + chunk * LANES + l];
+                if chunk == 0 {
+                    (lo[l], hi[l]) = (v, v);
+                } else {
+                    lo[l] = vmin(lo[l], v);
+                    hi[l] = vmax(hi[l], v);
+                }
+            }
+        }
+        out.range[c] = reduce(lo, vmin);
+        out.range[4 + c] = -reduce(hi, vmax);
+    }
 }
 
 /// Filters the pixels `[x0, x0 + w) × [y0, y0 + h)` of `film` from the prepared buckets
@@ -835,7 +974,7 @@ fn copy_into(tile: &mut Tile, part: &Tile) {
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::{Axis, Contrib, LANES, NSUMS, SUMS, TAPS};
+    use super::{Axis, Contrib, DepthFilter, Narrow, LANES, NSUMS, QUAD_LANES, SUMS, TAPS};
 
     /// [`super::weights_portable`], eight samples at a time.
     #[inline]
@@ -895,24 +1034,8 @@ mod avx2 {
             )
         });
         let lookup2 = |v: __m256, (rec, nsc, nst): (*const f32, __m256, __m256i)| {
-            let (f, k) = index(_mm256_mul_ps(v, nsc), nst);
-            // SAFETY: 0 ≤ k ≤ steps < rec.len(), 4 floats each.
-            let r = |a: i32, b: i32| unsafe {
-                _mm256_loadu2_m128(rec.add(4 * b as usize), rec.add(4 * a as usize))
-            };
-            let (r0, r1, r2, r3) = (r(k[0], k[4]), r(k[1], k[5]), r(k[2], k[6]), r(k[3], k[7]));
-            // Transposed: t0 = a0 a1 b0 b1 | a4 a5 b4 b5, t1 = a2 a3 b2 b3 | …, t2, t3 the
-            // same of c and d.
-            let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpacklo_ps(r2, r3));
-            let (t2, t3) = (_mm256_unpackhi_ps(r0, r1), _mm256_unpackhi_ps(r2, r3));
-            let a = _mm256_shuffle_ps::<0b01_00_01_00>(t0, t1);
-            let b = _mm256_shuffle_ps::<0b11_10_11_10>(t0, t1);
-            let c = _mm256_shuffle_ps::<0b01_00_01_00>(t2, t3);
-            let d = _mm256_shuffle_ps::<0b11_10_11_10>(t2, t3);
-            (
-                _mm256_add_ps(a, _mm256_mul_ps(f, _mm256_sub_ps(b, a))),
-                _mm256_add_ps(c, _mm256_mul_ps(f, _mm256_sub_ps(d, c))),
-            )
+            // SAFETY: `rec`, `nst` from a `Narrow`.
+            unsafe { narrow_at(v, rec, nsc, nst) }
         };
         let c = [0, 1, 2].map(|o| _mm256_set1_ps((q - 1 + o as i32) as f32));
         // The side's reach test `v ≥ 1 − h` holds for every v ≥ 0 when h ≥ 1 (and NaN
@@ -948,6 +1071,259 @@ mod avx2 {
                 unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * lanes + chunk * LANES), *w) };
             }
         }
+    }
+
+    /// [`super::Narrow::at`] of eight distances: (own, side) from one 16-byte record per
+    /// lane.
+    ///
+    /// # Safety
+    /// `rec` holds `steps + 1` records of 4 floats (`nst` is `steps` in every lane).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn narrow_at(v: __m256, rec: *const f32, nsc: __m256, nst: __m256i) -> (__m256, __m256) {
+        let u = _mm256_mul_ps(v, nsc);
+        // Clamped into [0, steps] (NaN's index is out of range: 0).
+        let i = _mm256_max_epi32(
+            _mm256_min_epi32(_mm256_cvttps_epi32(u), nst),
+            _mm256_setzero_si256(),
+        );
+        let mut k = [0i32; 8];
+        // SAFETY: 8 lanes into 8 i32.
+        unsafe { _mm256_storeu_si256(k.as_mut_ptr() as *mut __m256i, i) };
+        let f = _mm256_sub_ps(u, _mm256_cvtepi32_ps(i));
+        // SAFETY: 0 ≤ k ≤ steps < rec.len(), 4 floats each.
+        let r = |a: i32, b: i32| unsafe {
+            _mm256_loadu2_m128(rec.add(4 * b as usize), rec.add(4 * a as usize))
+        };
+        let (r0, r1, r2, r3) = (r(k[0], k[4]), r(k[1], k[5]), r(k[2], k[6]), r(k[3], k[7]));
+        // Transposed: t0 = a0 a1 b0 b1 | a4 a5 b4 b5, t1 = a2 a3 b2 b3 | …, t2, t3 the
+        // same of c and d.
+        let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpacklo_ps(r2, r3));
+        let (t2, t3) = (_mm256_unpackhi_ps(r0, r1), _mm256_unpackhi_ps(r2, r3));
+        let a = _mm256_shuffle_ps::<0b01_00_01_00>(t0, t1);
+        let b = _mm256_shuffle_ps::<0b11_10_11_10>(t0, t1);
+        let c = _mm256_shuffle_ps::<0b01_00_01_00>(t2, t3);
+        let d = _mm256_shuffle_ps::<0b11_10_11_10>(t2, t3);
+        (
+            _mm256_add_ps(a, _mm256_mul_ps(f, _mm256_sub_ps(b, a))),
+            _mm256_add_ps(c, _mm256_mul_ps(f, _mm256_sub_ps(d, c))),
+        )
+    }
+
+    /// A narrow axis's (own, side) weights of eight samples at `p` in the pixel whose
+    /// centre is `mid`, masked by the reach ([`super::quad_portable`]'s `wt`).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn narrow_weights(h: f32, n: &Narrow, p: __m256, mid: __m256) -> (__m256, __m256) {
+        let v = _mm256_andnot_ps(_mm256_set1_ps(-0.0), _mm256_sub_ps(mid, p));
+        // SAFETY: the record table of a `Narrow` and its `steps`.
+        let (own, side) = unsafe {
+            narrow_at(
+                v,
+                n.rec.as_ptr() as *const f32,
+                _mm256_set1_ps(n.scale),
+                _mm256_set1_epi32(n.steps),
+            )
+        };
+        (
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(v, _mm256_set1_ps(h)), own),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(v, _mm256_set1_ps(1.0 - h)),
+                side,
+            ),
+        )
+    }
+
+    /// r g b a times the weights `w`, and `w`: a kind's products of a chunk.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn products(w: __m256, v: &[__m256; 4]) -> [__m256; 5] {
+        [
+            _mm256_mul_ps(w, v[0]),
+            _mm256_mul_ps(w, v[1]),
+            _mm256_mul_ps(w, v[2]),
+            _mm256_mul_ps(w, v[3]),
+            w,
+        ]
+    }
+
+    /// Two chunks' products of a kind added lane by lane.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn add5(a: &[__m256; 5], b: &[__m256; 5]) -> [__m256; 5] {
+        [
+            _mm256_add_ps(a[0], b[0]),
+            _mm256_add_ps(a[1], b[1]),
+            _mm256_add_ps(a[2], b[2]),
+            _mm256_add_ps(a[3], b[3]),
+            _mm256_add_ps(a[4], b[4]),
+        ]
+    }
+
+    /// [`super::halves`] of the five sums of a kind: (P, W), P = [rL gL bL aL rR gR bR aR],
+    /// W = [wL wR wL wR …].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn halves(k: &[__m256; 5]) -> (__m256, __m256) {
+        let t1 = _mm256_hadd_ps(k[0], k[1]);
+        let t2 = _mm256_hadd_ps(k[2], k[3]);
+        let s = _mm256_add_ps(
+            _mm256_permute2f128_ps::<0x20>(t1, t2),
+            _mm256_permute2f128_ps::<0x31>(t1, t2),
+        );
+        let p = _mm256_permutevar8x32_ps(s, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));
+        let t3 = _mm256_hadd_ps(k[4], k[4]);
+        (p, _mm256_add_ps(t3, _mm256_permute2f128_ps::<0x01>(t3, t3)))
+    }
+
+    /// The left and right targets' r g b a w (lanes 0–4) from [`halves`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn sides((p, w): (__m256, __m256)) -> (__m256, __m256) {
+        (
+            _mm256_blend_ps::<0xf0>(p, w),
+            _mm256_blend_ps::<0xf0>(
+                _mm256_permute2f128_ps::<0x01>(p, p),
+                _mm256_permute_ps::<0b10_11_00_01>(w),
+            ),
+        )
+    }
+
+    /// The r g b a w of the target both halves reach, L + R, from [`halves`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn whole((p, w): (__m256, __m256)) -> __m256 {
+        _mm256_blend_ps::<0xf0>(
+            _mm256_add_ps(p, _mm256_permute2f128_ps::<0x01>(p, p)),
+            _mm256_add_ps(w, _mm256_permute_ps::<0b10_11_00_01>(w)),
+        )
+    }
+
+    /// [`super::quad_portable`] in AVX2 (the same bits).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn quad(
+        axes: &[Axis; 2],
+        (xs, ys): (&[f32], &[f32]),
+        (qx, qy): (i32, i32),
+        rgba: &[f32],
+        out: &mut Contrib,
+    ) -> Option<bool> {
+        let (Some(nx), Some(ny)) = (&axes[0].narrow, &axes[1].narrow) else {
+            return None;
+        };
+        assert!(xs.len() >= QUAD_LANES && ys.len() >= QUAD_LANES && rgba.len() >= 4 * QUAD_LANES);
+        let (px, py, pv) = (xs.as_ptr(), ys.as_ptr(), rgba.as_ptr());
+        // SAFETY: 16 floats of `xs` and `ys`, 64 of `rgba` (asserted).
+        let (x0, x1, y0, y1, v0, v1) = unsafe {
+            (
+                _mm256_loadu_ps(px),
+                _mm256_loadu_ps(px.add(LANES)),
+                _mm256_loadu_ps(py),
+                _mm256_loadu_ps(py.add(LANES)),
+                [0, 1, 2, 3].map(|c| _mm256_loadu_ps(pv.add(c * QUAD_LANES))),
+                [0, 1, 2, 3].map(|c| _mm256_loadu_ps(pv.add(c * QUAD_LANES + LANES))),
+            )
+        };
+        let (mx, my) = (
+            _mm256_set1_ps(qx as f32 + 0.5),
+            _mm256_set1_ps(qy as f32 + 0.5),
+        );
+        // Lanes 0, 1, 4, 5 left of the centre and 2, 3, 6, 7 right; the first chunk above,
+        // the second below.
+        let lt0 = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(x0, mx));
+        let gt0 = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(mx, x0));
+        let lt1 = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(x1, mx));
+        let gt1 = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(mx, x1));
+        let above = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(y0, my));
+        let below = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(my, y1));
+        if (lt0 & lt1) != 0b0011_0011 || (gt0 & gt1) != 0b1100_1100 || (above & below) != 0xff {
+            return None;
+        }
+        let (hx, hy) = (axes[0].h, axes[1].h);
+        let (ox0, sx0) = narrow_weights(hx, nx, x0, mx);
+        let (oy0, sy0) = narrow_weights(hy, ny, y0, my);
+        let (ox1, sx1) = narrow_weights(hx, nx, x1, mx);
+        let (oy1, sy1) = narrow_weights(hy, ny, y1, my);
+        let mul = |a, b| _mm256_mul_ps(a, b);
+        // Per chunk, the kinds: own, x side, y side, diagonal.
+        let own = add5(&products(mul(ox0, oy0), &v0), &products(mul(ox1, oy1), &v1));
+        let xside = add5(&products(mul(sx0, oy0), &v0), &products(mul(sx1, oy1), &v1));
+        let (d0, d2) = sides(halves(&products(mul(sx0, sy0), &v0)));
+        let (d6, d8) = sides(halves(&products(mul(sx1, sy1), &v1)));
+        let (x3, x5) = sides(halves(&xside));
+        let t = [
+            d0,
+            whole(halves(&products(mul(ox0, sy0), &v0))),
+            d2,
+            x3,
+            whole(halves(&own)),
+            x5,
+            d6,
+            whole(halves(&products(mul(ox1, sy1), &v1))),
+            // Lanes 5–7 beyond the last target's sums are zero.
+            _mm256_blend_ps::<0b1110_0000>(d8, _mm256_setzero_ps()),
+        ];
+        // x − x is 0 for finite x, NaN otherwise; the sum of them NaN when any is.
+        let mut bad = _mm256_setzero_ps();
+        let po = out.sums.as_mut_ptr();
+        for (k, t) in t.iter().enumerate() {
+            bad = _mm256_add_ps(bad, _mm256_sub_ps(*t, *t));
+            // SAFETY: 8 floats at 5·k ≤ 40 of 48 sums.
+            unsafe { _mm256_storeu_ps(po.add(5 * k), *t) };
+        }
+        ranges(rgba, QUAD_LANES, out);
+        let finite = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(bad, bad)) == 0;
+        out.finite = if finite { !0 } else { 0 };
+        Some(finite)
+    }
+
+    /// [`quad`] and, where it applies, the depth of `zs` into `out.z` ([`depth`] for `Min`
+    /// and `Max`, else [`super::own_depth`]), inlined together.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn quad_and_depth(
+        axes: &[Axis; 2],
+        xy: (&[f32], &[f32]),
+        q: (i32, i32),
+        rgba: &[f32],
+        zs: &[f32],
+        df: DepthFilter,
+        out: &mut Contrib,
+    ) -> Option<bool> {
+        let r = quad(axes, xy, q, rgba, out)?;
+        out.z = match df {
+            DepthFilter::Min | DepthFilter::Max if zs.len() >= LANES => {
+                depth(zs, df == DepthFilter::Max)
+            }
+            _ => super::own_depth(zs.iter().copied(), df),
+        };
+        Some(r)
+    }
+
+    /// [`super::ranges_portable`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn ranges(rgba: &[f32], lanes: usize, out: &mut Contrib) {
+        assert!(lanes % LANES == 0 && lanes > 0 && rgba.len() >= 4 * lanes);
+        let ld = |c: usize, o: usize| {
+            // SAFETY: inside block c (asserted above).
+            unsafe { _mm256_loadu_ps(rgba.as_ptr().add(c * lanes + o)) }
+        };
+        let mut lo = [0, 1, 2, 3].map(|c| ld(c, 0));
+        let mut hi = lo;
+        for chunk in 1..lanes / LANES {
+            for c in 0..4 {
+                let v = ld(c, chunk * LANES);
+                lo[c] = _mm256_min_ps(lo[c], v);
+                hi[c] = _mm256_max_ps(hi[c], v);
+            }
+        }
+        let lo = reduce8::<1>(&[lo[0], lo[1], lo[2], lo[3], lo[0], lo[1], lo[2], lo[3]]);
+        let hi = reduce8::<2>(&[hi[0], hi[1], hi[2], hi[3], hi[0], hi[1], hi[2], hi[3]]);
+        let r = _mm256_blend_ps::<0b1111_0000>(lo, _mm256_xor_ps(hi, _mm256_set1_ps(-0.0)));
+        // SAFETY: 8 floats.
+        unsafe { _mm256_storeu_ps(out.range.as_mut_ptr(), r) };
     }
 
     /// [`super::Kernel::finish`]: both axes' weights and the contributions, inlined.
@@ -1188,25 +1564,7 @@ mod avx2 {
             // SAFETY: 8 floats at 8·k < SUMS.
             unsafe { _mm256_storeu_ps(out.sums.as_mut_ptr().add(8 * k), *s) };
         }
-        // Ranges: lane-wise over the chunks, then across the lanes.
-        let ld = |c: usize, o: usize| {
-            // SAFETY: inside block c (asserted above).
-            unsafe { _mm256_loadu_ps(rgba.as_ptr().add(c * lanes + o)) }
-        };
-        let mut lo = [0, 1, 2, 3].map(|c| ld(c, 0));
-        let mut hi = lo;
-        for chunk in 1..lanes / LANES {
-            for c in 0..4 {
-                let v = ld(c, chunk * LANES);
-                lo[c] = _mm256_min_ps(lo[c], v);
-                hi[c] = _mm256_max_ps(hi[c], v);
-            }
-        }
-        let lo = reduce8::<1>(&[lo[0], lo[1], lo[2], lo[3], lo[0], lo[1], lo[2], lo[3]]);
-        let hi = reduce8::<2>(&[hi[0], hi[1], hi[2], hi[3], hi[0], hi[1], hi[2], hi[3]]);
-        let r = _mm256_blend_ps::<0b1111_0000>(lo, _mm256_xor_ps(hi, _mm256_set1_ps(-0.0)));
-        // SAFETY: 8 floats.
-        unsafe { _mm256_storeu_ps(out.range.as_mut_ptr(), r) };
+        ranges(rgba, lanes, out);
         let finite = _mm256_movemask_ps(bad) == 0;
         out.finite = if finite { !0 } else { 0 };
         finite
@@ -1405,6 +1763,70 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn quadrant_path_agrees_with_the_general_one_and_across_builds() {
+        for (kind, width) in [
+            (FilterKind::Gaussian, 2.0),
+            (FilterKind::Triangle, 2.0),
+            (FilterKind::Box, 1.0),
+            (FilterKind::Gaussian, 1.5),
+        ] {
+            let f = Filter::new(kind, width, width);
+            let t = f.tables().unwrap();
+            let ctx = PrepareCtx::new(&f, &t, DepthFilter::Min);
+            let mut b = buffer(5, 3, 6, 5, 4, 13);
+            // A sample on its pixel's vertical midline (pixel 1) and one on the horizontal
+            // midline (pixel 2): the general path.
+            b.positions[16 + 5] = [6.5, b.positions[16 + 5][1]];
+            b.positions[32 + 9] = [b.positions[32 + 9][0], 3.5];
+            // A non-finite value (pixel 3): the careful path.
+            b.values[5 * (48 + 6) + 2] = f32::INFINITY;
+            let mut quads = 0;
+            for pix in 0..b.width * b.height {
+                let q = (5 + (pix % b.width) as i32, 3 + (pix / b.width) as i32);
+                let (mut xs, mut ys) = (vec![0f32; 16], vec![0f32; 16]);
+                let mut rgba = vec![0f32; 64];
+                for s in 0..16 {
+                    [xs[s], ys[s]] = b.positions[pix * 16 + s];
+                    for c in 0..4 {
+                        rgba[c * 16 + s] = b.values[5 * (pix * 16 + s) + c];
+                    }
+                }
+                let mut a = ABSENT;
+                let got = quad_portable(&ctx.axes, (&xs, &ys), q, &rgba, &mut a);
+                assert_eq!(got.is_none(), pix == 1 || pix == 2, "pixel {pix}");
+                assert_eq!(got == Some(false), pix == 3, "pixel {pix}");
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    let mut v = ABSENT;
+                    // SAFETY: the CPU has AVX2.
+                    let vg = unsafe { avx2::quad(&ctx.axes, (&xs, &ys), q, &rgba, &mut v) };
+                    assert_eq!(got, vg);
+                    if got == Some(true) {
+                        assert_eq!(a.sums.map(f32::to_bits), v.sums.map(f32::to_bits));
+                        assert_eq!(a.range.map(f32::to_bits), v.range.map(f32::to_bits));
+                        assert_eq!(a.finite, v.finite);
+                    }
+                }
+                if got != Some(true) {
+                    continue;
+                }
+                quads += 1;
+                let mut w = vec![0f32; 2 * TAPS * 16];
+                let (wx, wy) = w.split_at_mut(TAPS * 16);
+                weights_portable(&xs, q.0, &ctx.axes[0], wx);
+                weights_portable(&ys, q.1, &ctx.axes[1], wy);
+                let mut g = ABSENT;
+                assert!(contrib_portable(wx, wy, &rgba, 16, false, &mut g));
+                for (k, (x, y)) in a.sums.iter().zip(&g.sums).enumerate() {
+                    assert!((x - y).abs() <= 1e-6 * y.abs().max(1.0), "{kind:?} sum {k}");
+                }
+                assert_eq!(a.range, g.range);
+            }
+            assert_eq!(quads, 27);
         }
     }
 

@@ -23,7 +23,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use image::ImageEncoder;
 
-use super::quantize::{apply_background, apply_exposure, is_float, quantize};
+use super::quantize::{apply_background, apply_exposure, is_float, quantize, quantize_row_u8};
 use super::resolve::Film;
 use super::zfile::ZFile;
 use crate::diag::{Diag, Diagnostics, Span};
@@ -651,6 +651,20 @@ fn write_target(
                         .flatten()
                         .filter(|v: &Vec<usize>| v.len() == nout);
                     let nch = film.channels();
+                    if let (Some(src), false) = (&plain, sixteen) {
+                        // A channel at a time through the vectorised row quantiser.
+                        let (mut vals, mut q8) = (vec![0f32; w], vec![0u8; w]);
+                        for (k, &c) in src.iter().enumerate() {
+                            for (x, v) in vals.iter_mut().enumerate() {
+                                *v = film.data[(y * w + x) * nch + c];
+                            }
+                            quantize_row_u8(&vals, &q, y as u32, k as u32, &mut q8);
+                            for (x, &b) in q8.iter().enumerate() {
+                                row[x * nout + k] = b;
+                            }
+                        }
+                        return;
+                    }
                     for x in 0..w {
                         let px = &film.data[(y * w + x) * nch..(y * w + x + 1) * nch];
                         for k in 0..nout {

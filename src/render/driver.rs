@@ -36,7 +36,7 @@ use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
 };
 use super::sampler::mix64;
-use super::stats::{Stage, Stats};
+use super::stats::{Phase, PhaseClock, Stage, Stats};
 use super::GridShader;
 use crate::film::{DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
@@ -864,6 +864,12 @@ fn render_inner(
     let wall = Instant::now();
     let local_stats = Stats::new();
     let stats = opts.stats.unwrap_or(&local_stats);
+    // Where the wall time goes, thread by thread (`--stats` only: it reads /proc).
+    let mut clock = opts.stats.map(|s| {
+        let tids = super::stats::pool_threads();
+        s.threads.store(tids.len() as u64, Ordering::Relaxed);
+        PhaseClock::now(std::sync::Arc::new(tids))
+    });
     let (xres, yres) = (camera.xres, camera.yres);
     let image = PixelRect {
         x0: 0,
@@ -1201,6 +1207,7 @@ fn render_inner(
             }
             kept
         };
+    clock = stats.phase(Phase::Setup, clock);
     // The film is made (its pages first touched: ~10 ms at 1280 × 960) while the first row's
     // surfaces are split, diced and shaded — before, it ran alone, the other thread idle.
     let (mut film, mut kept): (Film, Vec<Kept>) = rayon::join(
@@ -1213,6 +1220,7 @@ fn render_inner(
             }
         },
     );
+    clock = stats.phase(Phase::FirstRow, clock);
     // Hidden rows still needed by a row to filter, oldest first.
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
@@ -1282,6 +1290,7 @@ fn render_inner(
         } else {
             (hide_row(), Vec::new())
         };
+        clock = stats.phase(Phase::Rows, clock);
         kept.extend(next);
         hidden.push_back((row, bufs));
         // Filter the rows whose neighbours are now all hidden, while their samples are
@@ -1290,6 +1299,7 @@ fn render_inner(
             filter_row(&mut film, next_filter, &mut hidden);
             next_filter += 1;
         }
+        clock = stats.phase(Phase::Filter, clock);
         // Drop the rows no row left to filter needs.
         while hidden.front().is_some_and(|(r, _)| r + ky < next_filter) {
             if let Some((_, hs)) = hidden.pop_front() {
@@ -1309,15 +1319,18 @@ fn render_inner(
             }
             keep
         });
+        clock = stats.phase(Phase::Other, clock);
     }
     while next_filter < buckets.rows {
         filter_row(&mut film, next_filter, &mut hidden);
         next_filter += 1;
     }
+    clock = stats.phase(Phase::Filter, clock);
     for (_, hs) in hidden.drain(..) {
         hs.iter().for_each(|h| stats.free(h.bytes()));
     }
     frame.hider.finish(diags);
+    stats.phase(Phase::Other, clock);
     stats.free(film_bytes);
     stats
         .wall_ns
@@ -1702,6 +1715,19 @@ mod tests {
         assert!(Stats::get(&stats.samples_hit) > 0);
         assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
         assert!(Stats::get(&stats.peak_bytes) > 0);
+        // The phases: every render thread counted, the phases' wall times within the
+        // frame's, each thread's CPU time within its share of a phase's wall time.
+        let threads = Stats::get(&stats.threads);
+        assert_eq!(threads as usize, rayon::current_num_threads());
+        let walls: Vec<u64> = stats.phase_wall.iter().map(Stats::get).collect();
+        assert!(walls[Phase::Rows as usize] > 0);
+        assert!(walls.iter().sum::<u64>() <= Stats::get(&stats.wall_ns));
+        let run: u64 = stats.phase_run.iter().map(Stats::get).sum();
+        let wait: u64 = stats.phase_wait.iter().map(Stats::get).sum();
+        // (The kernel's per-thread times run ahead of the wall clock by at most a tick.)
+        let slack = 10_000_000 * threads;
+        assert!(run + wait <= threads * walls.iter().sum::<u64>() + slack);
+        assert!(stats.to_string().contains("hide rows"));
     }
 
     fn string_param(name: &str, value: &str) -> crate::scene::Param {

@@ -43,6 +43,100 @@ pub struct Stats {
     /// Bytes held now / at most by the film, shaded grids and sample buffers.
     pub live_bytes: AtomicU64,
     pub peak_bytes: AtomicU64,
+    /// Render threads, for the idle time of the [`Phase`]s (the output phase has one).
+    pub threads: AtomicU64,
+    /// Per [`Phase`]: wall-clock nanoseconds, and the nanoseconds the process's threads
+    /// ran and waited for a CPU in it (summed over threads; see [`PhaseClock`]).
+    pub phase_wall: [AtomicU64; PHASES],
+    pub phase_run: [AtomicU64; PHASES],
+    pub phase_wait: [AtomicU64; PHASES],
+}
+
+/// The parts of a frame's wall time, in order, for `--stats`: how busy the threads were in
+/// each (what one thread does alone shows as idle time of the others).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// Frame set-up and placing the surfaces in their first bucket rows.
+    Setup = 0,
+    /// The film's allocation alongside the first bucket row's surfaces.
+    FirstRow = 1,
+    /// Hiding a bucket row alongside the next row's splitting, dicing and shading.
+    Rows = 2,
+    /// Filtering the rows whose neighbours are hidden, and putting them into the film.
+    Filter = 3,
+    /// Freeing rows and grids no longer needed, and the end of the frame.
+    Other = 4,
+    /// Imager, quantising and writing the displays (after the render; the thread that
+    /// writes).
+    Output = 5,
+}
+
+const PHASES: usize = 6;
+const PHASE_NAMES: [&str; PHASES] = [
+    "set-up",
+    "first row",
+    "hide rows",
+    "filter rows",
+    "other",
+    "output",
+];
+
+/// The start of a [`Phase`]: the wall clock and the CPU time so far of the threads doing
+/// the phase's work (Linux `/proc/self/task/TID/schedstat`: time run and time waiting for a
+/// CPU — the waiting shows how much other processes took). Reading it costs a few system
+/// calls per thread, so the driver makes one only under `--stats`.
+#[derive(Clone, Debug)]
+pub struct PhaseClock {
+    wall: Instant,
+    tids: std::sync::Arc<Vec<u32>>,
+    run: u64,
+    wait: u64,
+}
+
+impl PhaseClock {
+    /// Now, for the threads `tids` (see [`pool_threads`], [`this_thread`]).
+    pub fn now(tids: std::sync::Arc<Vec<u32>>) -> PhaseClock {
+        let (run, wait) = sched_times(&tids);
+        PhaseClock {
+            wall: Instant::now(),
+            tids,
+            run,
+            wait,
+        }
+    }
+}
+
+/// The calling thread's id (None where `/proc/thread-self` does not exist).
+pub fn this_thread() -> Option<u32> {
+    let link = std::fs::read_link("/proc/thread-self").ok()?;
+    link.file_name()?.to_str()?.parse().ok()
+}
+
+/// The ids of the current rayon pool's threads (one call on each).
+pub fn pool_threads() -> Vec<u32> {
+    let mut tids: Vec<u32> = rayon::broadcast(|_| this_thread())
+        .into_iter()
+        .flatten()
+        .collect();
+    tids.sort_unstable();
+    tids
+}
+
+/// Nanoseconds run and waited for a CPU by the threads `tids` (a thread that has ended
+/// counts nothing).
+fn sched_times(tids: &[u32]) -> (u64, u64) {
+    let mut total = (0u64, 0u64);
+    for tid in tids {
+        let Ok(text) = std::fs::read_to_string(format!("/proc/self/task/{tid}/schedstat")) else {
+            continue;
+        };
+        let mut f = text
+            .split_whitespace()
+            .map(|v| v.parse::<u64>().unwrap_or(0));
+        total.0 += f.next().unwrap_or(0);
+        total.1 += f.next().unwrap_or(0);
+    }
+    total
 }
 
 impl Stats {
@@ -67,6 +161,18 @@ impl Stats {
     }
     pub fn get(counter: &AtomicU64) -> u64 {
         counter.load(Relaxed)
+    }
+    /// Ends `phase` begun at `since` (when timing phases at all) and returns the clock
+    /// that starts the next one.
+    pub fn phase(&self, phase: Phase, since: Option<PhaseClock>) -> Option<PhaseClock> {
+        let since = since?;
+        let now = PhaseClock::now(since.tids.clone());
+        let i = phase as usize;
+        let wall = now.wall.duration_since(since.wall).as_nanos() as u64;
+        self.phase_wall[i].fetch_add(wall, Relaxed);
+        self.phase_run[i].fetch_add(now.run.saturating_sub(since.run), Relaxed);
+        self.phase_wait[i].fetch_add(now.wait.saturating_sub(since.wait), Relaxed);
+        Some(now)
     }
 }
 
@@ -106,7 +212,37 @@ impl fmt::Display for Stats {
             f,
             "  wall time        {:>10.3} s",
             g(&self.wall_ns) as f64 * 1e-9
-        )
+        )?;
+        let threads = g(&self.threads);
+        if threads > 0 && self.phase_wall.iter().any(|w| g(w) > 0) {
+            write!(
+                f,
+                "\n  phases ({threads} threads; CPU-seconds run, waiting for a CPU, idle of threads × wall)"
+            )?;
+            let sec = |ns: u64| ns as f64 * 1e-9;
+            for (i, name) in PHASE_NAMES.iter().enumerate() {
+                let (w, r, q) = (
+                    g(&self.phase_wall[i]),
+                    g(&self.phase_run[i]),
+                    g(&self.phase_wait[i]),
+                );
+                let n = if i == Phase::Output as usize {
+                    1
+                } else {
+                    threads
+                };
+                let idle = (n * w).saturating_sub(r + q);
+                write!(
+                    f,
+                    "\n    {name:<11} wall {:>7.3} s  run {:>7.3}  wait {:>7.3}  idle {:>7.3}",
+                    sec(w),
+                    sec(r),
+                    sec(q),
+                    sec(idle)
+                )?;
+            }
+        }
+        Ok(())
     }
 }
 
