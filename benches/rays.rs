@@ -5,7 +5,9 @@
 //! `ARBOR_RAYS_ITERS=N` runs N batches without criterion (for callgrind or `perf`), reporting
 //! rays per second of wall time and of this thread's CPU time (the machine may be shared).
 //! `ARBOR_RAYS_FIELD=K` makes the field K × K spheres (default 32: about 1.06 M micropolygons;
-//! 16: 0.30 M).
+//! 16: 0.30 M). `ARBOR_RAYS_SHADOW=1` times shadow rays instead (`transmission` along
+//! segments K long from the same origins in the same directions: any-hit walks that stop at
+//! the first opaque blocker, no shading).
 
 use criterion::{criterion_group, Criterion, Throughput};
 use glam::Vec3;
@@ -140,6 +142,19 @@ fn bench(c: &mut Criterion) {
         dist.iter().filter(|d| d.is_finite()).count()
     };
     eprintln!("hit fraction: {:.2}", hits as f64 / BATCH as f64);
+    // Shadow segments: from each origin K along its direction (across the field).
+    let reach = field() as f32;
+    let ends: Vec<Vec<Vec3>> = batches
+        .iter()
+        .map(|(o, d)| o.iter().zip(d).map(|(o, d)| *o + *d * reach).collect())
+        .collect();
+    let mut trans = vec![Vec3::ONE; BATCH];
+    tracer.transmission(&batches[0].0, &ends[0], &active, &mut trans);
+    eprintln!(
+        "shadow segments blocked: {:.2}",
+        trans.iter().filter(|t| t.max_element() == 0.0).count() as f64 / BATCH as f64
+    );
+    let shadow = std::env::var("ARBOR_RAYS_SHADOW").is_ok_and(|v| v == "1");
     if let Some(n) = std::env::var("ARBOR_RAYS_ITERS")
         .ok()
         .and_then(|v| v.parse::<usize>().ok())
@@ -148,14 +163,19 @@ fn bench(c: &mut Criterion) {
         let c0 = thread_cpu();
         for k in 0..n {
             let (o, d) = &batches[k % batches.len()];
-            tracer.trace(o, d, &[], &active, &mut ci, &mut dist);
+            if shadow {
+                tracer.transmission(o, &ends[k % batches.len()], &active, &mut trans);
+            } else {
+                tracer.trace(o, d, &[], &active, &mut ci, &mut dist);
+            }
         }
         let s = t.elapsed().as_secs_f64();
         let cpu = thread_cpu().zip(c0).map(|(b, a)| b - a);
         let rays = (n * BATCH) as f64;
         eprintln!(
-            "{} rays in {:.3} s: {:.2} M rays/s wall{}",
+            "{} {}rays in {:.3} s: {:.2} M rays/s wall{}",
             n * BATCH,
+            if shadow { "shadow " } else { "" },
             s,
             rays / s / 1e6,
             cpu.map(|c| format!(", {:.2} M rays/s of CPU time ({c:.3} s)", rays / c / 1e6))
@@ -172,6 +192,14 @@ fn bench(c: &mut Criterion) {
             let (o, d) = &batches[k % batches.len()];
             k += 1;
             tracer.trace(o, d, &[], &active, &mut ci, &mut dist);
+        })
+    });
+    let mut k = 0;
+    g.bench_function("incoherent_shadow", |b| {
+        b.iter(|| {
+            let j = k % batches.len();
+            k += 1;
+            tracer.transmission(&batches[j].0, &ends[j], &active, &mut trans);
         })
     });
     g.finish();
