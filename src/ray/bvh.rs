@@ -1084,6 +1084,35 @@ mod tests {
                 assert_eq!(out[k], bvh.closest(o[k], d[k], tmin[k], tmax), "ray {k}");
             }
         }
+        // The interleaved any-hit walks call back each ray's lone `each_hit` hits in the same
+        // order, bit for bit, and stop where it stops (ray k asks to stop at its
+        // (k mod 4)-th hit, never for k mod 4 = 0; tmin and tmax vary by ray).
+        let o: Vec<Vec3> = rays.iter().map(|r| r.0).collect();
+        let d: Vec<Vec3> = rays.iter().map(|r| r.1).collect();
+        let tmin: Vec<f32> = (0..o.len()).map(|k| (k % 3) as f32 * 0.5).collect();
+        let tmax: Vec<f32> = rays.iter().map(|r| r.2).collect();
+        let stop_at = |k: usize| k % 4;
+        let bits = |h: &Hit| (h.t.to_bits(), h.grid, h.index, h.a.to_bits(), h.b.to_bits());
+        let mut many: Vec<Vec<_>> = vec![Vec::new(); o.len()];
+        bvh.each_hit_many(&o, &d, &tmin, &tmax, &mut |k, h| {
+            many[k].push(bits(&h));
+            many[k].len() == stop_at(k)
+        });
+        let (mut multi, mut stopped) = (0, 0);
+        for k in 0..o.len() {
+            let mut lone = Vec::new();
+            bvh.each_hit(o[k], d[k], tmin[k], tmax[k], &mut |h| {
+                lone.push(bits(&h));
+                lone.len() == stop_at(k)
+            });
+            assert_eq!(many[k], lone, "ray {k}");
+            multi += usize::from(lone.len() > 1);
+            stopped += usize::from(stop_at(k) > 0 && lone.len() == stop_at(k));
+        }
+        assert!(
+            multi > 60 && stopped > 300,
+            "{multi} rays with several hits, {stopped} stopped"
+        );
     }
 
     /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to

@@ -549,7 +549,12 @@ impl RayTracer for Tracer<'_, '_> {
         }
         let bias = self.bias_for();
         let skip = self.skip_light;
-        for k in 0..from.len() {
+        // The segments worth a walk, traced together (their walks interleave, see
+        // `Bvh::each_hit_many`: each ray's hits come in its lone walk's order, so each
+        // product below is the lone walk's, bit for bit).
+        let mut rays = Vec::new();
+        let (mut ro, mut rd, mut rt0, mut rt1) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for k in 0..from.len().min(to.len()).min(out.len()) {
             if !active.get(k).copied().unwrap_or(false) {
                 continue;
             }
@@ -558,29 +563,31 @@ impl RayTracer for Tracer<'_, '_> {
             if !(len > 2.0 * bias) || !len.is_finite() {
                 continue;
             }
-            let mut t = Vec3::ONE;
-            let tmin = bias / len;
-            let tmax = 1.0 - bias / len;
-            rs.bvh.each_hit(from[k], d, tmin, tmax, &mut |h| {
-                let rg = &rs.grids[h.grid as usize];
-                if !rg.shadows || (skip.is_some() && rg.area_light == skip) {
-                    return false;
-                }
-                let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
-                let c = corners(&rs, rg, &kk);
-                let os = (c[0].os * w[0] + c[1].os * w[1] + c[2].os * w[2] + c[3].os * w[3])
-                    .clamp(Vec3::ZERO, Vec3::ONE);
-                t *= Vec3::ONE - os;
-                // An opaque blocker (its interpolated opacity within rounding of 1) ends the
-                // walk: nothing can pass.
-                if t.max_element() < 1e-6 {
-                    t = Vec3::ZERO;
-                    return true;
-                }
-                false
-            });
-            out[k] = t;
+            rays.push(k);
+            ro.push(from[k]);
+            rd.push(d);
+            rt0.push(bias / len);
+            rt1.push(1.0 - bias / len);
         }
+        rs.bvh.each_hit_many(&ro, &rd, &rt0, &rt1, &mut |j, h| {
+            let rg = &rs.grids[h.grid as usize];
+            if !rg.shadows || (skip.is_some() && rg.area_light == skip) {
+                return false;
+            }
+            let t = &mut out[rays[j]];
+            let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
+            let c = corners(&rs, rg, &kk);
+            let os = (c[0].os * w[0] + c[1].os * w[1] + c[2].os * w[2] + c[3].os * w[3])
+                .clamp(Vec3::ZERO, Vec3::ONE);
+            *t *= Vec3::ONE - os;
+            // An opaque blocker (its interpolated opacity within rounding of 1) ends the
+            // walk: nothing can pass.
+            if t.max_element() < 1e-6 {
+                *t = Vec3::ZERO;
+                return true;
+            }
+            false
+        });
     }
 }
 

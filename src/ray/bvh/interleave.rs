@@ -1,16 +1,18 @@
-//! Interleaved closest-hit walks: many rays through one [`Bvh`], a step at a time.
+//! Interleaved walks: many rays through one [`Bvh`], a step at a time.
 //!
-//! Input: rays (origin, direction, `tmin`) and a shared `tmax`. Output: each ray's closest
-//! hit. Invariants: bit for bit [`Bvh::closest`] for each ray: a ray makes the visits its lone
-//! walk makes in the same order (the steps are `walk`'s loop cut at its memory accesses);
-//! only which ray runs next changes.
+//! Input: rays (origin, direction, `tmin`, `tmax`). Output: each ray's closest hit
+//! (`closest_many`), or each ray's hits handed to a callback until it says stop
+//! (`each_hit_many`: shadow and transmission rays). Invariants: bit for bit [`Bvh::closest`]
+//! and [`Bvh::each_hit`] for each ray: a ray makes the visits its lone walk makes in the
+//! same order (the steps are `walk`'s loop cut at its memory accesses); only which ray runs
+//! next changes.
 //! Why: the walk of a large scene is latency-bound (its nodes and the leaves' corners are
 //! rarely in the first-level cache); with several walks in flight, each step prefetching what
 //! its ray needs next, one ray's waits overlap the others' work.
 
 use glam::Vec3;
 
-use super::{Bvh, Hit, LeafRay, SlabRay, Stack};
+use super::{Bvh, Hit, LeafRay, Quad, SlabRay, Stack};
 
 impl Bvh {
     /// The closest hits of many rays: `out[k]` is `self.closest(o[k], d[k], tmin[k], tmax)`
@@ -34,26 +36,103 @@ impl Bvh {
             }
             return;
         }
+        self.interleave::<true>(
+            &o[..n],
+            d,
+            tmin,
+            |_| tmax,
+            &mut |_, best, q, t, a, b, tm| {
+                *tm = t;
+                *best = Some(Hit {
+                    t,
+                    grid: q.grid,
+                    index: q.index,
+                    a,
+                    b,
+                });
+                false
+            },
+            &mut |k, best| out[k] = best,
+        );
+    }
+
+    /// [`Bvh::each_hit`] for many rays, their walks interleaved as in [`Bvh::closest_many`]:
+    /// `f(k, hit)` is called for ray `k`'s hits with `tmin[k] < t < tmax[k]` until it returns
+    /// true. Each ray's calls are exactly its lone `each_hit` calls, in the same order (the
+    /// same visits in the same order); only the calls of different rays interleave, so `f`
+    /// may keep per-ray state (a product of transmissions, say) and get the lone walks'
+    /// results bit for bit.
+    pub fn each_hit_many(
+        &self,
+        o: &[Vec3],
+        d: &[Vec3],
+        tmin: &[f32],
+        tmax: &[f32],
+        f: &mut dyn FnMut(usize, Hit) -> bool,
+    ) {
+        let n = o.len().min(d.len()).min(tmin.len()).min(tmax.len());
+        if self.nodes.is_empty() {
+            for k in 0..n {
+                self.each_hit(o[k], d[k], tmin[k], tmax[k], &mut |h| f(k, h));
+            }
+            return;
+        }
+        self.interleave::<false>(
+            &o[..n],
+            d,
+            tmin,
+            |k| tmax[k],
+            &mut |k, _, q, t, a, b, _| {
+                f(
+                    k,
+                    Hit {
+                        t,
+                        grid: q.grid,
+                        index: q.index,
+                        a,
+                        b,
+                    },
+                )
+            },
+            &mut |_, _| {},
+        );
+    }
+
+    /// Runs the walks of rays `0..o.len()` (ordered or not, as [`Bvh::walk`]) `LANES` at a
+    /// time, a step at a time. `on_hit(ray, best, quad, t, a, b, &mut tmax)` is the walk's
+    /// hit callback with the ray's index and a per-ray slot (returning true ends that ray's
+    /// walk); `done(ray, best)` is called as each walk ends. Needs a tree of nodes.
+    #[inline(always)]
+    fn interleave<const ORDERED: bool>(
+        &self,
+        o: &[Vec3],
+        d: &[Vec3],
+        tmin: &[f32],
+        tmax: impl Fn(usize) -> f32,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+        done: &mut impl FnMut(usize, Option<Hit>),
+    ) {
+        let n = o.len();
         const LANES: usize = 8;
         // The lanes are made once and restarted in place (a lane is about 1 KB, mostly its
         // stack: moving a new one in cost more than a node visit).
         let mut lanes: Vec<Lane> = (0..LANES.min(n)).map(|_| Lane::new()).collect();
         for (k, l) in lanes.iter_mut().enumerate() {
-            l.start(k, o[k], d[k], tmin[k], tmax);
+            l.start(k, o[k], d[k], tmin[k], tmax(k));
         }
         let mut next_ray = lanes.len();
         self.prefetch(0, 0);
         while !lanes.is_empty() {
             let mut i = 0;
             while i < lanes.len() {
-                if self.step(&mut lanes[i]) {
+                if self.step::<ORDERED>(&mut lanes[i], on_hit) {
                     i += 1;
                     continue;
                 }
-                out[lanes[i].ray] = lanes[i].best;
+                done(lanes[i].ray, lanes[i].best);
                 if next_ray < n {
                     let k = next_ray;
-                    lanes[i].start(k, o[k], d[k], tmin[k], tmax);
+                    lanes[i].start(k, o[k], d[k], tmin[k], tmax(k));
                     next_ray += 1;
                     i += 1;
                 } else {
@@ -63,14 +142,18 @@ impl Bvh {
         }
     }
 
-    /// One step of a lane's closest-hit walk (see [`Bvh::closest_many`]); false when the
-    /// walk is over. The steps in sequence are [`Bvh::walk`]'s loop for `ORDERED`.
+    /// One step of a lane's walk (see [`Bvh::interleave`]); false when the walk is over.
+    /// The steps in sequence are [`Bvh::walk`]'s loop for `ORDERED`.
     #[inline(always)]
-    fn step(&self, l: &mut Lane) -> bool {
+    fn step<const ORDERED: bool>(
+        &self,
+        l: &mut Lane,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+    ) -> bool {
         match l.step {
             Step::Node(c) => {
                 let n = &self.nodes[c as usize];
-                match self.visit::<true>(n, &l.rb, l.tmin, l.tmax, &mut l.stack) {
+                match self.visit::<ORDERED>(n, &l.rb, l.tmin, l.tmax, &mut l.stack) {
                     Some((c, 0)) => {
                         self.prefetch(c, 0);
                         l.step = Step::Node(c);
@@ -91,25 +174,18 @@ impl Bvh {
                 return true;
             }
             Step::Leaf(first, count) => {
-                let best = &mut l.best;
-                self.leaf(
+                let (ray, best) = (l.ray, &mut l.best);
+                let stop = self.leaf(
                     first,
                     count,
                     &l.wt,
                     l.tmin,
                     &mut l.tmax,
-                    &mut |q, t, a, b, tm| {
-                        *tm = t;
-                        *best = Some(Hit {
-                            t,
-                            grid: q.grid,
-                            index: q.index,
-                            a,
-                            b,
-                        });
-                        false
-                    },
+                    &mut |q, t, a, b, tm| on_hit(ray, best, q, t, a, b, tm),
                 );
+                if stop {
+                    return false;
+                }
             }
         }
         // Pop (as `walk` does, but a leaf popped is read in later steps like any other).
@@ -156,7 +232,7 @@ impl Bvh {
     }
 }
 
-/// What a lane of [`Bvh::closest_many`] does next.
+/// What a lane of an interleaved walk does next.
 #[derive(Clone, Copy)]
 enum Step {
     /// Visit this interior node.
@@ -167,7 +243,7 @@ enum Step {
     Leaf(u32, u32),
 }
 
-/// One ray's walk in [`Bvh::closest_many`].
+/// One ray's walk in an interleaved run ([`Bvh::closest_many`], [`Bvh::each_hit_many`]).
 struct Lane {
     ray: usize,
     wt: LeafRay,
