@@ -1,8 +1,9 @@
 //! Reading source pictures into float images.
 //!
-//! Input: a path to anything the `image` crate reads (PNG, TIFF, JPEG, HDR) or an OpenEXR
-//! file, 8/16-bit or float, any channel count. Output: an [`Image`] (linear row-major floats,
-//! row 0 at the top, 8/16-bit values scaled to 0..1).
+//! Input: a path to anything the `image` crate reads (PNG, TIFF, JPEG, HDR), an OpenEXR
+//! file or a PRMan 3.x texture (its finest level), 8/16-bit or float, any channel count.
+//! Output: an [`Image`] (linear row-major floats, row 0 at the top, 8/16-bit values scaled
+//! to 0..1).
 //! Invariants: never panics on bad input; errors are a sentence naming the file.
 
 use std::path::Path;
@@ -38,6 +39,16 @@ pub fn read_image(path: &Path) -> Result<Image, String> {
         std::fs::read(path).map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
     if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
         return read_exr(path);
+    }
+    if super::prman_tx::is_prman_tx(&bytes) {
+        // A PRMan texture as a source picture: its finest level.
+        let t = super::prman_tx::decode(&bytes)
+            .map_err(|e| format!("cannot decode PRMan texture `{}`: {e}", path.display()))?;
+        return t
+            .levels
+            .into_iter()
+            .next()
+            .ok_or_else(|| format!("PRMan texture `{}` has no levels", path.display()));
     }
     let img = image::load_from_memory(&bytes)
         .map_err(|e| format!("cannot decode `{}`: {e}", path.display()))?;

@@ -5,6 +5,7 @@
 //! * [`mipmap`]: wrap modes and the pyramid.
 //! * [`format`]: the tiled mip-mapped `.tex` file.
 //! * [`make`]: `arbor texture` and the Make* requests.
+//! * [`prman_tx`]: PRMan 3.x `txmake` texture files (read only).
 //! * [`bump`]: the bump-map form (heights + slopes) and Blinn's perturbation for bump().
 //! * [`cache`]: tiles on demand, shared across threads, bounded.
 //! * [`filter`]: point / trilinear / EWA / summed-area-table lookups.
@@ -22,6 +23,7 @@ pub mod horizon;
 pub mod image_in;
 pub mod make;
 pub mod mipmap;
+pub mod prman_tx;
 pub mod sat;
 pub mod shadow;
 pub mod system;

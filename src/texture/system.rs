@@ -211,6 +211,16 @@ impl<'a> TextureSystem<'a> {
                 &[vec![im]],
             ));
         }
+        if super::prman_tx::is_prman_tx(&head) {
+            // Already a mip-map: its own (txmake-filtered) levels and wrap modes are used.
+            let bytes = std::fs::read(&path).map_err(|e| format!("texture `{name}`: {e}"))?;
+            let t = super::prman_tx::decode(&bytes).map_err(|e| {
+                format!("texture `{name}`: PRMan texture `{}`: {e}", path.display())
+            })?;
+            let mut header = blank(Kind::Texture, t.levels[0].nchan, t.swrap, None);
+            header.twrap = t.twrap;
+            return Ok(Texture::from_pyramids(id, header, &[t.levels]));
+        }
         let im = read_image(&path).map_err(|e| format!("texture `{name}`: {e}"))?;
         if note_raw {
             self.diags.report(
