@@ -29,8 +29,8 @@
 //! how many bytes it takes at the u32 offset:
 //! 0 raw bytes; 1 one value for the whole tile, in the top byte of the u32 (no data);
 //! 2 run-length (a control byte c < 128 repeats the next byte c+1 times, c ≥ 128 copies the
-//! next c−127 bytes); 6 zlib of the tile's bytes as running differences (row-major, mod 256).
-//! Code 5 (Huffman-coded bytes, one tile in the samples) is recognised but not decoded.
+//! next c−127 bytes); 5 Huffman-coded bytes (see [`unhuff`]); 6 zlib of the tile's bytes as
+//! running differences (row-major, mod 256).
 //! Tiles are min(64, level size) square; channels are stored one after another (planar).
 
 use super::image_in::Image;
@@ -224,7 +224,7 @@ fn tile_v3(r: &Bytes, rec: usize, ntiles: usize, i: usize, n: usize) -> Result<V
             }
             d
         }
-        5 => return Err("Huffman-coded tiles are not supported".into()),
+        5 => unhuff(data()?, n)?,
         m => return Err(format!("unknown tile coding {m} (code {code:#06x})")),
     };
     if out.len() != n {
@@ -249,6 +249,76 @@ fn unrun(d: &[u8], n: usize) -> Result<Vec<u8>, String> {
             let v = *d.get(j).ok_or("a run-length repeat is cut short")?;
             out.extend(std::iter::repeat_n(v, c + 1));
             j += 1;
+        }
+    }
+    Ok(out)
+}
+
+/// Huffman decoding: a 32-byte bitmap of the byte values present (bit 7 of byte 0 is value
+/// 0), one nibble per present value (code length − 1, high nibble first), each present
+/// value's code (MSB first, bit-packed in value order, padded to a byte), then the tile's
+/// `n` codes (MSB first).
+fn unhuff(d: &[u8], n: usize) -> Result<Vec<u8>, String> {
+    let cut = || "the Huffman table is cut short".to_string();
+    let bitmap = d.get(..32).ok_or_else(cut)?;
+    let present: Vec<u8> = (0..=255u8)
+        .filter(|&v| bitmap[v as usize / 8] >> (7 - v % 8) & 1 == 1)
+        .collect();
+    let nib_end = 32 + present.len().div_ceil(2);
+    let nibbles = d.get(32..nib_end).ok_or_else(cut)?;
+    let lens: Vec<usize> = (0..present.len())
+        .map(|i| (nibbles[i / 2] >> if i % 2 == 0 { 4 } else { 0 } & 15) as usize + 1)
+        .collect();
+    let code_bits: usize = lens.iter().sum();
+    let codes = d
+        .get(nib_end..nib_end + code_bits.div_ceil(8))
+        .ok_or_else(cut)?;
+    let bit = |b: &[u8], i: usize| b[i / 8] >> (7 - i % 8) & 1;
+    // A binary tree: node k's children at tree[k]; a leaf holds 256 + its value.
+    let mut tree: Vec<[u16; 2]> = vec![[0, 0]];
+    let mut at = 0;
+    for (&v, &len) in present.iter().zip(&lens) {
+        let mut node = 0usize;
+        for j in 0..len {
+            let b = bit(codes, at + j) as usize;
+            let next = tree[node][b] as usize;
+            if j + 1 == len {
+                if next != 0 {
+                    return Err("the Huffman codes are not prefix-free".into());
+                }
+                tree[node][b] = 256 + u16::from(v);
+            } else if next == 0 {
+                // Internal nodes stay below 256 (a full tree of 256 leaves has 255).
+                if tree.len() >= 255 {
+                    return Err("the Huffman table is malformed".into());
+                }
+                tree.push([0, 0]);
+                let k = tree.len() - 1;
+                tree[node][b] = k as u16;
+                node = k;
+            } else if next >= 256 {
+                return Err("the Huffman codes are not prefix-free".into());
+            } else {
+                node = next;
+            }
+        }
+        at += len;
+    }
+    let stream = &d[nib_end + code_bits.div_ceil(8)..];
+    let mut out = Vec::with_capacity(n);
+    let mut node = 0usize;
+    for i in 0..stream.len() * 8 {
+        if out.len() == n {
+            break;
+        }
+        let next = tree[node][bit(stream, i) as usize] as usize;
+        if next >= 256 {
+            out.push((next - 256) as u8);
+            node = 0;
+        } else if next == 0 {
+            return Err("a Huffman code is not in the table".into());
+        } else {
+            node = next;
         }
     }
     Ok(out)
@@ -426,8 +496,11 @@ mod tests {
         bad[0xd] = 40;
         assert!(decode(&bad).is_err());
         let mut bad = b.clone();
-        bad[0x340 + 16] = 0xa0; // Huffman code on tile 0
+        bad[0x340 + 16] = 0xa0; // Huffman code on a zlib tile
         assert!(decode(&bad).unwrap_err().contains("Huffman"));
+        let mut bad = b.clone();
+        bad[0x340 + 16] = 0xe0; // coding 7
+        assert!(decode(&bad).unwrap_err().contains("unknown tile coding 7"));
         let mut bad = b.clone();
         bad[0x340 + 8] = 0xff; // tile offset past the end
         assert!(decode(&bad).is_err());
@@ -436,6 +509,27 @@ mod tests {
         bad[z + 5] ^= 0xff; // damaged zlib data
         assert!(decode(&bad).is_err());
         assert!(decode(b"\x89PNG").is_err());
+    }
+
+    /// Values 3, 7, 200 coded `0`, `10`, `11`; the tile 7 3 200 200 3.
+    #[test]
+    fn huffman_tiles_decode_through_their_own_code_table() {
+        let mut d = vec![0u8; 32];
+        d[0] = 0b0001_0001; // 3 and 7
+        d[25] = 0b1000_0000; // 200
+        d.extend([0x01, 0x10]); // lengths 1, 2, 2 (minus one), a spare nibble
+        d.push(0b0101_1000); // codes 0, 10, 11
+        d.push(0b1001_1110); // 10 0 11 11 0
+        assert_eq!(unhuff(&d, 5).unwrap(), vec![7, 3, 200, 200, 3]);
+        // Stops at the tile's size; a short stream gives a short tile (an error upstream).
+        assert_eq!(unhuff(&d, 2).unwrap(), vec![7, 3]);
+        assert_eq!(unhuff(&d, 9).unwrap().len(), 5);
+        // Codes that are not prefix-free (0, 00, 11) and a cut table are errors.
+        let mut bad = d.clone();
+        bad[34] = 0b0001_1000;
+        assert!(unhuff(&bad, 5).is_err());
+        assert!(unhuff(&d[..33], 5).is_err());
+        assert!(unhuff(&d[..20], 5).is_err());
     }
 
     /// The published samples against their TIFF twins (skipped where they are absent).
@@ -460,6 +554,17 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0f32, f32::max);
         assert!(diff < 1e-6, "max difference {diff}");
+        // mandrill.tx holds every tile coding, one Huffman tile among them.
+        let t = decode(&std::fs::read(root.join("texture/mandrill.tx")).unwrap()).unwrap();
+        let reference =
+            super::super::image_in::read_image(&root.join("tifftexture/mandrill.tx")).unwrap();
+        let diff = t.levels[0]
+            .data
+            .iter()
+            .zip(&reference.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(diff < 1e-6, "mandrill max difference {diff}");
         let ori = std::path::Path::new("/work/shared/fidelity/scenes/RMR/Shaders/TLShaders");
         let t = decode(&std::fs::read(ori.join("ori2.tx")).unwrap()).unwrap();
         let reference =
