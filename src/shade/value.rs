@@ -181,22 +181,35 @@ mod pool {
         pub static FLOATS: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
         pub static TRIPLES: RefCell<Vec<Vec<Vec3>>> = const { RefCell::new(Vec::new()) };
     }
+
+    /// How many of the most recently recycled buffers [`take`] looks through.
+    const SCAN: usize = 8;
+
+    /// A buffer from `pool` with room for `n` elements, or a new one. Growing a pooled buffer
+    /// that is too small would `realloc` and copy contents nobody reads (compacted loops
+    /// recycle buffers of a few points that full grids then pick up), so a buffer is taken
+    /// only if it already fits; one that does not is left for a smaller grid.
+    pub fn take<T>(pool: &mut Vec<Vec<T>>, n: usize) -> Vec<T> {
+        let len = pool.len();
+        for i in (len.saturating_sub(SCAN)..len).rev() {
+            if pool[i].capacity() >= n {
+                return pool.swap_remove(i);
+            }
+        }
+        Vec::with_capacity(n)
+    }
 }
 
 /// A float buffer of length `n` with unspecified (initialised) contents.
 pub fn grid_vf(n: usize) -> Vec<f32> {
-    let mut v = pool::FLOATS
-        .with(|p| p.borrow_mut().pop())
-        .unwrap_or_default();
+    let mut v = pool::FLOATS.with(|p| pool::take(&mut p.borrow_mut(), n));
     v.resize(n, 0.0);
     v
 }
 
 /// A triple buffer of length `n` with unspecified (initialised) contents.
 pub fn grid_vt(n: usize) -> Vec<Vec3> {
-    let mut v = pool::TRIPLES
-        .with(|p| p.borrow_mut().pop())
-        .unwrap_or_default();
+    let mut v = pool::TRIPLES.with(|p| pool::take(&mut p.borrow_mut(), n));
     v.resize(n, Vec3::ZERO);
     v
 }
@@ -224,24 +237,42 @@ pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
     })
 }
 
+/// `v` resized to `n` values with unspecified contents: in place when it has the room,
+/// otherwise `v` goes back to the pool and a pooled buffer that fits is used (growing `v`
+/// would copy values nobody reads).
+fn refit_vf(mut v: Vec<f32>, n: usize) -> Vec<f32> {
+    if v.capacity() >= n {
+        v.resize(n, 0.0);
+        v
+    } else {
+        recycle([Slot::VF(v)]);
+        grid_vf(n)
+    }
+}
+
+/// [`refit_vf`] for triples.
+fn refit_vt(mut v: Vec<Vec3>, n: usize) -> Vec<Vec3> {
+    if v.capacity() >= n {
+        v.resize(n, Vec3::ZERO);
+        v
+    } else {
+        recycle([Slot::VT(v)]);
+        grid_vt(n)
+    }
+}
+
 /// Takes a float vector of length `n` out of a slot to reuse its allocation (contents are
 /// unspecified: callers overwrite every element).
 pub fn take_vf(slot: &mut Slot, n: usize) -> Vec<f32> {
     match std::mem::take(slot) {
-        Slot::VF(mut v) => {
-            v.resize(n, 0.0);
-            v
-        }
+        Slot::VF(v) => refit_vf(v, n),
         _ => grid_vf(n),
     }
 }
 
 pub fn take_vt(slot: &mut Slot, n: usize) -> Vec<Vec3> {
     match std::mem::take(slot) {
-        Slot::VT(mut v) => {
-            v.resize(n, Vec3::ZERO);
-            v
-        }
+        Slot::VT(v) => refit_vt(v, n),
         _ => grid_vt(n),
     }
 }
@@ -263,10 +294,7 @@ pub fn take_vm(slot: &mut Slot, n: usize) -> Vec<Mat4> {
 pub fn out_vf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<f32> {
     match (std::mem::take(slot), lanes) {
         (Slot::VF(v), _) if v.len() == n => v,
-        (Slot::VF(mut v), Lanes::All) => {
-            v.resize(n, 0.0);
-            v
-        }
+        (Slot::VF(v), Lanes::All) => refit_vf(v, n),
         (_, Lanes::All) => grid_vf(n),
         (_, Lanes::Some(_)) => {
             let mut v = grid_vf(n);
@@ -280,10 +308,7 @@ pub fn out_vf(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<f32> {
 pub fn out_vt(slot: &mut Slot, n: usize, lanes: Lanes) -> Vec<Vec3> {
     match (std::mem::take(slot), lanes) {
         (Slot::VT(v), _) if v.len() == n => v,
-        (Slot::VT(mut v), Lanes::All) => {
-            v.resize(n, Vec3::ZERO);
-            v
-        }
+        (Slot::VT(v), Lanes::All) => refit_vt(v, n),
         (_, Lanes::All) => grid_vt(n),
         (_, Lanes::Some(_)) => grid_vt_filled(n, Vec3::ZERO),
     }
