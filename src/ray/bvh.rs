@@ -24,7 +24,7 @@
 
 use glam::Vec3;
 
-use super::qbox;
+use super::{memhint, qbox};
 
 mod interleave;
 
@@ -179,7 +179,7 @@ impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
     /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
     /// alone (see the module invariants).
-    pub fn build(quads: Vec<Quad>, mut verts: Vec<Vec3>) -> Bvh {
+    pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
         if n == 0 {
             return Bvh::default();
@@ -319,13 +319,20 @@ impl Bvh {
             stack.push((left + 1, mid, e));
             stack.push((left, s, mid));
         }
-        let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
+        // The walks read the nodes, quads and corners at random: on huge pages where the
+        // system allows (see `memhint`; the corners are copied to a fresh reservation, as
+        // pages already written keep their size).
+        let mut sorted: Vec<Quad> = memhint::huge_vec(n);
+        sorted.extend(order.iter().map(|&k| quads[k as usize]));
         drop(quads);
-        verts.push(Vec3::ZERO);
+        let mut corners: Vec<Vec3> = memhint::huge_vec(verts.len() + 1);
+        corners.extend_from_slice(&verts);
+        corners.push(Vec3::ZERO);
+        drop(verts);
         let mut bvh = Bvh {
-            nodes: Vec::with_capacity(nodes.len() / 2 + 1),
+            nodes: memhint::huge_vec(nodes.len() / 2 + 1),
             quads: sorted,
-            verts,
+            verts: corners,
             root_leaf: 0,
         };
         if nodes[0].count > 0 {
