@@ -180,7 +180,10 @@ impl Bvh {
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
         let n = o.len();
-        const LANES: usize = 8;
+        // 16 rays in flight: with the tree on huge pages (no page walk per prefetch) more
+        // misses overlap; on the bench, 16 lanes beat 8 in 5 of 6 interleaved runs (median
+        // 2.12 against 1.95 M rays/s; 32: 2.08). Before the huge pages 16 were no faster.
+        const LANES: usize = 16;
         let mut lanes: Vec<Lane> = (0..LANES.min(n)).map(|_| Lane::new()).collect();
         for (k, l) in lanes.iter_mut().enumerate() {
             l.start(k, o[k], d[k], tmin[k], tmax(k));
