@@ -24,7 +24,7 @@
 
 use glam::Vec3;
 
-use super::qbox;
+use super::{memhint, qbox};
 
 mod interleave;
 
@@ -179,7 +179,7 @@ impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
     /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
     /// alone (see the module invariants).
-    pub fn build(quads: Vec<Quad>, mut verts: Vec<Vec3>) -> Bvh {
+    pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
         if n == 0 {
             return Bvh::default();
@@ -319,13 +319,20 @@ impl Bvh {
             stack.push((left + 1, mid, e));
             stack.push((left, s, mid));
         }
-        let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
+        // The walks read the nodes, quads and corners at random: on huge pages where the
+        // system allows (see `memhint`; the corners are copied to a fresh reservation, as
+        // pages already written keep their size).
+        let mut sorted: Vec<Quad> = memhint::huge_vec(n);
+        sorted.extend(order.iter().map(|&k| quads[k as usize]));
         drop(quads);
-        verts.push(Vec3::ZERO);
+        let mut corners: Vec<Vec3> = memhint::huge_vec(verts.len() + 1);
+        corners.extend_from_slice(&verts);
+        corners.push(Vec3::ZERO);
+        drop(verts);
         let mut bvh = Bvh {
-            nodes: Vec::with_capacity(nodes.len() / 2 + 1),
+            nodes: memhint::huge_vec(nodes.len() / 2 + 1),
             quads: sorted,
-            verts,
+            verts: corners,
             root_leaf: 0,
         };
         if nodes[0].count > 0 {
@@ -688,10 +695,17 @@ impl LeafRay {
 }
 
 /// A ray prepared for the slab test: the reciprocal direction and the origin scaled by it
-/// (a plane `p` is crossed at `p · inv − oi`).
+/// (a plane `p` is crossed at `p · inv − oi`), on x86-64 also splatted across four lanes
+/// (made once a ray instead of at each of its node visits).
 struct SlabRay {
+    #[cfg(not(target_arch = "x86_64"))]
     inv: [f32; 3],
+    #[cfg(not(target_arch = "x86_64"))]
     oi: [f32; 3],
+    #[cfg(target_arch = "x86_64")]
+    inv4: [std::arch::x86_64::__m128; 3],
+    #[cfg(target_arch = "x86_64")]
+    oi4: [std::arch::x86_64::__m128; 3],
 }
 
 impl SlabRay {
@@ -707,6 +721,18 @@ impl SlabRay {
         };
         let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
         let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::_mm_set1_ps;
+            // SAFETY: SSE is part of the x86-64 baseline.
+            unsafe {
+                SlabRay {
+                    inv4: inv.map(|x| _mm_set1_ps(x)),
+                    oi4: oi.map(|x| _mm_set1_ps(x)),
+                }
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
         SlabRay { inv, oi }
     }
 }
@@ -762,7 +788,7 @@ fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
                 splat(origin, a),
                 _mm_mul_ps(_mm_cvtepi32_ps(steps[row]), splat(quantum, a)),
             );
-            _mm_sub_ps(_mm_mul_ps(p, _mm_set1_ps(r.inv[a])), _mm_set1_ps(r.oi[a]))
+            _mm_sub_ps(_mm_mul_ps(p, r.inv4[a]), r.oi4[a])
         };
         let (lx, hx) = (cross(0, 0), cross(3, 0));
         let (ly, hy) = (cross(1, 1), cross(4, 1));

@@ -65,6 +65,9 @@ pub struct RayGrid {
     pub shadows: bool,
     /// The area light this grid is the surface of (`Attributes::area_light`).
     pub area_light: Option<usize>,
+    /// Its primitive has an `Interior` or `Exterior` shader (kept here so a hit's medium is
+    /// known without reading the primitive's attributes: a cache miss per hit).
+    pub media: bool,
 }
 
 /// The ray-traceable scene.
@@ -238,6 +241,7 @@ pub fn build(
                 trace,
                 shadows,
                 area_light: a.area_light,
+                media: a.interior.is_some() || a.exterior.is_some(),
             });
         }
         out.crack_fills +=
@@ -246,6 +250,8 @@ pub fn build(
     // The shading data side by side (see HitVertex); the grids' own arrays are freed.
     let total: usize = out.grids.iter().map(|g| g.grid.p.len()).sum();
     out.verts.reserve_exact(total);
+    // Read at random by hit shading (four corners a hit): huge pages spare a TLB miss a read.
+    super::memhint::huge_pages(&mut out.verts);
     for rg in &mut out.grids {
         rg.first = out.verts.len();
         let g = &mut rg.grid;

@@ -18,7 +18,13 @@ use crate::shade::system::{Medium, ShadeSystem};
 use crate::shade::{Grid, GridVar};
 
 use crate::ray::geometry::HitVertex;
+use crate::ray::memhint::{prefetch, prefetch_span};
 use crate::ray::{Cone, RayGrid, RayScene};
+
+/// How many hits ahead the loops over a batch's hits prefetch what a hit will read (its ray
+/// grid's fields, its corners' shading records): far enough for a miss to memory to land
+/// before its hit comes up, a few dozen lines in flight at most.
+const AHEAD: usize = 16;
 
 /// Default most ray depth (PRMan's `Option "trace" "maxdepth"`).
 pub const DEFAULT_MAX_DEPTH: u32 = 10;
@@ -256,6 +262,8 @@ struct PendingHit {
     i: Vec3,
     /// The space the ray crossed (picks the hit's volume shader).
     medium: Medium,
+    /// The primitive whose shading context shades it (see [`RayScene::shade_as`]).
+    class: usize,
     /// The ray's cone, its width taken at the hit.
     cone: Cone,
 }
@@ -273,11 +281,8 @@ fn medium_of(
     d: Vec3,
 ) -> Medium {
     let rg = &rs.grids[grid as usize];
-    let attrs = match scene.primitives.get(rg.prim) {
-        Some(p) => &p.attributes,
-        None => return Medium::Outside,
-    };
-    if attrs.interior.is_none() && attrs.exterior.is_none() {
+    // (`media` says as much as the attributes, without reading them.)
+    if !rg.media || scene.primitives.get(rg.prim).is_none() {
         return Medium::Outside;
     }
     let (k, w) = lerp_weights(rg, index, a, b);
@@ -287,6 +292,21 @@ fn medium_of(
         Medium::Inside
     } else {
         Medium::Outside
+    }
+}
+
+/// Asks for the fields of ray grid `grid` that a hit's gathering reads (its size, first
+/// record, primitive variables, visibility and media flags: a record of 456 bytes, so a few
+/// lines). No effect on results.
+#[inline(always)]
+fn prefetch_grid(rs: &RayScene, grid: u32) {
+    if let Some(rg) = rs.grids.get(grid as usize) {
+        prefetch(&rg.grid.nu);
+        prefetch(&rg.grid.primvars);
+        prefetch(&rg.first);
+        prefetch(&rg.trace);
+        prefetch(&rg.media);
+        prefetch(&rg.prim);
     }
 }
 
@@ -322,11 +342,16 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
         .collect();
     // The points to shade with their interpolation weights, gathered first (a list, not an
     // iterator of fixed arrays: those were copied whole per hit).
-    let mut pts: Vec<(PendingHit, ([usize; 4], [f32; 4]))> = Vec::with_capacity(n);
-    for hit in hits {
+    // Each with its grid's first shading record (so the loop below can prefetch the
+    // records ahead without reading the grid).
+    let mut pts: Vec<(PendingHit, ([usize; 4], [f32; 4]), usize)> = Vec::with_capacity(n);
+    for (h, hit) in hits.iter().enumerate() {
+        if let Some(ahead) = hits.get(h + AHEAD) {
+            prefetch_grid(rs, ahead.grid);
+        }
         let rg = &rs.grids[hit.grid as usize];
         let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
-        pts.push((*hit, (k, w)));
+        pts.push((*hit, (k, w), rg.first));
         if triples {
             let src = &rg.grid;
             let qu = src.nu - 1;
@@ -354,11 +379,18 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
                 let mut aux = *hit;
                 aux.p = p;
                 aux.i = (d + turn) * len;
-                pts.push((aux, (k2, w2)));
+                pts.push((aux, (k2, w2), rg.first));
             }
         }
     }
-    for (h, &(hit, (k, w))) in pts.iter().enumerate() {
+    for (h, &(hit, (k, w), _)) in pts.iter().enumerate() {
+        if let Some(&(ahead, (k, _), first)) = pts.get(h + AHEAD) {
+            // Its corners' records: two pairs of neighbours, 2 × 88 bytes each.
+            let v = rs.verts.as_ptr().wrapping_add(first);
+            prefetch_span(v.wrapping_add(k[0]), 2);
+            prefetch_span(v.wrapping_add(k[2]), 2);
+            prefetch_grid(rs, ahead.grid);
+        }
         let rg = &rs.grids[hit.grid as usize];
         let src = &rg.grid;
         g.p[h] = hit.p;
@@ -449,6 +481,9 @@ impl RayTracer for Tracer<'_, '_> {
             rs.bvh
                 .closest_many(&ro, &rd, &rt, f32::INFINITY, &mut found);
             for (j, &k) in rays.iter().enumerate() {
+                if let Some(Some(ahead)) = found.get(j + AHEAD) {
+                    prefetch_grid(&rs, ahead.grid);
+                }
                 let d = dir[k];
                 let hit = match found[j] {
                     Some(h) if !rs.grids[h.grid as usize].trace => {
@@ -467,7 +502,9 @@ impl RayTracer for Tracer<'_, '_> {
                             width: c.width_at(travelled[k] * d.length()),
                             spread: c.spread,
                         });
+                        let prim = rs.grids[h.grid as usize].prim;
                         pending.push(PendingHit {
+                            class: rs.shade_as.get(prim).copied().unwrap_or(prim),
                             ray: k,
                             grid: h.grid,
                             index: h.index,
@@ -487,13 +524,7 @@ impl RayTracer for Tracer<'_, '_> {
             }
             // Group by the primitive whose context shades them and the space the rays crossed,
             // keeping ray order inside each group.
-            let shade_as = |h: &PendingHit| {
-                let prim = rs.grids[h.grid as usize].prim;
-                (
-                    rs.shade_as.get(prim).copied().unwrap_or(prim),
-                    h.medium == Medium::Inside,
-                )
-            };
+            let shade_as = |h: &PendingHit| (h.class, h.medium == Medium::Inside);
             // Keys are distinct (one hit per ray per layer): unstable sorting is the same order.
             pending.sort_unstable_by_key(|h| (shade_as(h), h.ray));
             let mut s = 0;
