@@ -188,6 +188,75 @@ fn bicubic_patches_in_every_basis_match_direct_evaluation() {
     }
 }
 
+/// Hermite and power control values are partly tangents (their basis rows do not sum to 1),
+/// so a translating camera must move the surface once, not once per weight (Aqsis's
+/// Bug1102597 draws a power-basis curve over its Bézier twin; it was drawn off to one side).
+#[test]
+fn tangent_bases_under_a_translating_camera_match_direct_evaluation() {
+    let shift = Vec3::new(0.5, -2.0, 7.0);
+    let cam = Mat4::from_translation(shift);
+    let hermite = [
+        [2., 1., -2., 1.],
+        [-3., -2., 3., -1.],
+        [0., 1., 0., 0.],
+        [1., 0., 0., 0.],
+    ];
+    let power = [
+        [1., 0., 0., 0.],
+        [0., 1., 0., 0.],
+        [0., 0., 1., 0.],
+        [0., 0., 0., 1.],
+    ];
+    let pts = points16();
+    for (name, step, m) in [("hermite", 2, hermite), ("power", 4, power)] {
+        let b = build(&format!(
+            "Basis \"{name}\" {step} \"{name}\" {step}\nPatch \"bicubic\" \"P\" [{}]",
+            nums(&pts)
+        ));
+        assert!(b.errors().is_empty(), "{:?}", b.errors());
+        let surfs = surfaces_for(0, &b.scene.primitives[0], cam, &b.diags);
+        let g = surfs[0].dice(5, 5);
+        for j in 0..5 {
+            for i in 0..5 {
+                let (p, du) = direct(&m, &pts, i as f64 / 4.0, j as f64 / 4.0);
+                let k = j * 5 + i;
+                assert!(
+                    close(g.p[k], p + shift, 1e-4),
+                    "{name} patch P at {i},{j}: {} vs {}",
+                    g.p[k],
+                    p + shift
+                );
+                assert!(close(g.dpdu[k], du, 1e-3), "{name} patch dPdu at {i},{j}");
+            }
+        }
+        // A curve in the v basis: the first row of the points as its four control values.
+        let b = build(&format!(
+            "Basis \"bezier\" 3 \"{name}\" {step}\nCurves \"cubic\" [4] \"nonperiodic\" \"P\" [{}] \"constantwidth\" [0.01]",
+            nums(&pts[..12])
+        ));
+        assert!(b.errors().is_empty(), "{:?}", b.errors());
+        let surfs = surfaces_for(0, &b.scene.primitives[0], cam, &b.diags);
+        assert_eq!(surfs.len(), 1, "{name}: one curve segment");
+        let g = surfs[0].dice(3, 5);
+        for j in 0..5 {
+            let t = j as f64 / 4.0;
+            let tt = [t * t * t, t * t, t, 1.0];
+            let mut want = Vec3::ZERO;
+            for (c, _) in m.iter().enumerate() {
+                let w: f64 = (0..4).map(|r| tt[r] * m[r][c]).sum();
+                want += w as f32 * Vec3::new(pts[c * 3], pts[c * 3 + 1], pts[c * 3 + 2]);
+            }
+            // The ribbon's middle column lies on the curve.
+            let mid = g.p[j * 3 + 1];
+            assert!(
+                close(mid, want + shift, 1e-4),
+                "{name} curve at t={t}: {mid} vs {}",
+                want + shift
+            );
+        }
+    }
+}
+
 #[test]
 fn dicing_at_two_rates_gives_the_same_surface() {
     let b = build(&format!(
