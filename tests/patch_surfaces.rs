@@ -435,11 +435,13 @@ fn bad_nurbs_ranges_are_clear_errors() {
 
 #[test]
 fn trimmed_nurbs_has_a_hole() {
-    // Unit square plane; a square trim loop [0.25, 0.75]² of four linear curves.
+    // Unit square plane; a square trim loop [0.25, 0.75]² of four linear curves, sense
+    // "outside": the loop's inside is cut away.
     let loop_u = "0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25";
     let loop_v = "0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25";
     let body = format!(
-        "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [{loop_u}] [{loop_v}] [1 1 1 1 1 1 1 1]\n\
+        "Attribute \"trimcurve\" \"sense\" \"outside\"\n\
+         TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [{loop_u}] [{loop_v}] [1 1 1 1 1 1 1 1]\n\
          NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]"
     );
     let b = build(&body);
@@ -468,15 +470,34 @@ fn trimmed_nurbs_has_a_hole() {
 }
 
 #[test]
-fn trim_sense_outside_keeps_only_the_inside() {
-    let body = "Attribute \"trimcurve\" \"sense\" \"outside\"\n\
-         TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25] [0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25] [1 1 1 1 1 1 1 1]\n\
+fn default_trim_sense_keeps_only_the_inside() {
+    let body = "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25] [0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25] [1 1 1 1 1 1 1 1]\n\
          NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]";
     let b = build(body);
     assert!(b.errors().is_empty(), "{:?}", b.errors());
     let g = b.surfaces[0][0].dice(5, 5);
     assert_eq!(g.os[12], Vec3::ONE); // (0.5, 0.5)
     assert_eq!(g.os[0], Vec3::ZERO); // (0, 0)
+}
+
+/// Exporters write the parameter domain's boundary as a trim loop around surfaces they do not
+/// trim, with knot ranges of their own (Aqsis's Bug1471457: [0 0 6.12 6.12] and
+/// [-6.12 -6.12 0 0]); the whole surface is kept.
+#[test]
+fn a_loop_around_the_whole_domain_keeps_the_surface() {
+    let body = "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 6.12293 6.12293 0 0 1 1 -6.12293 -6.12293 0 0] [0 0 0 -6.12293] [1 6.12293 1 0] [2 2 2 2] [0 1 1 1 1 0 0 0] [0 0 0 1 1 1 1 0] [1 1 1 1 1 1 1 1]\n\
+         NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]";
+    let b = build(body);
+    assert!(b.errors().is_empty(), "{:?}", b.errors());
+    let s = &b.surfaces[0][0];
+    assert!(s.trimmed(&s.dice(9, 9)).is_none(), "no point is cut");
+    let g = s.dice(9, 9);
+    for k in 0..g.len() {
+        let (u, v) = (g.u[k], g.v[k]);
+        if u > 0.01 && u < 0.99 && v > 0.01 && v < 0.99 {
+            assert_eq!(g.os[k], Vec3::ONE, "({u},{v}) should be kept");
+        }
+    }
 }
 
 #[test]
