@@ -188,6 +188,75 @@ fn bicubic_patches_in_every_basis_match_direct_evaluation() {
     }
 }
 
+/// Hermite and power control values are partly tangents (their basis rows do not sum to 1),
+/// so a translating camera must move the surface once, not once per weight (Aqsis's
+/// Bug1102597 draws a power-basis curve over its Bézier twin; it was drawn off to one side).
+#[test]
+fn tangent_bases_under_a_translating_camera_match_direct_evaluation() {
+    let shift = Vec3::new(0.5, -2.0, 7.0);
+    let cam = Mat4::from_translation(shift);
+    let hermite = [
+        [2., 1., -2., 1.],
+        [-3., -2., 3., -1.],
+        [0., 1., 0., 0.],
+        [1., 0., 0., 0.],
+    ];
+    let power = [
+        [1., 0., 0., 0.],
+        [0., 1., 0., 0.],
+        [0., 0., 1., 0.],
+        [0., 0., 0., 1.],
+    ];
+    let pts = points16();
+    for (name, step, m) in [("hermite", 2, hermite), ("power", 4, power)] {
+        let b = build(&format!(
+            "Basis \"{name}\" {step} \"{name}\" {step}\nPatch \"bicubic\" \"P\" [{}]",
+            nums(&pts)
+        ));
+        assert!(b.errors().is_empty(), "{:?}", b.errors());
+        let surfs = surfaces_for(0, &b.scene.primitives[0], cam, &b.diags);
+        let g = surfs[0].dice(5, 5);
+        for j in 0..5 {
+            for i in 0..5 {
+                let (p, du) = direct(&m, &pts, i as f64 / 4.0, j as f64 / 4.0);
+                let k = j * 5 + i;
+                assert!(
+                    close(g.p[k], p + shift, 1e-4),
+                    "{name} patch P at {i},{j}: {} vs {}",
+                    g.p[k],
+                    p + shift
+                );
+                assert!(close(g.dpdu[k], du, 1e-3), "{name} patch dPdu at {i},{j}");
+            }
+        }
+        // A curve in the v basis: the first row of the points as its four control values.
+        let b = build(&format!(
+            "Basis \"bezier\" 3 \"{name}\" {step}\nCurves \"cubic\" [4] \"nonperiodic\" \"P\" [{}] \"constantwidth\" [0.01]",
+            nums(&pts[..12])
+        ));
+        assert!(b.errors().is_empty(), "{:?}", b.errors());
+        let surfs = surfaces_for(0, &b.scene.primitives[0], cam, &b.diags);
+        assert_eq!(surfs.len(), 1, "{name}: one curve segment");
+        let g = surfs[0].dice(3, 5);
+        for j in 0..5 {
+            let t = j as f64 / 4.0;
+            let tt = [t * t * t, t * t, t, 1.0];
+            let mut want = Vec3::ZERO;
+            for (c, _) in m.iter().enumerate() {
+                let w: f64 = (0..4).map(|r| tt[r] * m[r][c]).sum();
+                want += w as f32 * Vec3::new(pts[c * 3], pts[c * 3 + 1], pts[c * 3 + 2]);
+            }
+            // The ribbon's middle column lies on the curve.
+            let mid = g.p[j * 3 + 1];
+            assert!(
+                close(mid, want + shift, 1e-4),
+                "{name} curve at t={t}: {mid} vs {}",
+                want + shift
+            );
+        }
+    }
+}
+
 #[test]
 fn dicing_at_two_rates_gives_the_same_surface() {
     let b = build(&format!(
@@ -366,11 +435,13 @@ fn bad_nurbs_ranges_are_clear_errors() {
 
 #[test]
 fn trimmed_nurbs_has_a_hole() {
-    // Unit square plane; a square trim loop [0.25, 0.75]² of four linear curves.
+    // Unit square plane; a square trim loop [0.25, 0.75]² of four linear curves, sense
+    // "outside": the loop's inside is cut away.
     let loop_u = "0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25";
     let loop_v = "0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25";
     let body = format!(
-        "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [{loop_u}] [{loop_v}] [1 1 1 1 1 1 1 1]\n\
+        "Attribute \"trimcurve\" \"sense\" \"outside\"\n\
+         TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [{loop_u}] [{loop_v}] [1 1 1 1 1 1 1 1]\n\
          NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]"
     );
     let b = build(&body);
@@ -399,15 +470,34 @@ fn trimmed_nurbs_has_a_hole() {
 }
 
 #[test]
-fn trim_sense_outside_keeps_only_the_inside() {
-    let body = "Attribute \"trimcurve\" \"sense\" \"outside\"\n\
-         TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25] [0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25] [1 1 1 1 1 1 1 1]\n\
+fn default_trim_sense_keeps_only_the_inside() {
+    let body = "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2] [0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25] [0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25] [1 1 1 1 1 1 1 1]\n\
          NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]";
     let b = build(body);
     assert!(b.errors().is_empty(), "{:?}", b.errors());
     let g = b.surfaces[0][0].dice(5, 5);
     assert_eq!(g.os[12], Vec3::ONE); // (0.5, 0.5)
     assert_eq!(g.os[0], Vec3::ZERO); // (0, 0)
+}
+
+/// Exporters write the parameter domain's boundary as a trim loop around surfaces they do not
+/// trim, with knot ranges of their own (Aqsis's Bug1471457: [0 0 6.12 6.12] and
+/// [-6.12 -6.12 0 0]); the whole surface is kept.
+#[test]
+fn a_loop_around_the_whole_domain_keeps_the_surface() {
+    let body = "TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 6.12293 6.12293 0 0 1 1 -6.12293 -6.12293 0 0] [0 0 0 -6.12293] [1 6.12293 1 0] [2 2 2 2] [0 1 1 1 1 0 0 0] [0 0 0 1 1 1 1 0] [1 1 1 1 1 1 1 1]\n\
+         NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]";
+    let b = build(body);
+    assert!(b.errors().is_empty(), "{:?}", b.errors());
+    let s = &b.surfaces[0][0];
+    assert!(s.trimmed(&s.dice(9, 9)).is_none(), "no point is cut");
+    let g = s.dice(9, 9);
+    for k in 0..g.len() {
+        let (u, v) = (g.u[k], g.v[k]);
+        if u > 0.01 && u < 0.99 && v > 0.01 && v < 0.99 {
+            assert_eq!(g.os[k], Vec3::ONE, "({u},{v}) should be kept");
+        }
+    }
 }
 
 #[test]

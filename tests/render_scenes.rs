@@ -424,3 +424,31 @@ fn an_imager_that_sets_oi_sets_the_alpha() {
         "{m:?}"
     );
 }
+
+/// Points a trim curve cuts away stay empty whatever the shaders write there: an atmosphere
+/// adds its colour even at opacity 0 (Aqsis's Bug1471457 fogged spheres showed their trimmed
+/// parts as glowing disks).
+#[test]
+fn trimmed_points_stay_empty_under_an_atmosphere() {
+    let f = render_one(
+        r#"Format 32 32 1
+        PixelSamples 2 2
+        Projection "orthographic"
+        ScreenWindow 0 1 0 1
+        WorldBegin
+        Attribute "trimcurve" "sense" "outside"
+        TrimCurve [4] [2 2 2 2] [0 0 1 1 0 0 1 1 0 0 1 1 0 0 1 1] [0 0 0 0] [1 1 1 1] [2 2 2 2]
+            [0.25 0.75 0.75 0.75 0.75 0.25 0.25 0.25] [0.25 0.25 0.25 0.75 0.75 0.75 0.75 0.25] [1 1 1 1 1 1 1 1]
+        Surface "constant"
+        Atmosphere "fog" "distance" [1] "background" [1 1 0]
+        NuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 "P" [0 0 1  1 0 1  0 1 1  1 1 1]
+        WorldEnd"#,
+    );
+    // The hole's middle: nothing there.
+    for (x, y) in [(16, 16), (12, 12), (19, 19)] {
+        assert_eq!(px(&f, x, y), [0.0; 4], "{x},{y} lies in the trimmed hole");
+    }
+    // Outside the loop: the fogged surface.
+    let p = px(&f, 2, 2);
+    assert!(p[3] > 0.99 && p[0] > 0.5 && p[1] > 0.5, "{p:?}");
+}

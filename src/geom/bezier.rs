@@ -378,15 +378,21 @@ impl Surface for BezierPatch {
         if dim > 4 {
             write_extras(&mut g, &sh.extras, &extras, dim - 4);
         }
-        if let Some(t) = &sh.trim {
-            for k in 0..g.len() {
-                if !t.keeps(Vec2::new(g.u[k], g.v[k])) {
-                    g.os[k] = Vec3::ZERO;
-                }
+        if let Some(cut) = self.trimmed(&g) {
+            for (os, _) in g.os.iter_mut().zip(&cut).filter(|(_, c)| **c) {
+                *os = Vec3::ZERO;
             }
         }
         g.i.copy_from_slice(&g.p);
         g
+    }
+
+    fn trimmed(&self, grid: &Grid) -> Option<Vec<bool>> {
+        let t = self.shared.trim.as_ref()?;
+        let cut: Vec<bool> = (0..grid.len())
+            .map(|k| !t.keeps(Vec2::new(grid.u[k], grid.v[k])))
+            .collect();
+        cut.contains(&true).then_some(cut)
     }
 
     fn primitive(&self) -> usize {

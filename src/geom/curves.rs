@@ -53,6 +53,10 @@ pub(crate) struct CurveData {
     m: [f32; 16],
     /// Camera-space control points.
     p: Vec<Vec3>,
+    /// Camera-space image of the object-space origin. Bases whose weights do not sum to 1
+    /// (power, Hermite: some control values are tangents) are not affine-invariant, so a
+    /// combination of transformed points misses the translation by `(1 − Σw)·origin`.
+    origin: Vec3,
     segs: Vec<Seg>,
     vars: Vec<SourceVar>,
     /// Per-element widths (camera space) and their class, or the constant width.
@@ -153,6 +157,7 @@ pub(crate) fn curves(
         cubic: a.cubic,
         m: a.basis.matrix,
         p: obj.iter().map(|&q| m.transform_point3(q)).collect(),
+        origin: m.transform_point3(Vec3::ZERO),
         segs,
         vars: vars
             .into_iter()
@@ -227,8 +232,17 @@ impl CurveData {
         }
     }
 
+    /// The camera-space point the basis weights `w` give:
+    /// the combination of the object-space control points, transformed.
     fn center(&self, s: &Seg, w: &[f32; 4]) -> Vec3 {
-        (0..4).map(|k| w[k] * self.p[s.ctrl[k]]).sum()
+        let sum: Vec3 = (0..4).map(|k| w[k] * self.p[s.ctrl[k]]).sum();
+        sum + (1.0 - w.iter().sum::<f32>()) * self.origin
+    }
+
+    /// The camera-space tangent for derivative weights `dw` (translation-free).
+    fn tangent(&self, s: &Seg, dw: &[f32; 4]) -> Vec3 {
+        let sum: Vec3 = (0..4).map(|k| dw[k] * self.p[s.ctrl[k]]).sum();
+        sum - dw.iter().sum::<f32>() * self.origin
     }
 }
 
@@ -334,7 +348,7 @@ impl Surface for CurveSeg {
             let t = self.t0 + j as f32 * dt;
             let (w, dw) = d.weights(t);
             let c = d.center(&s, &w);
-            let tan: Vec3 = (0..4).map(|k| dw[k] * d.p[s.ctrl[k]]).sum();
+            let tan = d.tangent(&s, &dw);
             let width = d.width_at(&s, t, &w);
             // Ribbon orientation.
             let (side, ng) = match user_n {

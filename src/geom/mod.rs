@@ -125,6 +125,13 @@ pub trait Surface: Send + Sync + std::fmt::Debug {
     fn dice(&self, nu: usize, nv: usize) -> Grid;
     /// The primitive this surface came from (an index into `Scene::primitives`).
     fn primitive(&self) -> usize;
+    /// Which points of `grid` (diced from this surface) trim curves cut away; `None` when
+    /// none are. Dicing gives them opacity 0, but shaders still run there and an atmosphere
+    /// adds its colour even at opacity 0, so the hider drops what they wrote.
+    fn trimmed(&self, grid: &Grid) -> Option<Vec<bool>> {
+        let _ = grid;
+        None
+    }
     /// Approximate lengths of the surface along u and along v after `raster_from_camera` and
     /// the perspective divide (the longest u-line and v-line of a 5 × 5 sample), for choosing
     /// dice rates (`nu ≈ lu / sqrt(ShadingRate)`). None when unknown, or when a sample point is

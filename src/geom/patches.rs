@@ -223,6 +223,7 @@ pub(crate) fn patch_mesh(
     let vvars = primvar::resolve(&vert_pl, m, vcounts, diags);
     let (extras, dim) = vertex_extras(&vvars);
     let ctrl = rows(&pts, m, &vvars, dim);
+    let origin = m.transform_point3(Vec3::ZERO);
     let (au, av) = (to_bezier(&ub.matrix), to_bezier(&vb.matrix));
     let deg = if bicubic { 3 } else { 1 };
     let n1 = deg + 1;
@@ -271,9 +272,16 @@ pub(crate) fn patch_mesh(
                     }
                 }
                 if !rational {
-                    // Tangent-carrying bases (Hermite, power) have rows that do not sum to 1;
-                    // positional data stays affine, so only homogeneous input converts w.
-                    bez.chunks_exact_mut(dim).for_each(|c| c[3] = 1.0);
+                    // Tangent-carrying bases (Hermite, power) have rows that do not sum to 1,
+                    // so a Bézier point came out as A·(Σ aᵢ Pᵢ) + w·t for the camera
+                    // transform's translation t, w = Σ aᵢ: it needs t once.
+                    for c in bez.chunks_exact_mut(dim) {
+                        let k = 1.0 - c[3];
+                        c[0] += k * origin.x;
+                        c[1] += k * origin.y;
+                        c[2] += k * origin.z;
+                        c[3] = 1.0;
+                    }
                 }
                 bez
             } else {

@@ -4,8 +4,11 @@
 //! Output: a [`Trim`] that answers "is this parameter point rendered?" and classifies parameter
 //! rectangles (wholly kept, wholly cut, or mixed) so split pieces that are cut entirely vanish.
 //! Invariants: each loop is flattened into a closed polyline (its curves joined head to tail);
-//! "inside" is the odd-crossing rule over all loops. Sense "inside" (the default) cuts away the
-//! inside of the loops (a hole), "outside" keeps only the inside.
+//! "inside" is the odd-crossing rule over all loops. Sense "inside" (the default) keeps the
+//! inside of the loops and cuts away the rest, "outside" cuts the inside away (a hole). RISpec
+//! says trim curves exclude areas from the surface and defines their inside; Aqsis keeps the
+//! inside, and exporters write the domain's boundary as a loop around untrimmed surfaces
+//! (cutting the inside away left such a NURBS sphere invisible).
 
 use glam::Vec2;
 
@@ -57,16 +60,25 @@ impl Trim {
         }
         (!loops.is_empty()).then_some(Trim {
             loops,
-            cut_inside: !tc.sense_outside,
+            cut_inside: tc.sense_outside,
         })
     }
 
-    /// Odd-crossing inside test over all loops.
+    /// Odd-crossing inside test over all loops. A point on a loop (within rounding) is
+    /// inside: exporters trace the domain's own boundary, and its edge points must not be cut
+    /// (a seam of transparent micropolygons down a NURBS sphere).
     fn inside(&self, p: Vec2) -> bool {
+        const ON_LOOP: f32 = 1e-5;
         let mut odd = false;
         for l in &self.loops {
             let mut a = l[l.len() - 1];
             for &b in l {
+                let ab = b - a;
+                let t =
+                    ((p - a).dot(ab) / ab.length_squared().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
+                if (a + t * ab - p).length_squared() <= ON_LOOP * ON_LOOP {
+                    return true;
+                }
                 if (a.y > p.y) != (b.y > p.y) {
                     let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
                     if p.x < x {
@@ -162,8 +174,8 @@ mod tests {
     }
 
     #[test]
-    fn inside_sense_cuts_a_hole() {
-        let t = Trim::new(&square(false)).unwrap();
+    fn outside_sense_cuts_a_hole() {
+        let t = Trim::new(&square(true)).unwrap();
         assert!(!t.keeps(Vec2::new(0.5, 0.5)));
         assert!(t.keeps(Vec2::new(0.1, 0.5)));
         assert!(t.cuts_all(Vec2::new(0.4, 0.4), Vec2::new(0.6, 0.6)));
@@ -172,8 +184,8 @@ mod tests {
     }
 
     #[test]
-    fn outside_sense_keeps_the_inside() {
-        let t = Trim::new(&square(true)).unwrap();
+    fn inside_sense_keeps_the_inside() {
+        let t = Trim::new(&square(false)).unwrap();
         assert!(t.keeps(Vec2::new(0.5, 0.5)));
         assert!(!t.keeps(Vec2::new(0.9, 0.5)));
         assert!(t.cuts_all(Vec2::new(0.8, 0.8), Vec2::new(1.0, 1.0)));

@@ -726,6 +726,7 @@ impl Frame<'_> {
                     return (Outcome::Nothing, Vec::new());
                 }
                 set_incident(&mut grid, self.camera.perspective);
+                let trimmed = w.surface.trimmed(&grid);
                 let orient = orientation(&grid);
                 if info.csg.is_some_and(|c| c.inverted) {
                     // A subtracted solid's surface bounds the result from inside it.
@@ -754,6 +755,18 @@ impl Frame<'_> {
                 self.stats.time(Stage::Displace, t1);
                 let t2 = Instant::now();
                 self.shader.shade(self.scene, self.camera, prim, &mut grid);
+                if let Some(cut) = trimmed.filter(|c| c.len() == grid.ci.len()) {
+                    for ((ci, oi), _) in grid
+                        .ci
+                        .iter_mut()
+                        .zip(&mut grid.oi)
+                        .zip(&cut)
+                        .filter(|(_, c)| **c)
+                    {
+                        *ci = Vec3::ZERO;
+                        *oi = Vec3::ZERO;
+                    }
+                }
                 self.stats.time(Stage::Shade, t2);
                 Stats::add(&self.stats.grids, 1);
                 Stats::add(&self.stats.micropolygons, (nu * nv) as u64);
