@@ -3,6 +3,8 @@
 //! Input: the film, the frame's [`Options`] (Exposure, Imager, Quantize, Display list) and an
 //! optional CLI output path. Output: the written files' paths.
 //! Pipeline (RISpec §4.1.4): exposure → imager (`background`) → quantize/dither → encode.
+//! 8-bit PNG displays of a whole frame are usually encoded during the render, band by band
+//! (`film::stream`, planned by [`plan_streams`]); here they are only written out.
 //! Invariants: every file is written to a temporary name in its own directory and renamed, so
 //! a failed write never leaves a partial image; colours stay premultiplied by alpha; requests
 //! this module cannot honour exactly produce a warning and the closest output, never silence.

@@ -246,3 +246,70 @@ impl RowSink for Streams {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// RFC 2083 §6.6 as written.
+    fn paeth_reference(a: u8, b: u8, c: u8) -> u8 {
+        let p = i16::from(a) + i16::from(b) - i16::from(c);
+        let (pa, pb, pc) = (
+            (p - i16::from(a)).abs(),
+            (p - i16::from(b)).abs(),
+            (p - i16::from(c)).abs(),
+        );
+        if pa <= pb && pa <= pc {
+            a
+        } else if pb <= pc {
+            b
+        } else {
+            c
+        }
+    }
+
+    #[test]
+    fn paeth_is_the_reference_predictor_for_every_input() {
+        for a in 0..=255u8 {
+            for b in 0..=255u8 {
+                for c in (0..=255u8).step_by(3) {
+                    assert_eq!(paeth(a, b, c), paeth_reference(a, b, c), "{a} {b} {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn filters_and_the_adaptive_choice() {
+        // Two RGB pixels; the row above is a constant 10.
+        let prev = [10u8; 6];
+        let cur = [12u8, 14, 16, 13, 15, 17];
+        let mut out = [0u8; 6];
+        apply_filter(1, 3, &prev, &cur, &mut out);
+        assert_eq!(out, [12, 14, 16, 1, 1, 1], "Sub");
+        apply_filter(2, 3, &prev, &cur, &mut out);
+        assert_eq!(out, [2, 4, 6, 3, 5, 7], "Up");
+        apply_filter(3, 3, &prev, &cur, &mut out);
+        assert_eq!(
+            out,
+            [7, 9, 11, 2, 3, 4],
+            "Avg: ⌊(a + b) / 2⌋, a = 0 on the first pixel"
+        );
+        apply_filter(4, 3, &prev, &cur, &mut out);
+        assert_eq!(
+            out,
+            [2, 4, 6, 1, 1, 1],
+            "Paeth picks b on the first pixel, then a"
+        );
+        // Costs: Up 27, Sub 45, Avg 36, Paeth 15: Paeth, left in `out`.
+        assert_eq!(adaptive_filter(3, &prev, &cur, &mut out), 4);
+        assert_eq!(out, [2, 4, 6, 1, 1, 1]);
+        // Equal to the row above: Up costs 0 and is taken at once.
+        assert_eq!(adaptive_filter(3, &prev, &prev, &mut out), 2);
+        assert_eq!(out, [0; 6]);
+        // A tie goes to the later filter: under a zero row, Sub and Paeth both give [20, 20]
+        // (cost 40; Avg 50, Up 60).
+        let zero = [0u8; 2];
+        assert_eq!(adaptive_filter(1, &zero, &[20, 40], &mut out[..2]), 4);
+    }
+}
