@@ -882,6 +882,7 @@ fn run_in_pool<T: Send>(
     run()
 }
 
+#[allow(clippy::too_many_arguments)]
 fn render_inner(
     scene: &Scene,
     options: &Options,
@@ -1377,7 +1378,7 @@ fn render_inner(
     }
     clock = stats.phase(Phase::Filter, clock);
     // The last rows' scanlines (the frame's only serial encoding).
-    if let Some(out) = rows_out.as_deref_mut() {
+    if let Some(out) = rows_out {
         out.rows(&film, sent, finished);
     }
     for (_, hs) in hidden.drain(..) {
