@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
-use crate::render::driver::{render_frame, RenderOptions};
+use crate::render::driver::{render_frame, render_frame_rows, RenderOptions};
 use crate::render::hider::Aov;
 use crate::render::stats::Stats;
 use crate::scene::{build_scenes, BuildContext, Builder, ParamType, Scene};
@@ -267,7 +267,16 @@ pub fn render_paths(
             };
             system.preload_lights(scene);
             let start = Instant::now();
-            let film = render_frame(scene, &system, &opts, diags);
+            // 8-bit PNG displays of a whole frame are encoded as its rows finish.
+            let mut streams = match &tile {
+                None => plan_streams(scene, &opts, override_path.as_deref()),
+                Some(_) => Default::default(),
+            };
+            let film = if streams.any() {
+                render_frame_rows(scene, &system, &opts, Some(&mut streams), diags)
+            } else {
+                render_frame(scene, &system, &opts, diags)
+            };
             if let Some(b) = &bar {
                 b.finish_and_clear();
             }
@@ -307,12 +316,13 @@ pub fn render_paths(
                     Err(d) => diags.report(d),
                 }
             } else {
-                written.extend(write_frame(
+                written.extend(write_frame_streamed(
                     scene,
                     film,
                     &options,
                     override_path.as_deref(),
                     diags,
+                    streams,
                 ));
             }
             stats.phase(crate::render::stats::Phase::Output, output_clock);
@@ -423,6 +433,47 @@ pub fn write_frame(
     override_path: Option<&Path>,
     diags: &Diagnostics,
 ) -> Vec<PathBuf> {
+    write_frame_streamed(
+        scene,
+        film,
+        options,
+        override_path,
+        diags,
+        Default::default(),
+    )
+}
+
+/// The displays a frame can encode while it renders (see `film::stream`): none for a
+/// cropped frame or one with an imager shader (both change the film after the render).
+fn plan_streams(
+    scene: &Scene,
+    opts: &RenderOptions,
+    override_path: Option<&Path>,
+) -> crate::film::stream::Streams {
+    let options = crate::render::driver::effective_options(&scene.options, opts);
+    let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
+    let (w, h) = (options.xres as usize, options.yres as usize);
+    let whole = r.x0 == 0 && r.y0 == 0 && r.width() == w && r.height() == h;
+    if !whole || w == 0 || h == 0 {
+        return Default::default();
+    }
+    let mut aovs = Vec::new();
+    for a in &opts.aovs {
+        aovs.extend(a.channel_names());
+    }
+    let channels = crate::film::Film::standard_channels(&aovs);
+    crate::film::output::plan_streams(&options, override_path, channels, w, h)
+}
+
+/// [`write_frame`] with the displays encoded during the render.
+pub fn write_frame_streamed(
+    scene: &Scene,
+    film: crate::film::Film,
+    options: &crate::scene::Options,
+    override_path: Option<&Path>,
+    diags: &Diagnostics,
+    streams: crate::film::stream::Streams,
+) -> Vec<PathBuf> {
     let r = crate::render::crop_region(options.xres, options.yres, options.crop_window);
     let film = if r.width() < film.width || r.height() < film.height {
         film.cropped(
@@ -434,12 +485,13 @@ pub fn write_frame(
     } else {
         film
     };
-    match crate::film::output::write_displays_with_matrices(
+    match crate::film::output::write_displays_streamed(
         &film,
         options,
         diags,
         override_path,
         Some(depth_matrices(scene, options)),
+        streams,
     ) {
         Ok(files) => files,
         Err(d) => {

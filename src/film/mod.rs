@@ -15,6 +15,7 @@ pub mod gather;
 pub mod output;
 pub mod quantize;
 pub mod resolve;
+pub mod stream;
 pub mod zfile;
 
 pub use filter::{Filter, FilterKind};

@@ -3,6 +3,8 @@
 //! Input: the film, the frame's [`Options`] (Exposure, Imager, Quantize, Display list) and an
 //! optional CLI output path. Output: the written files' paths.
 //! Pipeline (RISpec §4.1.4): exposure → imager (`background`) → quantize/dither → encode.
+//! 8-bit PNG displays of a whole frame are usually encoded during the render, band by band
+//! (`film::stream`, planned by [`plan_streams`]); here they are only written out.
 //! Invariants: every file is written to a temporary name in its own directory and renamed, so
 //! a failed write never leaves a partial image; colours stay premultiplied by alpha; requests
 //! this module cannot honour exactly produce a warning and the closest output, never silence.
@@ -25,6 +27,7 @@ use image::ImageEncoder;
 
 use super::quantize::{apply_background, apply_exposure, is_float, quantize, quantize_row_u8};
 use super::resolve::Film;
+use super::stream::{Layout, PngStream, Streams};
 use super::zfile::ZFile;
 use crate::diag::{Diag, Diagnostics, Span};
 use crate::scene::{Display, Options, ParamList, Quantize};
@@ -84,12 +87,34 @@ pub fn write_displays_with_matrices(
     output_override: Option<&Path>,
     matrices: Option<([f32; 16], [f32; 16])>,
 ) -> Result<Vec<PathBuf>, Diag> {
+    write_displays_streamed(
+        film,
+        opts,
+        diags,
+        output_override,
+        matrices,
+        Streams::default(),
+    )
+}
+
+/// [`write_displays_with_matrices`] with the displays whose rows were encoded during the
+/// render (see [`plan_streams`]): those are written from their streams, the rest from the film.
+pub fn write_displays_streamed(
+    film: &Film,
+    opts: &Options,
+    diags: &Diagnostics,
+    output_override: Option<&Path>,
+    matrices: Option<([f32; 16], [f32; 16])>,
+    streams: Streams,
+) -> Result<Vec<PathBuf>, Diag> {
     let img = prepare(film, opts, diags);
     let targets = plan(opts, diags, output_override, matrices.is_some())?;
+    let mut streams = streams.displays.into_iter();
     let mut written = Vec::new();
     let mut first_err = None;
     for t in &targets {
-        match write_target(&img, t, opts, diags, matrices) {
+        let stream = streams.next().flatten();
+        match write_target(&img, t, opts, diags, matrices, stream) {
             Ok(()) => written.push(t.path.clone()),
             Err(e) => {
                 if first_err.is_none() {
@@ -104,6 +129,65 @@ pub fn write_displays_with_matrices(
         Some(e) => Err(e),
         None => Ok(written),
     }
+}
+
+/// The displays of a frame that can be encoded while it renders: 8-bit PNGs of plain film
+/// channels, for a film of `channel_names` and `width` × `height` written with `opts` (the
+/// effective options, whole frame, no imager shader but `background`). Empty when none is.
+pub fn plan_streams(
+    opts: &Options,
+    output_override: Option<&Path>,
+    channel_names: Vec<String>,
+    width: usize,
+    height: usize,
+) -> Streams {
+    let quiet = Diagnostics::new();
+    if opts.imager.as_ref().is_some_and(|i| i.name != "background") {
+        return Streams::default();
+    }
+    let Ok(targets) = plan(opts, &quiet, output_override, true) else {
+        return Streams::default();
+    };
+    let shape = Film::new(0, 0, channel_names);
+    let displays = targets
+        .iter()
+        .map(|t| stream_layout(&shape, t, opts).map(|l| PngStream::new(l, width, height)))
+        .collect();
+    let changes = opts.exposure != [1.0, 1.0] || opts.imager.is_some();
+    Streams {
+        displays,
+        prepare: changes.then(|| opts.clone()),
+    }
+}
+
+/// The layout `write_target` gives display `t` when it is an 8-bit PNG of film channels.
+fn stream_layout(film: &Film, t: &Target, opts: &Options) -> Option<Layout> {
+    if t.format != Format::Png {
+        return None;
+    }
+    let quiet = Diagnostics::new();
+    let (q, _) = display_quantizers(t, opts, &quiet);
+    let mut planes = select_planes(film, t, &quiet);
+    if planes.len() > 1 && planes.iter().any(|p| p.depth) {
+        planes.retain(|p| !p.depth);
+    }
+    planes.truncate(4);
+    if planes.is_empty() || planes[0].depth || is_float(&q) || q.max > 255.0 {
+        return None;
+    }
+    let src: Option<Vec<usize>> = planes.iter().map(|p| p.src).collect();
+    Some(Layout { src: src?, q })
+}
+
+/// A band of the film through [`prepare`] (for the streamed displays; the warnings are
+/// reported when the frame's displays are written).
+pub(super) fn prepared(band: Film, opts: &Options) -> Film {
+    let quiet = Diagnostics::new();
+    let changed = match prepare(&band, opts, &quiet) {
+        Cow::Owned(f) => Some(f),
+        Cow::Borrowed(_) => None,
+    };
+    changed.unwrap_or(band)
 }
 
 /// Exposure then the imager, on a copy only when something changes.
@@ -464,6 +548,7 @@ fn write_target(
     opts: &Options,
     diags: &Diagnostics,
     matrices: Option<([f32; 16], [f32; 16])>,
+    stream: Option<PngStream>,
 ) -> Result<(), Diag> {
     let (qc, qz) = display_quantizers(t, opts, diags);
     let warn = |msg: String| {
@@ -636,6 +721,21 @@ fn write_target(
             (3, true) => E::Rgb16,
             (_, true) => E::Rgba16,
         };
+        // Encoded while the frame rendered (the same bytes as below).
+        let streamed = stream
+            .filter(|s| {
+                let plain: Option<Vec<usize>> = planes.iter().take(nout).map(|p| p.src).collect();
+                !sixteen
+                    && znorm.is_none()
+                    && s.size() == (w, h)
+                    && plain.as_ref() == Some(&s.layout.src)
+                    && s.layout.q == q
+            })
+            .and_then(PngStream::finish);
+        if let Some(zlib) = streamed {
+            return write_png_zlib(path, w, h, nout, &zlib)
+                .map_err(|d| d.maybe_label(t.span, "this Display"));
+        }
         // Rows in parallel: this runs after the frame, on the critical path.
         let bpv = if sixteen { 2 } else { 1 };
         let mut bytes = vec![0u8; w * h * nout * bpv];
@@ -725,6 +825,39 @@ fn encode(
                     .write_image(bytes, w as u32, h as u32, ct),
             };
         r.map_err(|e| e.to_string())
+    })
+}
+
+/// An 8-bit PNG of `channels` samples a pixel from its zlib stream (see [`super::stream`]):
+/// the header the `png` crate writes, the stream as one IDAT chunk, the end chunk.
+fn write_png_zlib(
+    path: &Path,
+    w: usize,
+    h: usize,
+    channels: usize,
+    zlib: &[u8],
+) -> Result<(), Diag> {
+    use png::ColorType as C;
+    let color = match channels {
+        1 => C::Grayscale,
+        2 => C::GrayscaleAlpha,
+        3 => C::Rgb,
+        _ => C::Rgba,
+    };
+    write_atomically(path, |f| {
+        let mut e = png::Encoder::new(f, w as u32, h as u32);
+        e.set_color(color);
+        e.set_depth(png::BitDepth::Eight);
+        e.set_compression(png::Compression::Fast);
+        e.set_filter(png::Filter::Adaptive);
+        let write = || -> Result<(), png::EncodingError> {
+            let mut wr = e.write_header()?;
+            for chunk in zlib.chunks((u32::MAX >> 1) as usize) {
+                wr.write_chunk(png::chunk::IDAT, chunk)?;
+            }
+            wr.finish()
+        };
+        write().map_err(|e| e.to_string())
     })
 }
 
@@ -970,6 +1103,132 @@ mod tests {
 
     fn q8(v: f32) -> u8 {
         (v * 255.0).round() as u8
+    }
+
+    /// A `w` × `h` film of the standard channels: a smooth picture, or noise.
+    fn picture(w: usize, h: usize, noise: bool) -> Film {
+        let mut f = Film::new(w, h, Film::standard_channels(&[]));
+        let mut seed = 12345u32;
+        for y in 0..h {
+            for x in 0..w {
+                let mut v = [0f32; 5];
+                for (k, v) in v.iter_mut().enumerate() {
+                    seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+                    *v = if noise {
+                        (seed >> 8) as f32 / (1u32 << 24) as f32
+                    } else {
+                        ((x * (k + 1) + 3 * y) % 97) as f32 / 96.0 * 1.1 - 0.05
+                    };
+                }
+                f.pixel_mut(x, y).copy_from_slice(&v);
+            }
+        }
+        f
+    }
+
+    /// The display's file written from streams fed `f` in bands, and from the film alone.
+    fn streamed_and_whole(f: &Film, o: &Options, dir: &Path) -> (Vec<u8>, Vec<u8>) {
+        let d = Diagnostics::new();
+        let mut streams = plan_streams(o, None, f.channel_names.clone(), f.width, f.height);
+        assert!(streams.any(), "{:?} streams", o.displays[0].mode);
+        use super::super::stream::RowSink;
+        let mut y = 0;
+        for band in [0, 1, 5, 2, 7, 100] {
+            let y1 = (y + band).min(f.height);
+            streams.rows(f, y, y1);
+            y = y1;
+        }
+        let out = dir.join("out.png");
+        write_displays_streamed(f, o, &d, Some(&out), None, streams).unwrap();
+        let a = std::fs::read(&out).unwrap();
+        write_displays(f, o, &d, Some(&out)).unwrap();
+        (a, std::fs::read(&out).unwrap())
+    }
+
+    #[test]
+    fn streamed_png_is_byte_identical_to_the_whole_image_path() {
+        let dir = tmpdir("stream");
+        let smooth = picture(37, 23, false);
+        for mode in ["rgba", "rgb", "a", "ra"] {
+            for dither in [0.0, 0.5] {
+                let mut o = opts(vec![display(&dir.join("x.png"), "png", mode)]);
+                o.quantize_rgba.dither = dither;
+                let (a, b) = streamed_and_whole(&smooth, &o, &dir);
+                assert!(a == b, "mode {mode}, dither {dither}");
+                // The stream itself was used (not the fallback from the film).
+                let mut s = plan_streams(&o, None, smooth.channel_names.clone(), 37, 23);
+                use super::super::stream::RowSink;
+                s.rows(&smooth, 0, 23);
+                let ps = s.displays.pop().flatten().unwrap();
+                assert!(ps.finish().is_some(), "mode {mode}");
+            }
+        }
+        // Exposure and the background imager are applied band by band.
+        let mut o = opts(vec![display(&dir.join("x.png"), "png", "rgba")]);
+        o.exposure = [1.5, 2.2];
+        o.imager = Some(ShaderRef {
+            name: "background".into(),
+            params: ParamList::default(),
+            span: Span::default(),
+            world_from_shader: glam::Mat4::IDENTITY,
+        });
+        let (a, b) = streamed_and_whole(&smooth, &o, &dir);
+        assert!(a == b, "exposure and background");
+        // Noise does not compress: the png crate stores it, and so does the fallback.
+        let noise = picture(64, 9, true);
+        let o = opts(vec![display(&dir.join("x.png"), "png", "rgb")]);
+        let (a, b) = streamed_and_whole(&noise, &o, &dir);
+        assert!(a == b, "noise");
+        let mut s = plan_streams(&o, None, noise.channel_names.clone(), 64, 9);
+        use super::super::stream::RowSink;
+        s.rows(&noise, 0, 9);
+        assert!(
+            s.displays.pop().flatten().unwrap().finish().is_none(),
+            "stored"
+        );
+        let img = image::open(dir.join("out.png")).unwrap().to_rgb8();
+        assert_eq!(img.get_pixel(3, 2)[1], q8(noise.pixel(3, 2)[1]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn only_8_bit_png_of_whole_films_stream() {
+        let names = Film::standard_channels(&[]);
+        let plan = |o: &Options| plan_streams(o, None, names.clone(), 8, 8).any();
+        let p = PathBuf::from("x.png");
+        assert!(plan(&opts(vec![display(&p, "png", "rgb")])));
+        assert!(!plan(&opts(vec![display(&p, "png", "z")])));
+        assert!(!plan(&opts(vec![display(
+            &PathBuf::from("x.tif"),
+            "tiff",
+            "rgb"
+        )])));
+        assert!(!plan(&opts(vec![display(
+            &PathBuf::from("x.exr"),
+            "exr",
+            "rgb"
+        )])));
+        let mut o = opts(vec![display(&p, "png", "rgb")]);
+        o.quantize_rgba.max = 65535.0;
+        o.quantize_rgba.one = 65535.0;
+        assert!(!plan(&o), "16 bits");
+        let mut o = opts(vec![display(&p, "png", "rgb")]);
+        o.imager = Some(ShaderRef {
+            name: "sepia".into(),
+            params: ParamList::default(),
+            span: Span::default(),
+            world_from_shader: glam::Mat4::IDENTITY,
+        });
+        assert!(
+            !plan(&o),
+            "an imager shader changes the film after the render"
+        );
+        // A stream missing rows is not used.
+        let f = picture(8, 8, false);
+        let mut s = plan_streams(&opts(vec![display(&p, "png", "rgb")]), None, names, 8, 8);
+        use super::super::stream::RowSink;
+        s.rows(&f, 0, 7);
+        assert!(s.displays.pop().flatten().unwrap().finish().is_none());
     }
 
     #[test]

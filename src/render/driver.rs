@@ -38,6 +38,7 @@ use super::hider::{
 use super::sampler::mix64;
 use super::stats::{Phase, PhaseClock, Stage, Stats};
 use super::GridShader;
+use crate::film::stream::RowSink;
 use crate::film::{DepthFilter as FilmDepthFilter, Film, SampleBuffer};
 
 /// Default bucket size in pixels (`Option "limits" "bucketsize"` overrides).
@@ -75,6 +76,18 @@ pub fn render_frame(
     opts: &RenderOptions,
     diags: &Diagnostics,
 ) -> Film {
+    render_frame_rows(scene, shader, opts, None, diags)
+}
+
+/// [`render_frame`], handing `rows` each band of finished scanlines (in order, scanline 0
+/// first, whole-image coordinates) while later rows still render.
+pub fn render_frame_rows(
+    scene: &Scene,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    rows: Option<&mut (dyn RowSink + Send)>,
+    diags: &Diagnostics,
+) -> Film {
     let mut options = effective_options(&scene.options, opts);
     super::limits::apply_frame_limits(&mut options, diags);
     check_options(&options, diags);
@@ -99,6 +112,7 @@ pub fn render_frame(
             Surfaces::Lazy(&make),
             shader,
             opts,
+            rows,
             diags,
         )
     })
@@ -828,6 +842,21 @@ pub fn render_surfaces(
     opts: &RenderOptions,
     diags: &Diagnostics,
 ) -> Film {
+    render_surfaces_rows(scene, options, camera, surfaces, shader, opts, None, diags)
+}
+
+/// [`render_surfaces`], handing `rows` the finished scanlines as [`render_frame_rows`] does.
+#[allow(clippy::too_many_arguments)]
+pub fn render_surfaces_rows(
+    scene: &Scene,
+    options: &Options,
+    camera: &Camera,
+    surfaces: Vec<Vec<Box<dyn Surface>>>,
+    shader: &dyn GridShader,
+    opts: &RenderOptions,
+    rows: Option<&mut (dyn RowSink + Send)>,
+    diags: &Diagnostics,
+) -> Film {
     run_in_pool(opts, diags, || {
         render_inner(
             scene,
@@ -836,6 +865,7 @@ pub fn render_surfaces(
             Surfaces::Built(surfaces),
             shader,
             opts,
+            rows,
             diags,
         )
     })
@@ -865,6 +895,7 @@ fn run_in_pool<T: Send>(
     run()
 }
 
+#[allow(clippy::too_many_arguments)]
 fn render_inner(
     scene: &Scene,
     options: &Options,
@@ -872,6 +903,7 @@ fn render_inner(
     surfaces: Surfaces,
     shader: &dyn GridShader,
     opts: &RenderOptions,
+    mut rows_out: Option<&mut (dyn RowSink + Send)>,
     diags: &Diagnostics,
 ) -> Film {
     let wall = Instant::now();
@@ -1237,6 +1269,9 @@ fn render_inner(
     // Hidden rows still needed by a row to filter, oldest first.
     let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
     let mut next_filter = 0usize;
+    // Scanlines handed to `rows_out`, and scanlines final in the film.
+    let first_line = buckets.crop.y0.max(0) as usize;
+    let (mut sent, mut finished) = (first_line, first_line);
     for row in 0..buckets.rows {
         // Hide this row's buckets in parallel (each prepared for the filter at once).
         let film_ref: &Film = &film;
@@ -1295,14 +1330,28 @@ fn render_inner(
                 .collect()
         };
         // The next row's surfaces are split, diced and shaded alongside (they only add
-        // grids, which no bucket of this row needs), so neither runs alone on a few items.
-        let (bufs, next) = if row + 1 < buckets.rows {
-            rayon::join(hide_row, || {
-                process(row + 1, &mut pending, &mut pending_prims)
-            })
-        } else {
-            (hide_row(), Vec::new())
+        // grids, which no bucket of this row needs), so neither runs alone on a few items;
+        // so are the scanlines filtered last time encoded for output (a serial task, which
+        // the other thread takes when it has nothing else).
+        let rows_out = &mut rows_out;
+        let encode = || {
+            if let Some(out) = rows_out.as_deref_mut() {
+                out.rows(film_ref, sent, finished);
+            }
         };
+        let (bufs, (next, ())) = rayon::join(hide_row, || {
+            rayon::join(
+                || {
+                    if row + 1 < buckets.rows {
+                        process(row + 1, &mut pending, &mut pending_prims)
+                    } else {
+                        Vec::new()
+                    }
+                },
+                encode,
+            )
+        });
+        sent = finished;
         clock = stats.phase(Phase::Rows, clock);
         kept.extend(next);
         hidden.push_back((row, bufs));
@@ -1310,6 +1359,7 @@ fn render_inner(
         // still in the caches.
         while next_filter + ky <= row {
             filter_row(&mut film, next_filter, &mut hidden);
+            finished = buckets.rect(0, next_filter).y1.max(0) as usize;
             next_filter += 1;
         }
         clock = stats.phase(Phase::Filter, clock);
@@ -1336,9 +1386,14 @@ fn render_inner(
     }
     while next_filter < buckets.rows {
         filter_row(&mut film, next_filter, &mut hidden);
+        finished = buckets.rect(0, next_filter).y1.max(0) as usize;
         next_filter += 1;
     }
     clock = stats.phase(Phase::Filter, clock);
+    // The last rows' scanlines (the frame's only serial encoding).
+    if let Some(out) = rows_out {
+        out.rows(&film, sent, finished);
+    }
     for (_, hs) in hidden.drain(..) {
         hs.iter().for_each(|h| stats.free(h.bytes()));
     }
@@ -1594,6 +1649,69 @@ mod tests {
                 bits(&a) == bits(&b),
                 "threads {threads}, bucket {size:?} differ"
             );
+        }
+    }
+
+    #[test]
+    fn finished_scanlines_are_handed_out_in_order_while_rendering() {
+        /// Keeps a copy of every band as it was when handed out.
+        struct Copies(Vec<(usize, usize, Vec<u32>)>);
+        impl RowSink for Copies {
+            fn rows(&mut self, film: &Film, y0: usize, y1: usize) {
+                let n = film.width * film.channels();
+                let bits = film.data[y0 * n..y1 * n].iter().map(|v| v.to_bits());
+                self.0.push((y0, y1, bits.collect()));
+            }
+        }
+        let (s, quads) = busy_scene();
+        let options = effective_options(&s.options, &RenderOptions::default());
+        let camera = Camera::from_options(&options, s.camera_from_world, &s.coordinate_systems);
+        for (threads, size) in [(1, [16, 16]), (2, [7, 5]), (2, [64, 64]), (2, [48, 4])] {
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                ..Default::default()
+            };
+            let mut surfaces: Vec<Vec<Box<dyn Surface>>> =
+                (0..s.primitives.len()).map(|_| Vec::new()).collect();
+            for q in &quads {
+                surfaces[q.prim].push(Box::new(q.clone()));
+            }
+            let mut copies = Copies(Vec::new());
+            let diags = Diagnostics::new();
+            let film = render_surfaces_rows(
+                &s,
+                &options,
+                &camera,
+                surfaces,
+                &DefaultShader,
+                &opts,
+                Some(&mut copies),
+                &diags,
+            );
+            let n = film.width * film.channels();
+            let mut next = 0;
+            for (y0, y1, bits) in &copies.0 {
+                assert_eq!(
+                    *y0, next,
+                    "bands in order without gaps ({threads}, {size:?})"
+                );
+                let now: Vec<u32> = film.data[y0 * n..y1 * n]
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect();
+                assert!(
+                    *bits == now,
+                    "scanlines {y0}..{y1} changed after they were handed out"
+                );
+                next = *y1;
+            }
+            assert_eq!(next, 36, "every scanline handed out");
+            // Rows are handed out as they finish, not all at the end: a band per bucket row
+            // but the last two (filtered together, the filter reaching one row down).
+            let bands = copies.0.iter().filter(|(a, b, _)| b > a).count();
+            let rows = 36usize.div_ceil(size[1] as usize);
+            assert_eq!(bands, rows.max(2) - 1, "{size:?}");
         }
     }
 

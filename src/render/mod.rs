@@ -21,7 +21,7 @@ pub mod stats;
 
 pub use crate::film::Film;
 pub use camera::{crop_region, Camera, PixelRect};
-pub use driver::{render_frame, render_surfaces, RenderOptions};
+pub use driver::{render_frame, render_frame_rows, render_surfaces, RenderOptions};
 pub use hider::{Aov, Hider, ShadedGrid};
 pub use stats::Stats;
 
