@@ -533,6 +533,14 @@ mod tests {
     }
 
     /// The published samples against their TIFF twins (skipped where they are absent).
+    /// The largest absolute difference between two sample arrays.
+    fn max_difference(a: &[f32], b: &[f32]) -> f32 {
+        a.iter()
+            .zip(b)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max)
+    }
+
     #[test]
     #[ignore]
     fn published_samples_match_their_tiff_twins() {
@@ -547,34 +555,19 @@ mod tests {
         let reference = super::super::image_in::read_image(&tif).unwrap();
         let l0 = &t.levels[0];
         assert_eq!((l0.width, l0.height), (reference.width, reference.height));
-        let diff = l0
-            .data
-            .iter()
-            .zip(&reference.data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let diff = max_difference(&l0.data, &reference.data);
         assert!(diff < 1e-6, "max difference {diff}");
         // mandrill.tx holds every tile coding, one Huffman tile among them.
         let t = decode(&std::fs::read(root.join("texture/mandrill.tx")).unwrap()).unwrap();
         let reference =
             super::super::image_in::read_image(&root.join("tifftexture/mandrill.tx")).unwrap();
-        let diff = t.levels[0]
-            .data
-            .iter()
-            .zip(&reference.data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let diff = max_difference(&t.levels[0].data, &reference.data);
         assert!(diff < 1e-6, "mandrill max difference {diff}");
         let ori = std::path::Path::new("/work/shared/fidelity/scenes/RMR/Shaders/TLShaders");
         let t = decode(&std::fs::read(ori.join("ori2.tx")).unwrap()).unwrap();
         let reference =
             super::super::image_in::read_image(&ori.join("../../st/ori2.tiff")).unwrap();
-        let diff = t.levels[0]
-            .data
-            .iter()
-            .zip(&reference.data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let diff = max_difference(&t.levels[0].data, &reference.data);
         assert!(diff < 1e-6, "ori2 max difference {diff}");
         let grid = decode(&std::fs::read(ori.join("grid2.tx")).unwrap()).unwrap();
         assert_eq!((grid.levels[0].width, grid.levels[0].nchan), (512, 3));
