@@ -1,7 +1,9 @@
 //! What arbor renders when a scene names something it cannot have, as the published scenes
 //! need: a missing texture map reads as white (Aqsis and Pixie do the same), and a missing
 //! surface shader is stood in for by `matte` (or `plastic`, `metal`) when its name or its
-//! parameters say it is one, so the scene keeps its lights, and by `defaultsurface` otherwise.
+//! parameters say it is one, so the scene keeps its lights, and by `defaultsurface`
+//! otherwise; a missing light shader by the standard light it resembles (`spotlight`,
+//! `pointlight`, `distantlight`, `ambientlight`).
 
 mod common;
 
@@ -244,4 +246,80 @@ fn a_map_named_with_other_letter_case_is_found() {
     let (log, px, _) = render(&dir, &rib, Some(("casemap", shader)));
     assert!(log.contains("mixedcase.tiff"), "{log}");
     assert!(px.iter().all(|&v| (95..=97).contains(&v)), "{:?}", &px[..8]);
+}
+
+/// A missing light shader is stood in for by the standard light its instance points to: here
+/// a cone (`coneangle`) makes it `spotlight`, so the plane is lit exactly as by `spotlight`
+/// itself. Left out (as Aqsis and Pixie leave it) the frame would be black.
+#[test]
+fn a_missing_light_shader_is_stood_in_for_by_the_light_it_resembles() {
+    let dir = common::scratch_dir("fallbacks_light");
+    let out = dir.join("out.png").display().to_string();
+    let scene = |light: &str| {
+        format!(
+            "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+             LightSource \"{light}\" 1 \"from\" [0 0 -4] \"to\" [0 0 0] \"intensity\" 16 \
+             \"coneangle\" 0.1 \"conedeltaangle\" 0.01\n\
+             Surface \"matte\"\n\
+             Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+        )
+    };
+    let (log, px, w) = render(&dir, &scene("studioKeyLight"), None);
+    assert!(
+        log.contains("light `studioKeyLight` is not available"),
+        "{log}"
+    );
+    assert!(log.contains("`spotlight` stands in"), "{log}");
+    let centre = px[(w / 2) * w + w / 2];
+    assert!(centre > 200, "centre {centre}");
+    assert_eq!(px[0], 0);
+    // The same picture as the standard spotlight given the same values.
+    let (_, reference, _) = render(&dir, &scene("spotlight"), None);
+    assert_eq!(px, reference);
+}
+
+/// A missing light whose name and parameters hint at nothing stays out, with the warning
+/// that names it; one whose name says ambient becomes `ambientlight`.
+#[test]
+fn a_missing_light_nothing_hints_at_stays_out() {
+    let dir = common::scratch_dir("fallbacks_light_out");
+    let out = dir.join("out.png").display().to_string();
+    let scene = |light: &str| {
+        format!(
+            "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+             LightSource \"{light}\" 1 \"intensity\" 0.5\n\
+             Surface \"matte\"\n\
+             Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+        )
+    };
+    let (log, px, w) = render(&dir, &scene("mysteryglow"), None);
+    assert!(log.contains("`mysteryglow` not found"), "{log}");
+    assert!(!log.contains("stands in"), "{log}");
+    assert_eq!(px[(w / 2) * w + w / 2], 0);
+    let (log, px, w) = render(&dir, &scene("myAmbientFill"), None);
+    assert!(log.contains("`ambientlight` stands in"), "{log}");
+    // matte under an ambient light of 0.5: Ka·0.5 = 0.5 → grey 128 (±1 for rounding).
+    let centre = px[(w / 2) * w + w / 2];
+    assert!((126..=129).contains(&centre), "centre {centre}");
+}
+
+/// A missing light whose instance gives Maya's `decay` exponent (Liquid's `liquidpoint`)
+/// keeps it: decay 0 is no falloff, so a plane 10 away is lit at the full intensity, where
+/// `pointlight`'s squared falloff would leave it black.
+#[test]
+fn a_missing_maya_light_keeps_its_decay() {
+    let dir = common::scratch_dir("fallbacks_light_decay");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         LightSource \"liquidpoint\" 1 \"intensity\" 0.5 \"float decay\" 0 \
+         \"from\" [0 0 -10]\n\
+         Surface \"matte\" \"Ka\" 0\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let (log, px, w) = render(&dir, &rib, None);
+    assert!(log.contains("`pointlight_decay` stands in"), "{log}");
+    // Kd · intensity · N·L = 1 · 0.5 · 1 at the centre: grey 128 (±1 for rounding).
+    let centre = px[(w / 2) * w + w / 2];
+    assert!((126..=129).contains(&centre), "centre {centre}");
 }

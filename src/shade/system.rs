@@ -333,6 +333,60 @@ impl<'a> ShadeSystem<'a> {
         Some((prog, s.clone()))
     }
 
+    /// A light shader that could not be had (not found, or broken) is stood in for by the
+    /// standard light its instance points to, with the parameters the two share (`intensity`,
+    /// `lightcolor`, `from`, `to`, the cone angles): `ambientlight` when its name says ambient,
+    /// `spotlight` when it gives a cone or its name says spot, `distantlight` when its name says
+    /// distant, directional or sun, `pointlight` when its name says point or it gives only a
+    /// position. Left out, as Aqsis and Pixie leave it, the scene it lit renders black where
+    /// its author's picture is lit (a studio's own `liquidspot`, an `uberlight` not shipped
+    /// with the scene). A light nothing hints at stays out. An instance giving Maya's `decay`
+    /// exponent gets `pointlight_decay`/`spotlight_decay`, which honour it.
+    fn stand_in_light(&self, s: &ShaderRef) -> Option<Arc<Program>> {
+        // Only for a shader that does not load: one of another kind stays an error.
+        if self
+            .library
+            .get(&s.name, self.sources, self.diags)
+            .is_some()
+        {
+            return None;
+        }
+        let given = |names: &[&str]| names.iter().any(|n| s.params.get(n).is_some());
+        let lower = s.name.to_ascii_lowercase();
+        let has = |words: &[&str]| words.iter().any(|w| lower.contains(w));
+        let name = if has(&["ambient"]) {
+            "ambientlight"
+        } else if given(&["coneangle", "conedeltaangle", "beamdistribution"]) || has(&["spot"]) {
+            "spotlight"
+        } else if has(&["distant", "direction", "sun"]) {
+            "distantlight"
+        } else if has(&["point"]) || given(&["from"]) {
+            "pointlight"
+        } else {
+            return None;
+        };
+        // Maya's lights (and their exporters' shaders) give a `decay` exponent, often 0: the
+        // variants with one keep such a light as bright at a distance as it was meant.
+        let name = match name {
+            "pointlight" if given(&["decay"]) => "pointlight_decay",
+            "spotlight" if given(&["decay"]) => "spotlight_decay",
+            n => n,
+        };
+        let prog = self.library.get(name, self.sources, self.diags)?;
+        self.diags.report(
+            Diag::warning(
+                "shade::stand-in",
+                format!(
+                    "light `{}` is not available: `{name}` stands in for it, with the \
+                     parameters they share",
+                    s.name
+                ),
+            )
+            .label(s.span, "named here"),
+        );
+        Some(prog)
+    }
+
     /// The surface of a primitive that names none: RISpec's `defaultsurface` (as PRMan, Aqsis
     /// and Pixie), or `plastic` in a frame written for BMRT, whose pictures of such primitives
     /// show plastic's highlight (its displacement demos `dented`, `stucco`, `background`).
@@ -859,7 +913,9 @@ impl<'a> ShadeSystem<'a> {
             .iter()
             .filter_map(|&li| {
                 let light = ctx.scene.lights.get(li)?;
-                let mut prog = self.program(&light.shader, ShaderKind::Light)?;
+                let mut prog = self
+                    .program(&light.shader, ShaderKind::Light)
+                    .or_else(|| self.stand_in_light(&light.shader))?;
                 let area = if light.area {
                     self.area_shape(ctx, li).map(|shape| {
                         // Shaders written for area lights read the light's surface point

@@ -360,7 +360,7 @@ impl ShaderLibrary {
         diags.report(
             Diag::warning(
                 "shade::missing",
-                format!("shader `{name}` not found: a surface falls back to `matte` or `plastic`, other kinds are left out"),
+                format!("shader `{name}` not found: a surface or light falls back to a standard one it resembles, other kinds are left out"),
             )
             .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
         );
