@@ -1030,3 +1030,26 @@ fn a_printed_nan_or_infinity_drops_its_request_with_a_warning() {
         Vec3::new(0.0, 0.0, 5.0)
     ));
 }
+
+#[test]
+fn quantize_of_a_named_display_variable_is_kept_for_that_mode() {
+    // Aqsis scenes quantize arbitrary display variables (`Quantize "N" 0 0 0 0` asks for
+    // floats); the name is not an error, and a later request for it replaces the earlier.
+    let b = build(
+        "Quantize \"N\" 255 0 255 0.5\nQuantize \"N\" 0 0 0 0\nQuantize \"rgba\" 65535 0 65535 0\n\
+         Display \"a.tif\" \"file\" \"rgba\"\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    b.clean();
+    let o = &b.one().options;
+    assert_eq!(o.quantize_named.len(), 1);
+    assert_eq!(o.quantize_named[0].0, "N");
+    assert_eq!(o.quantize_named[0].1.one, 0.0);
+    assert_eq!(o.quantize_named[0].1.dither, 0.0);
+    assert_eq!(o.quantize_rgba.one, 65535.0);
+    let b = build("Quantize \"\" 255 0 255 0.5\nWorldBegin\nWorldEnd\n");
+    assert!(
+        b.errors()[0].contains("empty quantizer name"),
+        "{:?}",
+        b.errors()
+    );
+}

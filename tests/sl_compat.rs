@@ -706,3 +706,21 @@ fn triples_are_indexed_like_comp_and_setcomp() {
         "{rendered}"
     );
 }
+
+#[test]
+fn a_bare_declaration_as_a_construct_body_stays_visible_after_it() {
+    // Published light shaders write `solar() vector Lt = normalize(-L);` and use `Lt` in the
+    // statements after it; Aqsis declares such a name in the enclosing scope.
+    compile_ok(
+        "light l() {\n  solar()\n  vector Lt = normalize(-L);\n  Cl = color(xcomp(Lt));\n}\n",
+    );
+    let (prog, _) = compile_ok("surface t() {\n  if (s >= 0) float k = 0.25;\n  Ci = k;\n}\n");
+    let (ci, _) = run(&prog, 3);
+    assert!(ci.iter().all(|c| *c == Vec3::splat(0.25)), "{ci:?}");
+    // A braced body still has its own scope.
+    let (_, rendered, err) = compile("surface f() { if (s >= 0) { float k = 1; } Ci = k; }\n");
+    assert!(
+        err && rendered.contains("unknown variable `k`"),
+        "{rendered}"
+    );
+}

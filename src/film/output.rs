@@ -469,6 +469,9 @@ fn select_planes(film: &Film, t: &Target, diags: &Diagnostics) -> Vec<Plane> {
 /// warnings for parameters nobody reads.
 fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quantize, Quantize) {
     let (mut qc, mut qz) = (opts.quantize_rgba, opts.quantize_z);
+    if let Some((_, q)) = opts.quantize_named.iter().find(|(n, _)| *n == t.mode) {
+        qc = *q;
+    }
     for p in t.params.iter() {
         match &*p.name {
             "quantize" => {

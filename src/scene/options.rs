@@ -369,12 +369,17 @@ impl Builder<'_> {
         match call.pos[0].str() {
             "rgba" => self.options.quantize_rgba = q,
             "z" => self.options.quantize_z = q,
-            other => self.bad_arg(
+            "" => self.bad_arg(
                 call,
                 0,
-                format!("unknown quantizer \"{other}\""),
-                "use \"rgba\" or \"z\"",
+                "empty quantizer name".into(),
+                "use \"rgba\", \"z\" or a display variable's name",
             ),
+            other => {
+                let named = &mut self.options.quantize_named;
+                named.retain(|(n, _)| n != other);
+                named.push((other.to_string(), q));
+            }
         }
     }
 

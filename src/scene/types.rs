@@ -256,6 +256,9 @@ pub struct Options {
     pub imager: Option<ShaderRef>,
     pub quantize_rgba: Quantize,
     pub quantize_z: Quantize,
+    /// `Quantize` for other display variables (Aqsis: `Quantize "N" 0 0 0 0`), applied to
+    /// displays of exactly that mode; later requests for a name replace earlier ones.
+    pub quantize_named: Vec<(String, Quantize)>,
     pub displays: Vec<Display>,
     pub hider: Hider,
     pub relative_detail: f32,
@@ -300,6 +303,7 @@ impl Default for Options {
                 max: 0.0,
                 dither: 0.0,
             },
+            quantize_named: Vec::new(),
             displays: Vec::new(),
             hider: Hider {
                 name: "hidden".into(),

@@ -1065,6 +1065,14 @@ impl<'a> Lowerer<'a> {
     }
 
     fn scoped_stmt(&mut self, s: &Stmt) {
+        // A bare declaration as the body (`solar() vector Lt = -L;`, written by shaders
+        // that meant the construct to cover the rest of the body) declares into the
+        // enclosing scope, as Aqsis's compiler does; a fresh scope would make the name
+        // vanish before anything could use it.
+        if matches!(s.kind, StmtKind::VarDecl { .. }) {
+            self.stmt(s);
+            return;
+        }
         self.push_scope();
         self.stmt(s);
         self.pop_scope();
