@@ -318,19 +318,26 @@ impl<'a> ShadeSystem<'a> {
         } else {
             "defaultsurface"
         };
+        let prog = self.stand_in(s, "surface", name)?;
+        Some((prog, s.clone()))
+    }
+
+    /// The standard shader `name` standing in for the `kind` shader `s` could not have, with
+    /// the warning that says so.
+    fn stand_in(&self, s: &ShaderRef, kind: &str, name: &str) -> Option<Arc<Program>> {
         let prog = self.library.get(name, self.sources, self.diags)?;
         self.diags.report(
             Diag::warning(
                 "shade::stand-in",
                 format!(
-                    "surface `{}` is not available: `{name}` stands in for it, with the \
+                    "{kind} `{}` is not available: `{name}` stands in for it, with the \
                      parameters they share",
                     s.name
                 ),
             )
             .label(s.span, "named here"),
         );
-        Some((prog, s.clone()))
+        Some(prog)
     }
 
     /// A light shader that could not be had (not found, or broken) is stood in for by the
@@ -372,18 +379,7 @@ impl<'a> ShadeSystem<'a> {
             "spotlight" if given(&["decay"]) => "spotlight_decay",
             n => n,
         };
-        let prog = self.library.get(name, self.sources, self.diags)?;
-        self.diags.report(
-            Diag::warning(
-                "shade::stand-in",
-                format!(
-                    "light `{}` is not available: `{name}` stands in for it, with the \
-                     parameters they share",
-                    s.name
-                ),
-            )
-            .label(s.span, "named here"),
-        );
+        let prog = self.stand_in(s, "light", name)?;
         Some(prog)
     }
 
