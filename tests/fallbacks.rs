@@ -323,3 +323,22 @@ fn a_missing_maya_light_keeps_its_decay() {
     let centre = px[(w / 2) * w + w / 2];
     assert!((126..=129).contains(&centre), "centre {centre}");
 }
+
+/// A missing light whose instance names a picture shaping its beam (a blocker, slide or
+/// gobo map) stays out: a plain spotlight would light what the map darkens.
+#[test]
+fn a_missing_light_shaped_by_a_map_stays_out() {
+    let dir = common::scratch_dir("fallbacks_light_map");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         LightSource \"blockerspotlight\" 1 \"from\" [0 0 -4] \"to\" [0 0 0] \"intensity\" 16 \
+         \"coneangle\" 0.1 \"string shadowname\" [\"\"] \"string blockername\" \"star.tx\"\n\
+         Surface \"matte\"\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let (log, px, w) = render(&dir, &rib, None);
+    assert!(log.contains("`blockerspotlight` not found"), "{log}");
+    assert!(!log.contains("stands in"), "{log}");
+    assert_eq!(px[(w / 2) * w + w / 2], 0);
+}

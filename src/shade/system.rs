@@ -347,7 +347,8 @@ impl<'a> ShadeSystem<'a> {
     /// distant, directional or sun, `pointlight` when its name says point or it gives only a
     /// position. Left out, as Aqsis and Pixie leave it, the scene it lit renders black where
     /// its author's picture is lit (a studio's own `liquidspot`, an `uberlight` not shipped
-    /// with the scene). A light nothing hints at stays out. An instance giving Maya's `decay`
+    /// with the scene). A light nothing hints at, or one whose instance names a map that shapes
+    /// its beam, stays out. An instance giving Maya's `decay`
     /// exponent gets `pointlight_decay`/`spotlight_decay`, which honour it.
     fn stand_in_light(&self, s: &ShaderRef) -> Option<Arc<Program>> {
         // Only for a shader that does not load: one of another kind stays an error.
@@ -356,6 +357,17 @@ impl<'a> ShadeSystem<'a> {
             .get(&s.name, self.sources, self.diags)
             .is_some()
         {
+            return None;
+        }
+        // A light shaped by a picture (a slide, gobo or blocker map; shadow maps aside) stays
+        // out: a plain light would flood what the map darkens (the light-blocker paper's star
+        // blocker, SSIM 0.94 left out, 0.69 as a spotlight).
+        let names_a_file = |v: &String| std::path::Path::new(v).extension().is_some();
+        let shaped = s.params.iter().any(|p| {
+            !p.name.to_ascii_lowercase().contains("shadow")
+                && p.data.strings().iter().any(names_a_file)
+        });
+        if shaped {
             return None;
         }
         let given = |names: &[&str]| names.iter().any(|n| s.params.get(n).is_some());
