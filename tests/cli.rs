@@ -1,6 +1,8 @@
 //! The `arbor` command as a user runs it: exit codes, diagnostics on stderr, files written
 //! (or not) — through the real binary.
 
+mod common;
+
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -9,11 +11,8 @@ fn arbor() -> Command {
     Command::new(env!("CARGO_BIN_EXE_arbor"))
 }
 
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmpdir(name: &str) -> common::Scratch {
+    common::scratch(&format!("cli-{name}"))
 }
 
 fn run_stdin(args: &[&str], input: &str, dir: &PathBuf) -> (i32, String) {

@@ -7,6 +7,8 @@
 //! with rgbaz and with output variables); missing tiles, tiles of another size and tiles
 //! rendered with other settings are errors with a diagnostic, and leave no picture behind.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -14,11 +16,8 @@ fn arbor() -> Command {
     Command::new(env!("CARGO_BIN_EXE_arbor"))
 }
 
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-farm-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmpdir(name: &str) -> common::Scratch {
+    common::scratch(&format!("farm-{name}"))
 }
 
 /// A shader with two output variables (a colour and a float).

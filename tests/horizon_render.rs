@@ -2,16 +2,16 @@
 //! found on the texture search path, and the `horizon()` built-in finds `.hzn` names on the
 //! texture search path (`Option "searchpath" "texture"`) like texture() does.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 
 use arbor::diag::{Diagnostics, Severity, SourceMap};
 use arbor::pipeline::{render_paths, Settings};
 use arbor::texture::horizon::{read_height_image, HorizonTable};
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-hzn-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> common::Scratch {
+    common::scratch(&format!("hzn-{name}"))
 }
 
 fn render(dir: &Path, rib: &str) -> Diagnostics {

@@ -2,6 +2,8 @@
 //! Every answer is checked, including a diagnostic that appears when a typo is made and goes
 //! when it is fixed, and the server surviving malformed messages and documents.
 
+mod common;
+
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -133,11 +135,12 @@ fn is_diag_for(n: &Value, uri: &str) -> bool {
     n["method"] == "textDocument/publishDiagnostics" && n["params"]["uri"] == uri
 }
 
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-lsp-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d.canonicalize().unwrap()
+/// A scratch folder (removed when the guard drops) and its canonical path, which the server
+/// reports in URIs.
+fn tmpdir(name: &str) -> (common::Scratch, PathBuf) {
+    let guard = common::scratch(&format!("lsp-{name}"));
+    let path = guard.canonicalize().unwrap();
+    (guard, path)
 }
 
 fn uri(p: &Path) -> String {
@@ -196,7 +199,7 @@ fn messages(diags: &[Value]) -> String {
 
 #[test]
 fn an_editor_session_over_stdio() {
-    let dir = tmpdir("session");
+    let (_guard, dir) = tmpdir("session");
     std::fs::write(dir.join("util.h"), UTIL_H).unwrap();
     std::fs::write(dir.join("stripes.sl"), STRIPES_SL).unwrap();
     std::fs::write(dir.join("scene.rib"), SCENE_RIB).unwrap();
@@ -546,7 +549,7 @@ fn an_editor_session_over_stdio() {
 
 #[test]
 fn malformed_requests_and_documents_never_crash_the_server() {
-    let dir = tmpdir("malformed");
+    let (_guard, dir) = tmpdir("malformed");
     let mut c = Client::start(&dir);
     // Before initialize: an error, not a crash.
     let r = c.request("textDocument/hover", at("file:///x.sl", 0, 0));
@@ -637,7 +640,7 @@ fn malformed_requests_and_documents_never_crash_the_server() {
 
 #[test]
 fn end_of_input_without_exit_ends_the_server() {
-    let dir = tmpdir("eof");
+    let (_guard, dir) = tmpdir("eof");
     let mut c = Client::start(&dir);
     c.request("initialize", json!({"capabilities": {}}));
     drop(c.stdin);

@@ -6,6 +6,8 @@
 //! ×10 difference image are written under `target/golden-failures/`. `UPDATE_GOLDEN=1`
 //! rewrites the references (commit them only when the change is intended).
 
+mod common;
+
 use std::path::PathBuf;
 
 use arbor::diag::{Diagnostics, SourceMap};
@@ -308,8 +310,7 @@ fn golden_quadrics_and_polygons() {
 /// Renders a 16 × 16 orthographic frame of a red polygon at `polygon` (RIB point list) under
 /// the imager `name`, whose source is written to a scratch shader folder.
 fn render_with_imager(name: &str, source: &str, polygon: &str) -> (Vec<Film>, String, bool) {
-    let dir = std::env::temp_dir().join(format!("arbor-imager-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch(&format!("imager-{name}"));
     std::fs::write(dir.join(format!("{name}.sl")), source).unwrap();
     let settings = Settings {
         shader_paths: vec![dir.display().to_string()],

@@ -2,6 +2,8 @@
 //! (options, transforms, attributes, lights, primitives, objects, archives, frames,
 //! conditionals) and that each malformed input gives one clear diagnostic.
 
+mod common;
+
 use arbor::diag::{Diagnostics, Severity, SourceMap};
 use arbor::rib::parse_bytes;
 use arbor::scene::{build_scenes, BuildContext, Class, Geometry, ParamType, Projection, Scene};
@@ -434,7 +436,7 @@ FrameEnd
 
 #[test]
 fn read_archive_from_disk_with_cycle_detection() {
-    let dir = std::env::temp_dir().join(format!("arbor-scene-test-{}", std::process::id()));
+    let dir = common::scratch("scene-test");
     let sub = dir.join("parts");
     std::fs::create_dir_all(&sub).unwrap();
     std::fs::write(
@@ -459,7 +461,7 @@ fn read_archive_from_disk_with_cycle_detection() {
     let diags = Diagnostics::new();
     let reqs = arbor::rib::read_path(&main, &sources, &diags).unwrap();
     let mut ctx = BuildContext::new(&sources, &diags);
-    ctx.base_dir = Some(dir.clone());
+    ctx.base_dir = Some(dir.to_path_buf());
     let scenes = build_scenes(reqs, &ctx);
     let errs: Vec<String> = diags
         .snapshot()
@@ -478,7 +480,6 @@ fn read_archive_from_disk_with_cycle_detection() {
         *scenes[0].primitives[1].geometry,
         Geometry::Disk { .. }
     ));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

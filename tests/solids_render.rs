@@ -2,6 +2,8 @@
 //! analytic spheres: coverage and depth of differences, intersections, unions and nested
 //! solids, and the cut faces' normals (a shader paints N·I < 0 green, otherwise red).
 
+mod common;
+
 use arbor::diag::{Diagnostics, SourceMap};
 use arbor::film::Film;
 use arbor::pipeline::{render_text, Settings};
@@ -13,13 +15,8 @@ const PIX: f32 = 3.0 / N as f32;
 const FACING: &str = "surface facing() {\n  Oi = Os;\n  Ci = Oi * ((N . I < 0) ? color(0, 1, 0) : color(1, 0, 0));\n}\n";
 
 fn render(world: &str) -> Film {
-    let dir = std::env::temp_dir().join(format!("arbor-solids-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    // Tests run in parallel and share the folder: write a private copy and rename it into
-    // place, so no test ever reads a half-written shader.
-    let tmp = dir.join(format!("facing.sl.{:?}", std::thread::current().id()));
-    std::fs::write(&tmp, FACING).unwrap();
-    std::fs::rename(&tmp, dir.join("facing.sl")).unwrap();
+    let dir = common::scratch("solids");
+    std::fs::write(dir.join("facing.sl"), FACING).unwrap();
     let text = format!(
         "Format {N} {N} 1\nPixelSamples 4 4\nPixelFilter \"box\" 1 1\nProjection \"orthographic\"\n\
          ScreenWindow -1.5 1.5 -1.5 1.5\nShadingRate 0.25\nTranslate 0 0 5\nWorldBegin\n\

@@ -3,7 +3,9 @@
 //! (finite differences), and a known tilt of the normal through the shading language's
 //! bump(); SAT lookups through the texture system return exact box averages.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 
 use arbor::diag::{Diagnostics, SourceMap};
 use arbor::pipeline::{render_paths, Settings};
@@ -14,10 +16,8 @@ use arbor::texture::image_in::Image;
 use arbor::texture::mipmap::{build_pyramid, Downsample, Wrap};
 use arbor::texture::TextureSystem;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-texbump-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> common::Scratch {
+    common::scratch(&format!("texbump-{name}"))
 }
 
 fn params(filter: &str) -> TextureParams {

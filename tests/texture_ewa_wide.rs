@@ -1,6 +1,8 @@
 //! EWA on long, wide footprints (a plane receding to the horizon over a 512² checker):
 //! the filtered value stays close to the exact box average of the footprint.
 
+mod common;
+
 use arbor::diag::Diagnostics;
 use arbor::shade::exec::{TextureLookup, TextureParams};
 use arbor::texture::make::{make_texture, MakeOptions};
@@ -17,8 +19,7 @@ fn checker(s: f32, t: f32) -> f32 {
 
 #[test]
 fn ewa_on_wide_footprints_tracks_the_footprint_average() {
-    let dir = std::env::temp_dir().join(format!("arbor-ewawide-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("ewawide");
     let png = dir.join("checker.png");
     image::GrayImage::from_fn(512, 512, |x, y| {
         let v = checker((x as f32 + 0.5) / 512.0, (y as f32 + 0.5) / 512.0);

@@ -2,7 +2,7 @@
 //! checkerboard plane receding to the horizon is much closer to a 16×16-supersampled
 //! reference when filtered (trilinear, EWA) than when point sampled.
 
-use std::path::PathBuf;
+mod common;
 
 use arbor::diag::Diagnostics;
 use arbor::shade::exec::{TextureLookup, TextureParams};
@@ -10,10 +10,8 @@ use arbor::texture::make::{make_texture, MakeOptions};
 use arbor::texture::mipmap::{Downsample, Wrap};
 use arbor::texture::TextureSystem;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-texfilter-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> common::Scratch {
+    common::scratch(&format!("texfilter-{name}"))
 }
 
 fn params(filter: &str) -> TextureParams {

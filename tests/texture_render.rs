@@ -2,7 +2,9 @@
 //! whose lit and shadowed pixels must match the occluder's projection; and a blurred cube
 //! environment whose values are continuous across face seams.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 
 use arbor::diag::{Diagnostics, SourceMap};
 use arbor::pipeline::{render_paths, Settings};
@@ -11,10 +13,8 @@ use arbor::texture::make::{make_cube, MakeOptions};
 use arbor::texture::TextureSystem;
 use glam::Vec3;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("arbor-texrender-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> common::Scratch {
+    common::scratch(&format!("texrender-{name}"))
 }
 
 /// Camera (or light) at height `h` looking straight down -y, image up = +z, orthographic

@@ -296,8 +296,11 @@ mod tests {
         for (i, v) in im.data.iter_mut().enumerate() {
             *v = (i % 1000) as f32;
         }
-        let dir = std::env::temp_dir().join(format!("arbor-cache-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("arbor-cache-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let p = dir.join("big.tex");
         format::write(
             &p,

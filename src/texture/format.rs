@@ -297,8 +297,11 @@ mod tests {
         for (i, v) in im.data.iter_mut().enumerate() {
             *v = i as f32;
         }
-        let dir = std::env::temp_dir().join(format!("arbor-fmt-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("arbor-fmt-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let p = dir.join("a.tex");
         let mats = Some(([1.0; 16], [2.0; 16]));
         write(

@@ -165,8 +165,11 @@ mod tests {
 
     #[test]
     fn png_gray16_and_rgba8_read_scaled() {
-        let dir = std::env::temp_dir().join(format!("arbor-imgin-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("arbor-imgin-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let p = dir.join("g16.png");
         let g = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(2, 1, vec![0, 65535])
             .unwrap();
@@ -228,14 +231,16 @@ mod tests {
             Some("periodic clamp")
         );
         assert_eq!(tiff_description(b"\x89PNG...."), None);
-        let dir = std::env::temp_dir().join(format!("arbor-imgin-wrap-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("arbor-imgin-wrap-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let p = dir.join("hint.tif");
         std::fs::write(&p, tiff_with_description(true, "periodic clamp")).unwrap();
         use super::super::mipmap::Wrap;
         assert_eq!(tiff_wrap_hint(&p), Some((Wrap::Periodic, Wrap::Clamp)));
         std::fs::write(&p, tiff_with_description(false, "the GIMP was here")).unwrap();
         assert_eq!(tiff_wrap_hint(&p), None);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -276,8 +276,11 @@ mod tests {
 
     #[test]
     fn requests_honour_filter_and_widths_and_make_bump_maps() {
-        let dir = std::env::temp_dir().join(format!("arbor-make-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("arbor-make-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         // One bright column (x = 8) in a 16 × 4 grey-level picture.
         let png = dir.join("line.png");
         image::GrayImage::from_fn(16, 4, |x, _| image::Luma([if x == 8 { 255 } else { 0 }]))

@@ -227,3 +227,36 @@ pub fn check_golden(name: &str, width: usize, height: usize, rgb: &[f32], tol: T
         );
     }
 }
+
+/// A scratch folder in the system temp folder that is removed with its contents when the value
+/// is dropped (at the end of the test, pass or fail), so test runs leave nothing behind.
+/// Derefs to its path.
+pub struct Scratch {
+    path: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+/// A new empty scratch folder whose name starts with `arbor-{prefix}-`.
+pub fn scratch(prefix: &str) -> Scratch {
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("arbor-{prefix}-"))
+        .tempdir()
+        .expect("create scratch folder");
+    Scratch {
+        path: dir.path().to_path_buf(),
+        _dir: dir,
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = PathBuf;
+    fn deref(&self) -> &PathBuf {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
