@@ -724,3 +724,19 @@ fn a_bare_declaration_as_a_construct_body_stays_visible_after_it() {
         "{rendered}"
     );
 }
+
+/// `faceforward(N, I)` judges the side by Ng (PRMan, Aqsis, VEX), so a bumped normal that
+/// tilts past the silhouette is not turned over onto the far side; with Nref given, Nref judges.
+/// Here Ng = I = +z (the back side is seen) and N is tilted so that N·I < 0.
+#[test]
+fn faceforward_of_two_arguments_judges_the_side_by_ng() {
+    let (prog, _) = compile_ok(
+        "surface ff() { normal Nb = normal(1, 0, -0.1); Ci = color(faceforward(Nb, I)); \
+         Oi = color(faceforward(Nb, I, Nb)); }",
+    );
+    let (ci, oi) = run(&prog, 3);
+    for (c, o) in ci.iter().zip(&oi) {
+        assert_eq!(*c, Vec3::new(-1.0, 0.0, 0.1), "flipped because I·Ng > 0");
+        assert_eq!(*o, Vec3::new(1.0, 0.0, -0.1), "kept because I·Nref < 0");
+    }
+}

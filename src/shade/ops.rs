@@ -569,6 +569,17 @@ pub fn deriv_t(x: &[Vec3], nu: usize, nv: usize, dir: usize, step: f32) -> Vec<V
     (0..x.len()).map(|i| Vec3::new(a[i], b[i], c[i])).collect()
 }
 
+/// `N` turned, if needed, to face against `I` as judged by `nref` (RISpec `faceforward`):
+/// flipped when `I` and `nref` point the same way; kept when they are perpendicular.
+#[inline]
+fn face_forward(n: Vec3, i: Vec3, nref: Vec3) -> Vec3 {
+    if i.dot(nref) > 0.0 {
+        -n
+    } else {
+        n
+    }
+}
+
 fn global_f(ex: &Exec, name: &str) -> f32 {
     ex.prog
         .global(name)
@@ -1236,30 +1247,26 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             out = Slot::VF((0..n).map(|i| a[i].cross(b[i]).length()).collect());
         }
         FaceForward2 => {
-            // The common two-argument form runs over slices (no per-point operand dispatch).
+            // The two-argument form decides the side by the geometric normal Ng, as PRMan,
+            // Aqsis and VEX do: a bumped N that tilts past the silhouette is kept, not flipped
+            // to the far side (which turned grazing bumps black). Where the shader has no Ng
+            // (lights, volumes) or Ng is zero, N itself is the reference; so it is when N
+            // and I are both uniform, whose result the compiler treats as uniform.
             let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            zip_tt(
-                &mut out,
-                n,
-                nn,
-                i_,
-                |nv, iv| if iv.dot(nv) < 0.0 { nv } else { -nv },
-            );
+            let ng = ex.prog.global("Ng").map(|g| ex.regs[g.reg as usize].t());
+            match ng.filter(|_| varying_any!()) {
+                Some(ng) => write_t(&mut out, n, true, |i| {
+                    let (nv, iv, gv) = (nn.at(i), i_.at(i), ng.at(i));
+                    face_forward(nv, iv, if gv == Vec3::ZERO { nv } else { gv })
+                }),
+                None => zip_tt(&mut out, n, nn, i_, |nv, iv| face_forward(nv, iv, nv)),
+            }
         }
         FaceForward3 => {
             let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            let nref = if f == FaceForward3 {
-                arg(ex, args, 2).t()
-            } else {
-                nn
-            };
+            let nref = arg(ex, args, 2).t();
             write_t(&mut out, n, varying_any!(), |i| {
-                let nv = nn.at(i);
-                if i_.at(i).dot(nref.at(i)) < 0.0 {
-                    nv
-                } else {
-                    -nv
-                }
+                face_forward(nn.at(i), i_.at(i), nref.at(i))
             });
         }
         Reflect => {

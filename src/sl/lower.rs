@@ -2348,6 +2348,12 @@ impl<'a> Lowerer<'a> {
                 }
             }
         }
+        if sig.f == Builtin::FaceForward2 {
+            // faceforward(N, I) judges the side by Ng, named or not.
+            if let Some(v) = self.lookup("Ng") {
+                self.mark_used(v.reg);
+            }
+        }
         for (i, (v, e)) in vals.iter().enumerate() {
             let (code, out) = codes
                 .get(i)
