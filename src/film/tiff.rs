@@ -1,5 +1,10 @@
 //! Uncompressed TIFF 6.0 writer for display output.
 //!
+//! Input: interleaved 8-bit, 16-bit or float samples of 1–4 channels, rows top to bottom.
+//! Output: one baseline TIFF image (chunky strips of about 64 KiB). Invariants: the pixel
+//! bytes are written unchanged (same picture bytes for any thread count or bucket size as
+//! the film they come from); a second or fourth channel is declared associated alpha.
+//!
 //! Why an own writer rather than the `image` crate's encoder: that encoder writes a fourth
 //! sample without an `ExtraSamples` tag, so readers must guess what it is, and many (PIL,
 //! ImageMagick) take it as unassociated alpha. A RenderMan display's colour is premultiplied by
