@@ -528,3 +528,72 @@ fn eye_space_is_camera_space() {
     );
     assert_eq!(common::film_mean(&film)[1], 1.0);
 }
+
+/// The value of TIFF tag `want` when it holds one SHORT (byte order from the header).
+fn tiff_short_tag(bytes: &[u8], want: u16) -> Option<u16> {
+    let le = bytes.get(..2)? == b"II";
+    let u16_at = |i: usize| {
+        let b = [bytes[i], bytes[i + 1]];
+        if le {
+            u16::from_le_bytes(b)
+        } else {
+            u16::from_be_bytes(b)
+        }
+    };
+    let ifd = {
+        let b = [bytes[4], bytes[5], bytes[6], bytes[7]];
+        (if le {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        }) as usize
+    };
+    (0..u16_at(ifd) as usize)
+        .map(|k| ifd + 2 + 12 * k)
+        .find(|&e| u16_at(e) == want)
+        .map(|e| u16_at(e + 8))
+}
+
+#[test]
+fn rgba_tiff_declares_its_premultiplied_alpha() {
+    // A see-through surface (BMRT's screen shaders: `Oi = d; Ci = Oi * ...`) leaves colour
+    // premultiplied by alpha, as RISpec has it. PRMan, BMRT and Aqsis mark such TIFFs
+    // ExtraSamples = 1 (associated alpha); without the tag, readers take straight alpha and
+    // show a half-covered pixel at a quarter of its brightness.
+    let dir = common::scratch_dir("tiff-alpha");
+    std::fs::write(
+        dir.join("halfwhite.sl"),
+        "surface halfwhite() { Oi = 0.5; Ci = Oi * color(1, 1, 1); }\n",
+    )
+    .unwrap();
+    let (rgba, rgb) = (dir.join("rgba.tif"), dir.join("rgb.tif"));
+    for (out, mode) in [(&rgba, "rgba"), (&rgb, "rgb")] {
+        let _ = std::fs::remove_file(out);
+        let rib = format!(
+            "Format 8 8 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"{mode}\"\n\
+             Projection \"perspective\" \"fov\" 40\nWorldBegin\nSurface \"halfwhite\"\n\
+             Polygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n",
+            out.display()
+        );
+        let (text, err) = common::render_scene_file(&dir, &rib);
+        assert!(!err, "{text}");
+    }
+    let bytes = std::fs::read(&rgba).unwrap();
+    assert_eq!(
+        tiff_short_tag(&bytes, 338),
+        Some(1),
+        "ExtraSamples: associated alpha"
+    );
+    assert_eq!(tiff_short_tag(&bytes, 277), Some(4));
+    let px = image::open(&rgba).unwrap().to_rgba8().get_pixel(4, 4).0;
+    for v in px {
+        assert!((127..=128).contains(&v), "premultiplied half white: {px:?}");
+    }
+    let bytes = std::fs::read(&rgb).unwrap();
+    assert_eq!(tiff_short_tag(&bytes, 338), None);
+    assert_eq!(tiff_short_tag(&bytes, 277), Some(3));
+    assert_eq!(
+        image::open(&rgb).unwrap().to_rgb8().get_pixel(4, 4).0,
+        [px[0], px[1], px[2]]
+    );
+}

@@ -8,7 +8,7 @@
 //! Modules: [`filter`] (the RenderMan filter functions), [`resolve`] (samples → [`Film`]
 //! pixels, depth filters), [`gather`] (the vectorised filter for the usual r g b a z
 //! buffer), [`quantize`] (exposure, background imager, quantize/dither), [`output`] (display
-//! drivers), [`zfile`] (arbor's depth-image format).
+//! drivers), [`tiff`] (the TIFF writer), [`zfile`] (arbor's depth-image format).
 
 pub mod filter;
 pub mod gather;
@@ -16,6 +16,7 @@ pub mod output;
 pub mod quantize;
 pub mod resolve;
 pub mod stream;
+pub mod tiff;
 pub mod zfile;
 
 pub use filter::{Filter, FilterKind};

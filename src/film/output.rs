@@ -819,15 +819,28 @@ fn encode(
     h: usize,
     ct: image::ExtendedColorType,
 ) -> Result<(), Diag> {
-    write_atomically(path, |f| {
-        let r =
-            match format {
-                Format::Png => image::codecs::png::PngEncoder::new(f)
-                    .write_image(bytes, w as u32, h as u32, ct),
-                _ => image::codecs::tiff::TiffEncoder::new(f)
-                    .write_image(bytes, w as u32, h as u32, ct),
+    use image::ExtendedColorType as E;
+    write_atomically(path, |f| match format {
+        Format::Png => image::codecs::png::PngEncoder::new(f)
+            .write_image(bytes, w as u32, h as u32, ct)
+            .map_err(|e| e.to_string()),
+        _ => {
+            // The colour types `write_target` picks for TIFF (never two channels).
+            let (n, sample) = match ct {
+                E::L8 => (1, super::tiff::Sample::U8),
+                E::La8 => (2, super::tiff::Sample::U8),
+                E::Rgb8 => (3, super::tiff::Sample::U8),
+                E::Rgba8 => (4, super::tiff::Sample::U8),
+                E::L16 => (1, super::tiff::Sample::U16),
+                E::La16 => (2, super::tiff::Sample::U16),
+                E::Rgb16 => (3, super::tiff::Sample::U16),
+                E::Rgba16 => (4, super::tiff::Sample::U16),
+                E::Rgb32F => (3, super::tiff::Sample::F32),
+                E::Rgba32F => (4, super::tiff::Sample::F32),
+                other => return Err(format!("no tiff layout for {other:?}")),
             };
-        r.map_err(|e| e.to_string())
+            super::tiff::write(f, bytes, w, h, n, sample)
+        }
     })
 }
 
