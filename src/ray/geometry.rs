@@ -35,30 +35,80 @@ const MAX_SIDE: usize = 24;
 /// Most splits along one path (then the surface dices at the clamped rate).
 const MAX_DEPTH: u32 = 20;
 
-/// What hit shading interpolates at a vertex of a ray grid, side by side: a hit reads the
-/// records of its micropolygon's four corners (two pairs of neighbours) instead of ten
-/// arrays four times over (the cache misses of hit shading, on large scenes).
+/// What hit shading interpolates at a vertex of a ray grid, side by side in one 64-byte
+/// cache line: a hit reads the records of its micropolygon's four corners (two pairs of
+/// neighbours: four lines, where the 88-byte records with colour and opacity took six to
+/// eight) instead of ten arrays four times over (the cache misses of hit shading, on large
+/// scenes). Colour and opacity are kept per grid when they are the same at every vertex
+/// (see [`Tint`]).
 #[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
 pub struct HitVertex {
     pub n: Vec3,
     pub ng: Vec3,
     pub dpdu: Vec3,
     pub dpdv: Vec3,
-    pub cs: Vec3,
-    pub os: Vec3,
     /// u, v, s, t.
     pub uvst: [f32; 4],
 }
 
+const _: () = assert!(std::mem::size_of::<HitVertex>() == 64);
+
+/// A ray grid's `Cs` or `Os`: one value when every vertex holds the same bits (the common
+/// case: a primitive's colour and opacity attributes), else per vertex in a scene-wide array
+/// ([`RayScene::cs`], [`RayScene::os`]) from the grid's first vertex on. A hit interpolates
+/// a uniform value with the same weights and the same sum as per-vertex values (so the same
+/// bits) without reading any vertex: a shadow ray meeting an opaque blocker reads no record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tint {
+    Uniform(Vec3),
+    /// Index of the grid's first vertex in the scene's array.
+    Varying(usize),
+}
+
+impl Tint {
+    /// Keeps `values` (one per vertex) as a [`Tint`], appending them to `all` unless uniform.
+    fn of(values: &[Vec3], all: &mut Vec<Vec3>) -> Tint {
+        let bits = |v: &Vec3| v.to_array().map(f32::to_bits);
+        match values.first() {
+            Some(v0) if values.iter().all(|v| bits(v) == bits(v0)) => Tint::Uniform(*v0),
+            _ => {
+                let first = all.len();
+                all.extend_from_slice(values);
+                Tint::Varying(first)
+            }
+        }
+    }
+
+    /// The value at a hit: vertices `k` of the grid (indices inside it) weighted by `w`, as
+    /// `v[k0]·w0 + v[k1]·w1 + v[k2]·w2 + v[k3]·w3` (uniform or not, the same expression).
+    #[inline]
+    pub fn at(&self, all: &[Vec3], k: &[usize; 4], w: &[f32; 4]) -> Vec3 {
+        let c = match *self {
+            Tint::Uniform(c) => [c; 4],
+            Tint::Varying(first) => {
+                let v = |i: usize| all.get(first + k[i]).copied().unwrap_or(Vec3::ZERO);
+                [v(0), v(1), v(2), v(3)]
+            }
+        };
+        c[0] * w[0] + c[1] * w[1] + c[2] * w[2] + c[3] * w[3]
+    }
+}
+
 /// One diced, displaced grid of ray geometry. Its per-vertex shading data (`n`, `ng`, `dpdu`,
-/// `dpdv`, `u`, `v`, `s`, `t`, `cs`, `os`) lives in [`RayScene::verts`] from `first` on (the
-/// grid's own arrays for them are emptied); `p` and the primitive variables stay.
+/// `dpdv`, `u`, `v`, `s`, `t`) lives in [`RayScene::verts`] from `first` on, its `cs` and
+/// `os` in [`RayGrid::cs`] and [`RayGrid::os`] (the grid's own arrays for them are emptied);
+/// `p` and the primitive variables stay.
 #[derive(Debug)]
 pub struct RayGrid {
     pub prim: usize,
     pub grid: Grid,
     /// Index of the grid's first vertex in [`RayScene::verts`].
     pub first: usize,
+    /// Surface colour at the vertices.
+    pub cs: Tint,
+    /// Opacity at the vertices (what a shadow ray reads of a hit).
+    pub os: Tint,
     /// Seen by reflection/refraction rays (`trace`, `gather`, `indirectdiffuse`).
     pub trace: bool,
     /// Blocks shadow rays (`transmission`, `shadow("raytrace")`, `occlusion`).
@@ -76,6 +126,10 @@ pub struct RayScene {
     pub grids: Vec<RayGrid>,
     /// Every grid's vertices' shading data (see [`RayGrid::first`]).
     pub verts: Vec<HitVertex>,
+    /// The per-vertex colours of grids whose colour varies (see [`Tint`]).
+    pub cs: Vec<Vec3>,
+    /// The per-vertex opacities of grids whose opacity varies (see [`Tint`]).
+    pub os: Vec<Vec3>,
     pub bvh: Bvh,
     /// Total micropolygons.
     pub micropolygons: usize,
@@ -238,6 +292,8 @@ pub fn build(
                 prim,
                 grid,
                 first: 0,
+                cs: Tint::Uniform(Vec3::ONE),
+                os: Tint::Uniform(Vec3::ONE),
                 trace,
                 shadows,
                 area_light: a.area_light,
@@ -260,10 +316,11 @@ pub fn build(
             ng: g.ng[k],
             dpdu: g.dpdu[k],
             dpdv: g.dpdv[k],
-            cs: g.cs[k],
-            os: g.os[k],
             uvst: [g.u[k], g.v[k], g.s[k], g.t[k]],
         }));
+        let n = g.p.len();
+        rg.cs = Tint::of(&g.cs[..n], &mut out.cs);
+        rg.os = Tint::of(&g.os[..n], &mut out.os);
         for v in [
             &mut g.n,
             &mut g.ng,
@@ -547,4 +604,44 @@ pub fn fill_cracks(
         }
     }
     added
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grid of one colour is kept once, a varying one per vertex (from the grid's first
+    /// vertex on); either way a hit's value is the per-vertex mix bit for bit.
+    #[test]
+    fn tints_keep_uniform_values_once_and_mix_as_per_vertex() {
+        let mut all = vec![Vec3::splat(9.0)]; // another grid's values before these
+        let same = vec![Vec3::new(0.3, 0.7, 0.1); 6];
+        let tint = Tint::of(&same, &mut all);
+        assert_eq!(tint, Tint::Uniform(Vec3::new(0.3, 0.7, 0.1)));
+        assert_eq!(all.len(), 1);
+        // Zero and negative zero are different bits: the grid varies.
+        let signed = [
+            Vec3::ZERO,
+            Vec3::new(-0.0, 0.0, 0.0),
+            Vec3::ZERO,
+            Vec3::ZERO,
+        ];
+        assert_eq!(Tint::of(&signed, &mut all), Tint::Varying(1));
+        assert_eq!(all.len(), 5);
+        let ramp: Vec<Vec3> = (0..6).map(|k| Vec3::splat(k as f32 * 0.1)).collect();
+        let varying = Tint::of(&ramp, &mut all);
+        assert_eq!(varying, Tint::Varying(5));
+        let mut h = 5u32;
+        for _ in 0..200 {
+            h = crate::pattern::hash::hash_u32(h);
+            let (a, b) = (crate::ray::unit(h), crate::ray::unit(h ^ 0x55aa));
+            let w = [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b];
+            let k = [1, 2, 4, 5];
+            let mix =
+                |v: &[Vec3]| v[k[0]] * w[0] + v[k[1]] * w[1] + v[k[2]] * w[2] + v[k[3]] * w[3];
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!(bits(tint.at(&all, &k, &w)), bits(mix(&same)));
+            assert_eq!(bits(varying.at(&all, &k, &w)), bits(mix(&ramp)));
+        }
+    }
 }

@@ -296,7 +296,7 @@ fn medium_of(
 }
 
 /// Asks for the fields of ray grid `grid` that a hit's gathering reads (its size, first
-/// record, primitive variables, visibility and media flags: a record of 456 bytes, so a few
+/// record, primitive variables, visibility and media flags: a record of about 490 bytes, so a few
 /// lines). No effect on results.
 #[inline(always)]
 fn prefetch_grid(rs: &RayScene, grid: u32) {
@@ -307,6 +307,8 @@ fn prefetch_grid(rs: &RayScene, grid: u32) {
         prefetch(&rg.trace);
         prefetch(&rg.media);
         prefetch(&rg.prim);
+        prefetch(&rg.cs);
+        prefetch(&rg.os);
     }
 }
 
@@ -385,7 +387,8 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
     }
     for (h, &(hit, (k, w), _)) in pts.iter().enumerate() {
         if let Some(&(ahead, (k, _), first)) = pts.get(h + AHEAD) {
-            // Its corners' records: two pairs of neighbours, 2 × 88 bytes each.
+            // Its corners' records: two pairs of neighbours, a cache line each. (Colours
+            // and opacities varying per vertex, rare, are not prefetched.)
             let v = rs.verts.as_ptr().wrapping_add(first);
             prefetch_span(v.wrapping_add(k[0]), 2);
             prefetch_span(v.wrapping_add(k[2]), 2);
@@ -407,8 +410,8 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
             c[0].uvst[e] * w[0] + c[1].uvst[e] * w[1] + c[2].uvst[e] * w[2] + c[3].uvst[e] * w[3]
         });
         [g.u[h], g.v[h], g.s[h], g.t[h]] = uvst;
-        g.cs[h] = m3(|v| v.cs);
-        g.os[h] = m3(|v| v.os);
+        g.cs[h] = rg.cs.at(&rs.cs, &k, &w);
+        g.os[h] = rg.os.at(&rs.os, &k, &w);
         for (dst, sv) in pv.iter_mut().zip(&src.primvars) {
             if dst.uniform || sv.uniform || sv.width() != dst.width() {
                 continue;
@@ -606,10 +609,9 @@ impl RayTracer for Tracer<'_, '_> {
                 return false;
             }
             let t = &mut out[rays[j]];
+            // (A grid of one opacity, the common case, reads no vertex here.)
             let (kk, w) = lerp_weights(rg, h.index, h.a, h.b);
-            let c = corners(&rs, rg, &kk);
-            let os = (c[0].os * w[0] + c[1].os * w[1] + c[2].os * w[2] + c[3].os * w[3])
-                .clamp(Vec3::ZERO, Vec3::ONE);
+            let os = rg.os.at(&rs.os, &kk, &w).clamp(Vec3::ZERO, Vec3::ONE);
             *t *= Vec3::ONE - os;
             // An opaque blocker (its interpolated opacity within rounding of 1) ends the
             // walk: nothing can pass.
