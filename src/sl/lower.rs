@@ -1512,14 +1512,41 @@ impl<'a> Lowerer<'a> {
                 );
                 self.ident("P", span)
             }
-            None if self.kind == ShaderKind::Imager
-                && matches!(name, "s" | "t" | "u" | "v" | "du" | "dv") =>
-            {
-                // RISpec gives imagers no surface parameters, but Aqsis' compiler accepts
-                // them (its `filmgrain` imager uses s and t).
+            None if self.kind == ShaderKind::Imager && matches!(name, "s" | "t") => {
+                // RISpec gives imagers no surface parameters, but Aqsis binds s and t to the
+                // pixel's raster position (its centre, x + 0.5 and y + 0.5): its `filmgrain`
+                // imager calls noise(s, t) for a grain that changes from pixel to pixel. That
+                // is arbor's imager `P` (the pixel centre in raster space), read by component.
+                let (key, comp): (&'static str, &str) = if name == "s" {
+                    ("s", "xcomp")
+                } else {
+                    ("t", "ycomp")
+                };
+                self.warn_extension(
+                    key,
+                    span,
+                    &format!(
+                        "`{name}` is not defined in imager shaders (RISpec); arbor reads the \
+                         pixel's raster {} (`{comp}(P)`), as Aqsis does",
+                        if name == "s" { "x" } else { "y" }
+                    ),
+                );
+                let call = Expr {
+                    kind: ExprKind::Call {
+                        name: comp.into(),
+                        name_span: span,
+                        args: vec![Expr {
+                            kind: ExprKind::Ident("P".into()),
+                            span,
+                        }],
+                    },
+                    span,
+                };
+                self.expr(&call, Some(BaseType::Float))
+            }
+            None if self.kind == ShaderKind::Imager && matches!(name, "u" | "v" | "du" | "dv") => {
+                // No renderer defines these for imagers (Aqsis binds only s and t).
                 let what: &'static str = match name {
-                    "s" => "s",
-                    "t" => "t",
                     "u" => "u",
                     "v" => "v",
                     "du" => "du",
