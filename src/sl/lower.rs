@@ -3101,6 +3101,24 @@ impl<'a> Lowerer<'a> {
                 &[BaseType::Point, BaseType::Point],
             ),
         };
+        // Aqsis's `occlusion(mapname, P, N, samples, …)` reads a set of shadow maps rendered
+        // around the scene; arbor traces the same hemisphere against the scene instead.
+        let map_form = matches!(name, "occlusion" | "indirectdiffuse")
+            && args.len() >= 4
+            && self.is_string_expr(&args[0]);
+        let args = if map_form {
+            self.warn_extension(
+                "occlusion map",
+                args[0].span,
+                &format!(
+                    "`{name}` from a map (Aqsis's `{name}(mapname, P, N, samples)`): arbor traces \
+                     rays against the scene and does not read the map"
+                ),
+            );
+            &args[1..]
+        } else {
+            args
+        };
         let mut regs = Vec::new();
         let mut k = 0;
         while k < args.len() && k < pos.len() {
@@ -3115,6 +3133,14 @@ impl<'a> Lowerer<'a> {
         // PRMan's occlusion/indirectdiffuse without a sample count: 16 (arbor's default).
         if regs.len() == 2 && pos.len() == 3 {
             regs.push(self.const_float(16.0));
+        }
+        // The map form's count is the map lookup's (Aqsis's examples pass 0 and give
+        // "samples" as a parameter): a constant below 1 means arbor's default.
+        if map_form && regs.len() == 3 {
+            let low = matches!(self.const_values.get(&regs[2]), Some(Const::F(x)) if *x < 1.0);
+            if low {
+                regs[2] = self.const_float(16.0);
+            }
         }
         if regs.len() != pos.len() {
             return self.error(
@@ -3143,6 +3169,16 @@ impl<'a> Lowerer<'a> {
             span,
         });
         t
+    }
+
+    /// Whether `e` is a string without lowering it: a literal, or a variable or parameter
+    /// declared `string`.
+    fn is_string_expr(&self, e: &Expr) -> bool {
+        match &e.kind {
+            ExprKind::Str(_) => true,
+            ExprKind::Ident(n) => self.lookup(n).is_some_and(|v| v.ty == BaseType::String),
+            _ => false,
+        }
     }
 
     /// The `"name", value` pairs of a call from argument `k` on: their registers in order.
