@@ -227,6 +227,44 @@ WorldEnd
 }
 
 #[test]
+fn occlusion_from_a_map_name_is_traced_like_prman_occlusion() {
+    // Aqsis's occlusion(mapname, P, N, samples, …): the map set is not read, the same
+    // hemisphere is traced. One warning says so; open plane 0, closed box 1.
+    let open = format!(
+        "Format 16 16 1\nProjection \"orthographic\"\nScreenWindow -1 1 -1 1\nWorldBegin\n\
+         Surface \"occlmaptest\"\n{}\nWorldEnd\n",
+        square(1000.0, 5.0)
+    );
+    let (film, diags, _) = common::render_rib_with(&open, &[shaders()], &RenderOptions::default());
+    let rgb = film_rgb(&film);
+    assert!(
+        rgb.iter().all(|&v| v == 0.0),
+        "open plane occluded: {:?}",
+        &rgb[..6]
+    );
+    let warned: Vec<_> = diags
+        .iter()
+        .filter(|(d, _)| d.message.contains("from a map"))
+        .collect();
+    assert_eq!(warned.len(), 1, "{diags:?}");
+    assert!(
+        diags.iter().all(|(d, _)| !d.message.contains("\"blur\"")),
+        "blur is the map lookup's, accepted quietly: {diags:?}"
+    );
+    let closed = format!(
+        "Format 16 16 1\nProjection \"orthographic\"\nScreenWindow -1 1 -1 1\nWorldBegin\n\
+         Surface \"occlmaptest\"\n{}\nWorldEnd\n",
+        CLOSED_BOX.join("\n")
+    );
+    let rgb = film_rgb(&render_rib(&closed, &[shaders()]));
+    assert!(
+        rgb.iter().all(|&v| (v - 1.0).abs() < 1e-6),
+        "closed box not occluded: {:?}",
+        &rgb[..6]
+    );
+}
+
+#[test]
 fn refraction_through_a_glass_slab_shifts_a_line_by_the_slab_formula() {
     // A slab of thickness t tilted by θ about y; a vertical white line at x = 0 behind it. A
     // ray crossing the slab leaves parallel to itself, displaced sideways by

@@ -368,8 +368,8 @@ fn ps_in_a_surface_shader_reads_p_with_a_warning() {
 }
 
 #[test]
-fn imager_surface_parameters_read_zero_with_a_warning() {
-    // Aqsis' filmgrain imager reads s and t.
+fn imager_surface_parameters_compile_with_a_warning() {
+    // Aqsis' filmgrain imager reads s and t (the pixel's raster position; film_conventions.rs).
     let (progs, diags) =
         compile_text("imager t() { float g = float noise(s, t); Ci = Ci * (1 - 0.1 * g); }");
     assert_eq!(progs.len(), 1, "{diags:?}");

@@ -477,22 +477,15 @@ fn display_quantizers(t: &Target, opts: &Options, diags: &Diagnostics) -> (Quant
             "quantize" => {
                 let f = p.data.floats();
                 if f.len() == 4 {
-                    if f[0] != 0.0 {
-                        diags.report(
-                            Diag::warning(
-                                "film::display",
-                                "display \"quantize\" zero offset is not supported; ignored",
-                            )
-                            .maybe_label(p.span, "here"),
-                        );
-                    }
                     qc = Quantize {
+                        zero: f[0],
                         one: f[1],
                         min: f[2],
                         max: f[3],
                         ..qc
                     };
                     qz = Quantize {
+                        zero: f[0],
                         one: f[1],
                         min: f[2],
                         max: f[3],
@@ -644,6 +637,7 @@ fn write_target(
             ));
         }
         q = Quantize {
+            zero: 0.0,
             one: 65535.0,
             min: 0.0,
             max: 65535.0,
@@ -1272,6 +1266,7 @@ mod tests {
         let p16 = dir.join("b.png");
         let mut o = opts(vec![display(&p16, "png", "rgb")]);
         o.quantize_rgba = Quantize {
+            zero: 0.0,
             one: 65535.0,
             min: 0.0,
             max: 65535.0,
@@ -1307,6 +1302,7 @@ mod tests {
 
         let mut o = opts(vec![display(&tf, "tiff", "rgba")]);
         o.quantize_rgba = Quantize {
+            zero: 0.0,
             one: 0.0,
             min: 0.0,
             max: 0.0,
@@ -1507,6 +1503,7 @@ mod tests {
         let p = dir.join("e.tif");
         let mut o = opts(vec![display(&p, "tiff", "rgba")]);
         o.quantize_rgba = Quantize {
+            zero: 0.0,
             one: 0.0,
             min: 0.0,
             max: 0.0,

@@ -84,10 +84,11 @@ pub fn dither_noise(x: u32, y: u32, channel: u32) -> f32 {
     (h >> 8) as f32 * (2.0 / 16_777_216.0) - 1.0
 }
 
-/// `Quantize`: clamp(round(one·v + dither·noise), min, max). Only meaningful when one ≠ 0.
+/// `Quantize`: clamp(round(zero + (one − zero)·v + dither·noise), min, max). Only meaningful
+/// when one ≠ 0. With zero = 0 (every RiQuantize) this is `one·v`, bit for bit.
 #[inline]
 pub fn quantize(v: f32, q: &Quantize, x: u32, y: u32, channel: u32) -> f32 {
-    let mut t = q.one * v;
+    let mut t = q.zero + (q.one - q.zero) * v;
     if q.dither != 0.0 {
         t += q.dither * dither_noise(x, y, channel);
     }
@@ -129,12 +130,12 @@ fn quantize_row_u8_body(v: &[f32], q: &Quantize, y: u32, channel: u32, out: &mut
     }
 }
 
-/// The loop of [`quantize_row_u8`], with `noise(x, one · v)` adding the dither.
+/// The loop of [`quantize_row_u8`], with `noise(x, zero + scale · v)` adding the dither.
 #[inline(always)]
 fn quantize_row_with(v: &[f32], q: &Quantize, out: &mut [u8], noise: impl Fn(u32, f32) -> f32) {
-    let (one, lo, hi) = (q.one, q.min, q.max.max(q.min));
+    let (zero, scale, lo, hi) = (q.zero, q.one - q.zero, q.min, q.max.max(q.min));
     for (x, (o, &v)) in out.iter_mut().zip(v).enumerate() {
-        let t = noise(x as u32, one * v);
+        let t = noise(x as u32, zero + scale * v);
         // [`round`], the large (already whole) and NaN values passed through unchanged.
         let i = t as i32 as f32;
         let d = t - i;
@@ -202,6 +203,7 @@ mod tests {
             -0.5 / 255.0,
         ]);
         let rgba = Quantize {
+            zero: 0.0,
             one: 255.0,
             min: 0.0,
             max: 255.0,
@@ -214,15 +216,24 @@ mod tests {
                 ..rgba
             },
             Quantize {
+                zero: 0.0,
                 one: 255.0,
                 min: 10.0,
                 max: 200.0,
                 dither: 2.0,
             },
             Quantize {
+                zero: 0.0,
                 one: 255.0,
                 min: 300.0,
                 max: 100.0,
+                dither: 0.5,
+            }, // A display's [zero one min max] (normals: −1..1 into 1..255).
+            Quantize {
+                zero: 128.0,
+                one: 255.0,
+                min: 0.0,
+                max: 255.0,
                 dither: 0.5,
             },
         ];
@@ -329,6 +340,7 @@ mod tests {
     #[test]
     fn quantize_bounds_and_dither() {
         let q = Quantize {
+            zero: 0.0,
             one: 255.0,
             min: 0.0,
             max: 255.0,
@@ -350,6 +362,10 @@ mod tests {
         }
         let nd = Quantize { dither: 0.0, ..q };
         assert_eq!(quantize(0.2, &nd, 0, 0, 0), 51.0);
+        let centred = Quantize { zero: 128.0, ..nd };
+        assert_eq!(quantize(-1.0, &centred, 0, 0, 0), 1.0);
+        assert_eq!(quantize(0.0, &centred, 0, 0, 0), 128.0);
+        assert_eq!(quantize(1.0, &centred, 0, 0, 0), 255.0);
         assert_eq!(
             quantize(0.5, &nd, 0, 0, 0),
             128.0,

@@ -352,6 +352,7 @@ impl Builder<'_> {
             return;
         }
         let q = Quantize {
+            zero: 0.0,
             one: call.pos[1].num(),
             min: call.pos[2].num(),
             max: call.pos[3].num(),

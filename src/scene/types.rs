@@ -195,6 +195,10 @@ pub struct PixelFilter {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quantize {
+    /// The value 0 maps to (PRMan's and Aqsis's display `"quantize" [zero one min max]`;
+    /// RiQuantize has none, so 0): `round(zero + v·(one − zero) + dither)`. A display of
+    /// normals writes `[128 255 0 255]` so that −1 lands on 1, not on 0.
+    pub zero: f32,
     pub one: f32,
     pub min: f32,
     pub max: f32,
@@ -292,12 +296,14 @@ impl Default for Options {
             exposure: [1.0, 1.0],
             imager: None,
             quantize_rgba: Quantize {
+                zero: 0.0,
                 one: 255.0,
                 min: 0.0,
                 max: 255.0,
                 dither: 0.5,
             },
             quantize_z: Quantize {
+                zero: 0.0,
                 one: 0.0,
                 min: 0.0,
                 max: 0.0,

@@ -114,9 +114,10 @@ pub(super) fn call(
                     "maxdist" => maxdist = v.f().first().clamp(0.0, FAR),
                     "coneangle" => cone = v.f().first(),
                     "environmentcolor" => env_color = v.t().first(),
+                    // "blur" is the map lookup's in Aqsis's occlusion(mapname, …).
                     "bias" | "hitmode" | "hitsides" | "label" | "subset" | "adaptive"
                     | "minsamples" | "falloff" | "falloffmode" | "maxerror" | "maxpixeldist"
-                    | "distribution" | "pointbased" => {}
+                    | "distribution" | "pointbased" | "blur" => {}
                     other => ex.warn(
                         span,
                         format!("{f:?} parameter \"{other}\" is not supported; ignored"),

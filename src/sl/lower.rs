@@ -1512,14 +1512,41 @@ impl<'a> Lowerer<'a> {
                 );
                 self.ident("P", span)
             }
-            None if self.kind == ShaderKind::Imager
-                && matches!(name, "s" | "t" | "u" | "v" | "du" | "dv") =>
-            {
-                // RISpec gives imagers no surface parameters, but Aqsis' compiler accepts
-                // them (its `filmgrain` imager uses s and t).
+            None if self.kind == ShaderKind::Imager && matches!(name, "s" | "t") => {
+                // RISpec gives imagers no surface parameters, but Aqsis binds s and t to the
+                // pixel's raster position (its centre, x + 0.5 and y + 0.5): its `filmgrain`
+                // imager calls noise(s, t) for a grain that changes from pixel to pixel. That
+                // is arbor's imager `P` (the pixel centre in raster space), read by component.
+                let (key, comp): (&'static str, &str) = if name == "s" {
+                    ("s", "xcomp")
+                } else {
+                    ("t", "ycomp")
+                };
+                self.warn_extension(
+                    key,
+                    span,
+                    &format!(
+                        "`{name}` is not defined in imager shaders (RISpec); arbor reads the \
+                         pixel's raster {} (`{comp}(P)`), as Aqsis does",
+                        if name == "s" { "x" } else { "y" }
+                    ),
+                );
+                let call = Expr {
+                    kind: ExprKind::Call {
+                        name: comp.into(),
+                        name_span: span,
+                        args: vec![Expr {
+                            kind: ExprKind::Ident("P".into()),
+                            span,
+                        }],
+                    },
+                    span,
+                };
+                self.expr(&call, Some(BaseType::Float))
+            }
+            None if self.kind == ShaderKind::Imager && matches!(name, "u" | "v" | "du" | "dv") => {
+                // No renderer defines these for imagers (Aqsis binds only s and t).
                 let what: &'static str = match name {
-                    "s" => "s",
-                    "t" => "t",
                     "u" => "u",
                     "v" => "v",
                     "du" => "du",
@@ -3080,6 +3107,24 @@ impl<'a> Lowerer<'a> {
                 &[BaseType::Point, BaseType::Point],
             ),
         };
+        // Aqsis's `occlusion(mapname, P, N, samples, …)` reads a set of shadow maps rendered
+        // around the scene; arbor traces the same hemisphere against the scene instead.
+        let map_form = matches!(name, "occlusion" | "indirectdiffuse")
+            && args.len() >= 4
+            && self.is_string_expr(&args[0]);
+        let args = if map_form {
+            self.warn_extension(
+                "occlusion map",
+                args[0].span,
+                &format!(
+                    "`{name}` from a map (Aqsis's `{name}(mapname, P, N, samples)`): arbor traces \
+                     rays against the scene and does not read the map"
+                ),
+            );
+            &args[1..]
+        } else {
+            args
+        };
         let mut regs = Vec::new();
         let mut k = 0;
         while k < args.len() && k < pos.len() {
@@ -3094,6 +3139,14 @@ impl<'a> Lowerer<'a> {
         // PRMan's occlusion/indirectdiffuse without a sample count: 16 (arbor's default).
         if regs.len() == 2 && pos.len() == 3 {
             regs.push(self.const_float(16.0));
+        }
+        // The map form's count is the map lookup's (Aqsis's examples pass 0 and give
+        // "samples" as a parameter): a constant below 1 means arbor's default.
+        if map_form && regs.len() == 3 {
+            let low = matches!(self.const_values.get(&regs[2]), Some(Const::F(x)) if *x < 1.0);
+            if low {
+                regs[2] = self.const_float(16.0);
+            }
         }
         if regs.len() != pos.len() {
             return self.error(
@@ -3122,6 +3175,16 @@ impl<'a> Lowerer<'a> {
             span,
         });
         t
+    }
+
+    /// Whether `e` is a string without lowering it: a literal, or a variable or parameter
+    /// declared `string`.
+    fn is_string_expr(&self, e: &Expr) -> bool {
+        match &e.kind {
+            ExprKind::Str(_) => true,
+            ExprKind::Ident(n) => self.lookup(n).is_some_and(|v| v.ty == BaseType::String),
+            _ => false,
+        }
     }
 
     /// The `"name", value` pairs of a call from argument `k` on: their registers in order.

@@ -1,0 +1,84 @@
+//! What the film stage does where RISpec is silent and the renderers agree: an imager shader
+//! reads `s` and `t` as the pixel's raster position (Aqsis binds them so, and grain imagers
+//! call `noise(s, t)`), and a display's `"quantize" [zero one min max]` maps 0 to `zero`
+//! (PRMan's and Aqsis's display parameter; a picture of normals puts −1..1 into 1..255).
+
+mod common;
+
+use std::path::Path;
+
+/// The 8-bit RGB pixels of `dir/name`.
+fn pixels(dir: &Path, name: &str) -> (Vec<[u8; 3]>, usize) {
+    let img = image::open(dir.join(name)).expect("picture").to_rgb8();
+    let w = img.width() as usize;
+    (img.pixels().map(|p| p.0).collect(), w)
+}
+
+#[test]
+fn imager_s_and_t_are_the_pixel_centre_in_raster_space() {
+    let dir = common::scratch_dir("film_imager_st");
+    std::fs::write(
+        dir.join("rasterpos.sl"),
+        "imager rasterpos() { Ci = color(s / 8, t / 8, xcomp(P) - s + ycomp(P) - t); Oi = 1; }",
+    )
+    .unwrap();
+    let out = dir.join("out.png").display().to_string();
+    // No dither, so each value rounds the same way everywhere.
+    let rib = format!(
+        "Format 8 4 1\nQuantize \"rgba\" 255 0 255 0\nDisplay \"{out}\" \"png\" \"rgb\"\n\
+         Imager \"rasterpos\"\nWorldBegin\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
+    // One warning each for s and t, naming what they read.
+    assert_eq!(log.matches("sl::extension").count(), 2, "{log}");
+    assert!(log.contains("raster x"), "{log}");
+    let (px, w) = pixels(&dir, "out.png");
+    for (k, p) in px.iter().enumerate() {
+        let (x, y) = ((k % w) as f32, (k / w) as f32);
+        let want_r = ((x + 0.5) / 8.0 * 255.0).round() as u8;
+        let want_g = ((y + 0.5) / 8.0 * 255.0).round() as u8;
+        assert_eq!(*p, [want_r, want_g, 0], "pixel ({x}, {y})");
+    }
+}
+
+#[test]
+fn a_grain_imager_varies_from_pixel_to_pixel() {
+    // Aqsis' filmgrain-style imager: with s and t read as 0 every pixel got the same grain.
+    let dir = common::scratch_dir("film_imager_grain");
+    std::fs::write(
+        dir.join("grain.sl"),
+        "imager grain() { Ci = float noise(s * 0.37, t * 0.37); Oi = 1; }",
+    )
+    .unwrap();
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Format 16 16 1\nQuantize \"rgba\" 255 0 255 0\nDisplay \"{out}\" \"png\" \"rgb\"\n\
+         Imager \"grain\"\nWorldBegin\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
+    let (px, _) = pixels(&dir, "out.png");
+    let mut levels: Vec<u8> = px.iter().map(|p| p[0]).collect();
+    levels.sort_unstable();
+    levels.dedup();
+    assert!(levels.len() > 20, "grain levels: {levels:?}");
+}
+
+#[test]
+fn display_quantize_zero_is_the_level_of_zero() {
+    let dir = common::scratch_dir("film_quantize_zero");
+    let out = dir.join("cs.png").display().to_string();
+    // Cs = (−1, 0, 1) through [128 255 0 255]: 128 − 127 = 1, 128, 255.
+    let rib = format!(
+        "Format 4 4 1\nPixelSamples 1 1\nProjection \"orthographic\"\nScreenWindow -1 1 -1 1\n\
+         Display \"{out}\" \"png\" \"Cs\" \"quantize\" [128 255 0 255]\n\
+         Translate 0 0 5\nWorldBegin\nColor -1 0 1\nSurface \"constant\"\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
+    assert!(!log.contains("zero offset"), "{log}");
+    let (px, _) = pixels(&dir, "cs.png");
+    assert!(px.iter().all(|p| *p == [1, 128, 255]), "{:?}", &px[..4]);
+}
