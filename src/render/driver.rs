@@ -942,6 +942,9 @@ fn render_inner(
         s.threads.store(tids.len() as u64, Ordering::Relaxed);
         PhaseClock::now(std::sync::Arc::new(tids))
     });
+    let threads_clock = clock
+        .as_ref()
+        .map(|c| super::stats::ThreadClock::now(c.tids()));
     let (xres, yres) = (camera.xres, camera.yres);
     let image = PixelRect {
         x0: 0,
@@ -1396,11 +1399,11 @@ fn render_inner(
         // The next row's surfaces are split, diced and shaded alongside (they only add
         // grids, which no bucket of this row needs), so neither runs alone on a few items;
         // so are the scanlines filtered last time encoded for output (a serial task, which
-        // the other thread takes when it has nothing else), and last row's dead grids freed.
+        // the other thread takes when it has nothing else); the last row's dead grids are
+        // freed first.
         let rows_out = &mut rows_out;
         let gone = std::mem::take(&mut dead);
         let encode = || {
-            drop(gone);
             if let Some(out) = rows_out.as_deref_mut() {
                 out.rows(film_ref, sent, finished);
             }
@@ -1408,6 +1411,8 @@ fn render_inner(
         let ((), (next, ())) = rayon::join(hide_row, || {
             rayon::join(
                 || {
+                    // Before the next row's grids are made, so the two are not held at once.
+                    drop(gone);
                     if row + 1 < buckets.rows {
                         process(row + 1, &mut pending, &mut pending_prims)
                     } else {
@@ -1469,6 +1474,9 @@ fn render_inner(
     }
     frame.hider.finish(diags);
     stats.phase(Phase::Other, clock);
+    if let Some(t) = threads_clock {
+        t.stop(stats);
+    }
     stats.free(film_bytes);
     stats
         .wall_ns
