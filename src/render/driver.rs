@@ -1344,7 +1344,7 @@ fn render_inner(
                 let rect = buckets.sample_rect(col, row);
                 let h = match &gather {
                     Some(ctx) => {
-                        let p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
+                        let mut p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
                             Some(p) => {
                                 stats.time(Stage::Hide, t);
                                 p
@@ -1369,6 +1369,7 @@ fn render_inner(
                             out.width(),
                             out.height(),
                         );
+                        p.keep_ring(&partial, ctx);
                         stats.time(Stage::Filter, t);
                         Hidden::Prepared(p, Some(partial))
                     }
