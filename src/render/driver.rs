@@ -9,8 +9,10 @@
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
 //!   needs are freed — memory holds only the grids overlapping the open rows. The surfaces
-//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; filtering (one
-//!   film, one writer) of row r − 1 follows the hiding of row r;
+//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; the tile of a
+//!   bucket of row r − 1 is filtered during the hiding of row r, by the thread that hides the
+//!   last bucket of row r within its reach, and the row's tiles go into the film (one
+//!   writer) after it;
 //! * surfaces are made from the scene's primitives in parallel before the first row; those
 //!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
 //!   made again when their first row opens, so memory holds the scene and the open rows'

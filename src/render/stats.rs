@@ -63,9 +63,10 @@ pub enum Phase {
     Setup = 0,
     /// The film's allocation alongside the first bucket row's surfaces.
     FirstRow = 1,
-    /// Hiding a bucket row alongside the next row's splitting, dicing and shading.
+    /// Hiding a bucket row (filtering the row above's tiles as their neighbours are hidden)
+    /// alongside the next row's splitting, dicing and shading.
     Rows = 2,
-    /// Filtering the rows whose neighbours are hidden, and putting them into the film.
+    /// Putting the filtered tiles into the film; at the end, filtering the last rows.
     Filter = 3,
     /// Freeing rows and grids no longer needed, and the end of the frame.
     Other = 4,
