@@ -103,7 +103,13 @@ pub struct Prepared {
     /// Scratch for one pixel's weights: x towards columns q − 1, q, q + 1, then y, `lanes`
     /// floats each.
     w: Vec<f32>,
+    /// After [`Prepared::keep_ring`]: per pixel, its block in `rgba` ([`NOT_KEPT`] for the
+    /// pixels already filtered); None while `rgba` holds every pixel.
+    ring: Option<Vec<u32>>,
 }
+
+/// A pixel whose r g b a blocks [`Prepared::keep_ring`] let go.
+const NOT_KEPT: u32 = u32::MAX;
 
 /// What preparing a pixel needs from the frame: the filter's axes, the depth filter, the
 /// kernel build to run, and the storage of filtered buckets for reuse.
@@ -112,8 +118,10 @@ pub struct PrepareCtx<'a> {
     axes: [Axis<'a>; 2],
     df: DepthFilter,
     kernel: Kernel,
-    #[allow(clippy::type_complexity)]
-    pool: std::sync::Mutex<Vec<(Vec<f32>, Vec<Contrib>)>>,
+    /// Storage of finished buckets for reuse: r g b a blocks, and contributions (kept
+    /// apart: a bucket's blocks come back as soon as its inner pixels are filtered).
+    rgba_pool: std::sync::Mutex<Vec<Vec<f32>>>,
+    px_pool: std::sync::Mutex<Vec<Vec<Contrib>>>,
 }
 
 /// One axis of the filter as the weight kernels read it.
@@ -198,15 +206,26 @@ impl<'a> PrepareCtx<'a> {
             axes: [Axis::new(hx, &t.x), Axis::new(hy, &t.y)],
             df,
             kernel: pick_kernel(),
-            pool: Default::default(),
+            rgba_pool: Default::default(),
+            px_pool: Default::default(),
         }
     }
 
     /// Keeps a bucket's storage for the next [`Prepared::new`] (no allocation or clearing
     /// per bucket once the first rows are done).
     pub fn recycle(&self, p: Prepared) {
-        if let Ok(mut pool) = self.pool.lock() {
-            pool.push((p.rgba, p.px));
+        if let Ok(mut pool) = self.px_pool.lock() {
+            pool.push(p.px);
+        }
+        // The few blocks a ring keeps are not worth keeping.
+        if p.ring.is_none() {
+            self.recycle_rgba(p.rgba);
+        }
+    }
+
+    fn recycle_rgba(&self, rgba: Vec<f32>) {
+        if let Ok(mut pool) = self.rgba_pool.lock() {
+            pool.push(rgba);
         }
     }
 }
@@ -227,8 +246,14 @@ impl Prepared {
         assert!((1..=MAX_SPP).contains(&spp));
         let lanes = spp.div_ceil(LANES) * LANES;
         let npix = width * height;
-        let (mut rgba, mut px) = ctx
-            .pool
+        let mut rgba = ctx
+            .rgba_pool
+            .lock()
+            .ok()
+            .and_then(|mut p| p.pop())
+            .unwrap_or_default();
+        let mut px = ctx
+            .px_pool
             .lock()
             .ok()
             .and_then(|mut p| p.pop())
@@ -245,12 +270,49 @@ impl Prepared {
             rgba,
             px,
             w: vec![0.0; 2 * TAPS * lanes],
+            ring: None,
         }
     }
 
     /// Heap size, for the peak-memory statistic.
     pub fn bytes(&self) -> usize {
-        (self.rgba.len() + self.w.len()) * 4 + self.px.len() * std::mem::size_of::<Contrib>()
+        (self.rgba.len() + self.w.len() + self.ring.as_ref().map_or(0, Vec::len)) * 4
+            + self.px.len() * std::mem::size_of::<Contrib>()
+    }
+
+    /// Once [`start_tile`] has filtered `partial`'s inner pixels, keeps the r g b a blocks
+    /// of the others only (the ring [`finish_tile`] filters later, which reads a pixel's own
+    /// blocks when nothing in its support weighs anything; neighbours read only the
+    /// contributions) and gives the full storage back to `ctx` at once. A hidden row
+    /// waiting for the row below then holds about a quarter of its samples (16 × 16 buckets:
+    /// 60 of 256 pixels), not all of them.
+    pub fn keep_ring(&mut self, partial: &Partial, ctx: &PrepareCtx) {
+        let [ix0, iy0, ix1, iy1] = partial.inner;
+        let n = 4 * self.lanes;
+        let npix = self.width * self.height;
+        let overlap = |lo: i32, len: usize, a: usize, b: usize| {
+            (lo + len as i32).min(b as i32) - lo.max(a as i32)
+        };
+        let inner = overlap(self.x0, self.width, ix0, ix1).max(0) as usize
+            * overlap(self.y0, self.height, iy0, iy1).max(0) as usize;
+        let mut at = vec![NOT_KEPT; npix];
+        let mut kept = Vec::with_capacity((npix - inner.min(npix)) * n);
+        for j in 0..self.height {
+            let y = self.y0 + j as i32;
+            let row_inner = y >= iy0 as i32 && y < iy1 as i32;
+            for i in 0..self.width {
+                let x = self.x0 + i as i32;
+                if row_inner && x >= ix0 as i32 && x < ix1 as i32 {
+                    continue;
+                }
+                let pix = j * self.width + i;
+                at[pix] = (kept.len() / n) as u32;
+                kept.extend_from_slice(&self.rgba[pix * n..(pix + 1) * n]);
+            }
+        }
+        let full = std::mem::replace(&mut self.rgba, kept);
+        ctx.recycle_rgba(full);
+        self.ring = Some(at);
     }
 
     /// Floats per block (samples per pixel rounded up to [`LANES`]).
@@ -770,10 +832,14 @@ impl Grid<'_> {
         self.parts.iter().find_map(|p| {
             let (i, j) = (x - p.x0, y - p.y0);
             let inside = (0..p.width as i32).contains(&i) && (0..p.height as i32).contains(&j);
-            inside.then(|| {
-                let pix = j as usize * p.width + i as usize;
-                (*p, &p.rgba[pix * 4 * p.lanes..(pix + 1) * 4 * p.lanes])
-            })
+            inside.then_some(())?;
+            let pix = j as usize * p.width + i as usize;
+            let block = match &p.ring {
+                Some(at) if at[pix] == NOT_KEPT => return None,
+                Some(at) => at[pix] as usize,
+                None => pix,
+            };
+            Some((*p, &p.rgba[block * 4 * p.lanes..(block + 1) * 4 * p.lanes]))
         })
     }
 }
@@ -1677,6 +1743,77 @@ mod tests {
                     assert_eq!(
                         a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
                         b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_bucket_keeping_only_its_ring_finishes_the_same_bits() {
+        // Box 0.5: a sample farther than 0.25 from its pixel's centre weighs nothing, so a
+        // pixel whose samples all sit in a corner has no weight and takes their plain mean
+        // (the one read of a bucket's own blocks after start_tile).
+        let f = Filter::new(FilterKind::Box, 0.5, 0.5);
+        let t = f.tables().unwrap();
+        let (w, h) = (9, 7);
+        let mut whole = buffer(0, 0, w, h, 4, 5);
+        let lonely = (3, 2); // on the right edge of the first bucket: in its ring
+        let s0 = (lonely.1 * w + lonely.0) * 16;
+        for s in 0..16 {
+            whole.positions[s0 + s] = [lonely.0 as f32 + 0.02, lonely.1 as f32 + 0.03];
+        }
+        let fm = film(w, h);
+        assert!(applies(&f, Some(&t), 5, 16, &fm));
+        let ctx = PrepareCtx::new(&f, &t, DepthFilter::Min);
+        let one = gather_tile(&fm, &[&prepare(&whole, &ctx)], 0, 0, w, h);
+        let mean: Vec<f32> = (0..4)
+            .map(|c| {
+                let s: f64 = (0..16).map(|s| whole.values[(s0 + s) * 5 + c] as f64).sum();
+                (s / 16.0) as f32
+            })
+            .collect();
+        let at = (lonely.1 * w + lonely.0) * 5;
+        assert_eq!(&one.data[at..at + 4], &mean[..]);
+        let sub = |x0: usize, y0: usize, x1: usize, y1: usize| {
+            let mut b = SampleBuffer::new(x0 as i32, y0 as i32, x1 - x0, y1 - y0, 4, 4, 5);
+            b.positions.clear();
+            b.values.clear();
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let s0 = (y * w + x) * 16;
+                    b.positions.extend_from_slice(&whole.positions[s0..s0 + 16]);
+                    b.values
+                        .extend_from_slice(&whole.values[s0 * 5..(s0 + 16) * 5]);
+                }
+            }
+            prepare(&b, &ctx)
+        };
+        let rects = [(0, 0, 4, 3), (4, 0, 9, 3), (0, 3, 4, 7), (4, 3, 9, 7)];
+        let mut parts = Vec::new();
+        let mut partials = Vec::new();
+        for &(x0, y0, x1, y1) in &rects {
+            let mut p = sub(x0, y0, x1, y1);
+            let full = p.bytes();
+            let partial = start_tile(&fm, &p, x0, y0, x1 - x0, y1 - y0);
+            p.keep_ring(&partial, &ctx);
+            assert!(p.bytes() < full, "the inner pixels' blocks are let go");
+            parts.push(p);
+            partials.push(partial);
+        }
+        let refs: Vec<&Prepared> = parts.iter().collect();
+        for (&(x0, y0, x1, y1), partial) in rects.iter().zip(partials) {
+            let tile = finish_tile(&fm, &refs, partial);
+            for j in 0..y1 - y0 {
+                for i in 0..x1 - x0 {
+                    let a = &tile.data[(j * (x1 - x0) + i) * 5..][..5];
+                    let b = &one.data[((y0 + j) * w + x0 + i) * 5..][..5];
+                    assert_eq!(
+                        a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        b.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        "pixel ({}, {})",
+                        x0 + i,
+                        y0 + j
                     );
                 }
             }

@@ -9,8 +9,10 @@
 //!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
 //!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
 //!   needs are freed — memory holds only the grids overlapping the open rows. The surfaces
-//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; filtering (one
-//!   film, one writer) of row r − 1 follows the hiding of row r;
+//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; the tile of a
+//!   bucket of row r − 1 is filtered during the hiding of row r, by the thread that hides the
+//!   last bucket of row r within its reach, and the row's tiles go into the film (one
+//!   writer) after it;
 //! * surfaces are made from the scene's primitives in parallel before the first row; those
 //!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
 //!   made again when their first row opens, so memory holds the scene and the open rows'
@@ -20,6 +22,7 @@
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -406,6 +409,32 @@ impl Hidden {
             Hidden::Prepared(p, _) => p.bytes(),
         }
     }
+}
+
+/// The hidden buckets the filter of bucket (col, row) reads — rows `row − ky ..= row + ky`,
+/// columns `col − kx ..= col + kx` — row-major (the order the tile's result depends on):
+/// from `rows` (finished rows, oldest first), then from `open`, the row being hidden (its
+/// buckets within reach must all be hidden).
+fn within_reach<'h>(
+    rows: &'h VecDeque<(usize, Vec<Hidden>)>,
+    open: Option<(usize, &'h [OnceLock<Hidden>])>,
+    col: usize,
+    row: usize,
+    kx: usize,
+    ky: usize,
+) -> Vec<&'h Hidden> {
+    let near = |r: usize| r + ky >= row && r <= row + ky;
+    let lo = col.saturating_sub(kx);
+    let mut parts = Vec::new();
+    for (r, hs) in rows.iter().filter(|(r, _)| near(*r)) {
+        debug_assert!(open.is_none_or(|(o, _)| *r < o));
+        parts.extend(hs[lo.min(hs.len())..(col + kx + 1).min(hs.len())].iter());
+    }
+    if let Some((_, slots)) = open.filter(|(r, _)| near(*r)) {
+        let hi = (col + kx + 1).min(slots.len());
+        parts.extend(slots[lo.min(hi)..hi].iter().filter_map(OnceLock::get));
+    }
+    parts
 }
 
 /// The samples of `parts` (buffers of whole pixels, same samples per pixel and channels)
@@ -915,6 +944,9 @@ fn render_inner(
         s.threads.store(tids.len() as u64, Ordering::Relaxed);
         PhaseClock::now(std::sync::Arc::new(tids))
     });
+    let threads_clock = clock
+        .as_ref()
+        .map(|c| super::stats::ThreadClock::now(c.tids()));
     let (xres, yres) = (camera.xres, camera.yres);
     let image = PixelRect {
         x0: 0,
@@ -1113,15 +1145,64 @@ fn render_inner(
         })
         .map(|t| crate::film::gather::PrepareCtx::new(&pixel_filter, t, depth_filter));
     let (kx, ky) = (buckets.reach(0), buckets.reach(1));
-    // Filters row `row` once its neighbour rows are hidden: each bucket's pixels from its
-    // own samples and those of the buckets around it, in parallel into tiles, then written
-    // into the film.
-    let filter_row = |film: &mut Film, row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
+    // Filters the tile of bucket (col, row) from `parts` (the hidden buckets of the rows
+    // and columns within reach, row-major: see `within_reach`) and `partial` (the pixels its
+    // own hiding already filtered), and counts the bucket as done.
+    let filter_one = |film: &Film,
+                      col: usize,
+                      row: usize,
+                      parts: &[&Hidden],
+                      partial: Option<crate::film::gather::Partial>|
+     -> crate::film::Tile {
         let t = Instant::now();
-        let shared: &Film = film;
-        // The tiles the hiding started.
-        let partials: Vec<Option<crate::film::gather::Partial>> = rows
-            .iter_mut()
+        let r = buckets.rect(col, row);
+        let (x0, y0) = (r.x0 as usize, r.y0 as usize);
+        let prepared: Option<Vec<&crate::film::gather::Prepared>> = parts
+            .iter()
+            .map(|h| match h {
+                Hidden::Prepared(p, _) => Some(p),
+                Hidden::Samples(_) => None,
+            })
+            .collect();
+        let tile = if let Some(p) = prepared {
+            let partial = partial.unwrap_or_else(|| {
+                crate::film::gather::Partial::empty(film, x0, y0, r.width(), r.height())
+            });
+            crate::film::gather::finish_tile(film, &p, partial)
+        } else {
+            let region = r
+                .grow(buckets.margin[0], buckets.margin[1])
+                .intersect(buckets.image);
+            let bufs: Vec<&SampleBuffer> = parts
+                .iter()
+                .filter_map(|h| match h {
+                    Hidden::Samples(b) => Some(b),
+                    Hidden::Prepared(..) => None,
+                })
+                .collect();
+            let buf = assemble(region, &bufs);
+            crate::film::filter_tile(
+                film,
+                &buf,
+                &pixel_filter,
+                x0,
+                y0,
+                r.width(),
+                r.height(),
+                depth_filter,
+            )
+        };
+        stats.time(Stage::Filter, t);
+        Stats::add(&stats.buckets, 1);
+        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Some(p) = opts.progress {
+            p(d, total);
+        }
+        tile
+    };
+    // Takes the partial tiles the hiding of `row` started (None where there are none).
+    let take_partials = |row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
+        rows.iter_mut()
             .find(|(r, _)| *r == row)
             .map(|(_, hs)| {
                 hs.iter_mut()
@@ -1131,65 +1212,25 @@ fn render_inner(
                     })
                     .collect()
             })
-            .unwrap_or_default();
+            .unwrap_or_else(|| (0..buckets.cols).map(|_| None).collect::<Vec<_>>())
+    };
+    // Filters row `row` once every row within reach is hidden (the rows at the end of the
+    // frame; the others are filtered bucket by bucket inside the hiding of the row below),
+    // in parallel into tiles, then written into the film.
+    let filter_row = |film: &mut Film, row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
+        let partials = take_partials(row, rows);
         let rows: &VecDeque<(usize, Vec<Hidden>)> = rows;
-        let near = |col: usize| -> Vec<&Hidden> {
-            rows.iter()
-                .filter(|(r, _)| r + ky >= row && *r <= row + ky)
-                .flat_map(|(_, hs)| hs[col.saturating_sub(kx)..(col + kx + 1).min(hs.len())].iter())
-                .collect()
-        };
+        let shared: &Film = film;
         let tiles: Vec<crate::film::Tile> = partials
             .into_par_iter()
             .enumerate()
             .map(|(col, partial)| {
-                let r = buckets.rect(col, row);
-                let parts = near(col);
-                let (x0, y0) = (r.x0 as usize, r.y0 as usize);
-                let prepared: Option<Vec<&crate::film::gather::Prepared>> = parts
-                    .iter()
-                    .map(|h| match h {
-                        Hidden::Prepared(p, _) => Some(p),
-                        Hidden::Samples(_) => None,
-                    })
-                    .collect();
-                if let Some(p) = prepared {
-                    let partial = partial.unwrap_or_else(|| {
-                        crate::film::gather::Partial::empty(shared, x0, y0, r.width(), r.height())
-                    });
-                    return crate::film::gather::finish_tile(shared, &p, partial);
-                }
-                let region = r
-                    .grow(buckets.margin[0], buckets.margin[1])
-                    .intersect(buckets.image);
-                let bufs: Vec<&SampleBuffer> = parts
-                    .iter()
-                    .filter_map(|h| match h {
-                        Hidden::Samples(b) => Some(b),
-                        Hidden::Prepared(..) => None,
-                    })
-                    .collect();
-                let buf = assemble(region, &bufs);
-                crate::film::filter_tile(
-                    shared,
-                    &buf,
-                    &pixel_filter,
-                    x0,
-                    y0,
-                    r.width(),
-                    r.height(),
-                    depth_filter,
-                )
+                let parts = within_reach(rows, None, col, row, kx, ky);
+                filter_one(shared, col, row, &parts, partial)
             })
             .collect();
+        let t = Instant::now();
         film.put_tiles(&tiles);
-        for _ in &tiles {
-            Stats::add(&stats.buckets, 1);
-            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if let Some(p) = opts.progress {
-                p(d, total);
-            }
-        }
         stats.time(Stage::Filter, t);
     };
     // Splits, dices and shades everything that starts in `row`: the surfaces of the
@@ -1272,76 +1313,109 @@ fn render_inner(
     // Scanlines handed to `rows_out`, and scanlines final in the film.
     let first_line = buckets.crop.y0.max(0) as usize;
     let (mut sent, mut finished) = (first_line, first_line);
+    // Grids no row needs any more, freed alongside the next row's hiding.
+    let mut dead: Vec<Kept> = Vec::new();
     for row in 0..buckets.rows {
-        // Hide this row's buckets in parallel (each prepared for the filter at once).
+        // The row whose tiles this row's hiding completes: a tile is filtered as soon as the
+        // buckets of this row within its reach are hidden, by the thread that hid the last
+        // of them (no barrier between hiding and filtering; the samples still in cache).
+        let frow = row.checked_sub(ky);
+        let partials: Vec<std::sync::Mutex<Option<crate::film::gather::Partial>>> = frow
+            .map(|f| take_partials(f, &mut hidden))
+            .unwrap_or_default()
+            .into_iter()
+            .map(std::sync::Mutex::new)
+            .collect();
+        let slots: Vec<OnceLock<Hidden>> = (0..buckets.cols).map(|_| OnceLock::new()).collect();
+        let waiting: Vec<AtomicUsize> = (0..buckets.cols).map(|_| AtomicUsize::new(0)).collect();
+        let tiles: Vec<OnceLock<crate::film::Tile>> =
+            (0..buckets.cols).map(|_| OnceLock::new()).collect();
         let film_ref: &Film = &film;
-        let hide_row = || -> Vec<Hidden> {
-            (0..buckets.cols)
-                .into_par_iter()
-                .map(|col| {
-                    let t = Instant::now();
-                    let grids: Vec<&ShadedGrid> = kept
-                        .iter()
-                        .filter(|k| {
-                            k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
-                        })
-                        .map(|k| k.grid.as_ref())
-                        .collect();
-                    let rect = buckets.sample_rect(col, row);
-                    let h = match &gather {
-                        Some(ctx) => {
-                            let p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
-                                Some(p) => {
-                                    stats.time(Stage::Hide, t);
-                                    p
-                                }
-                                None => {
-                                    let buf = frame.hider.hide(rect, &grids, stats);
-                                    stats.time(Stage::Hide, t);
-                                    let t = Instant::now();
-                                    let p = crate::film::gather::prepare(&buf, ctx);
-                                    stats.time(Stage::Filter, t);
-                                    p
-                                }
-                            };
-                            // The pixels needing no other bucket, filtered while hot.
-                            let t = Instant::now();
-                            let out = buckets.rect(col, row);
-                            let partial = crate::film::gather::start_tile(
-                                film_ref,
-                                &p,
-                                out.x0 as usize,
-                                out.y0 as usize,
-                                out.width(),
-                                out.height(),
-                            );
-                            stats.time(Stage::Filter, t);
-                            Hidden::Prepared(p, Some(partial))
-                        }
-                        None => {
-                            let buf = frame.hider.hide(rect, &grids, stats);
-                            stats.time(Stage::Hide, t);
-                            Hidden::Samples(buf)
-                        }
-                    };
-                    stats.alloc(h.bytes());
-                    h
-                })
-                .collect()
+        let hidden_ref = &hidden;
+        // Hide this row's buckets in parallel (each prepared for the filter at once).
+        let hide_row = || {
+            (0..buckets.cols).into_par_iter().for_each(|col| {
+                let t = Instant::now();
+                let grids: Vec<&ShadedGrid> = kept
+                    .iter()
+                    .filter(|k| {
+                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
+                    })
+                    .map(|k| k.grid.as_ref())
+                    .collect();
+                let rect = buckets.sample_rect(col, row);
+                let h = match &gather {
+                    Some(ctx) => {
+                        let mut p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
+                            Some(p) => {
+                                stats.time(Stage::Hide, t);
+                                p
+                            }
+                            None => {
+                                let buf = frame.hider.hide(rect, &grids, stats);
+                                stats.time(Stage::Hide, t);
+                                let t = Instant::now();
+                                let p = crate::film::gather::prepare(&buf, ctx);
+                                stats.time(Stage::Filter, t);
+                                p
+                            }
+                        };
+                        // The pixels needing no other bucket, filtered while hot.
+                        let t = Instant::now();
+                        let out = buckets.rect(col, row);
+                        let partial = crate::film::gather::start_tile(
+                            film_ref,
+                            &p,
+                            out.x0 as usize,
+                            out.y0 as usize,
+                            out.width(),
+                            out.height(),
+                        );
+                        p.keep_ring(&partial, ctx);
+                        stats.time(Stage::Filter, t);
+                        Hidden::Prepared(p, Some(partial))
+                    }
+                    None => {
+                        let buf = frame.hider.hide(rect, &grids, stats);
+                        stats.time(Stage::Hide, t);
+                        Hidden::Samples(buf)
+                    }
+                };
+                stats.alloc(h.bytes());
+                let _ = slots[col].set(h);
+                let Some(f) = frow else {
+                    return;
+                };
+                // The tiles of row `f` this bucket was the last one missing for.
+                let cols = buckets.cols;
+                for c in col.saturating_sub(kx)..(col + kx + 1).min(cols) {
+                    let needs = (c + kx + 1).min(cols) - c.saturating_sub(kx);
+                    // AcqRel: the thread completing the count sees every bucket it counts.
+                    if waiting[c].fetch_add(1, Ordering::AcqRel) + 1 == needs {
+                        let parts = within_reach(hidden_ref, Some((row, &slots)), c, f, kx, ky);
+                        let partial = partials[c].lock().ok().and_then(|mut p| p.take());
+                        let _ = tiles[c].set(filter_one(film_ref, c, f, &parts, partial));
+                    }
+                }
+            })
         };
         // The next row's surfaces are split, diced and shaded alongside (they only add
         // grids, which no bucket of this row needs), so neither runs alone on a few items;
         // so are the scanlines filtered last time encoded for output (a serial task, which
-        // the other thread takes when it has nothing else).
+        // the other thread takes when it has nothing else); the last row's dead grids are
+        // freed first.
         let rows_out = &mut rows_out;
+        let gone = std::mem::take(&mut dead);
         let encode = || {
             if let Some(out) = rows_out.as_deref_mut() {
                 out.rows(film_ref, sent, finished);
             }
         };
-        let (bufs, (next, ())) = rayon::join(hide_row, || {
+        let ((), (next, ())) = rayon::join(hide_row, || {
             rayon::join(
                 || {
+                    // Before the next row's grids are made, so the two are not held at once.
+                    drop(gone);
                     if row + 1 < buckets.rows {
                         process(row + 1, &mut pending, &mut pending_prims)
                     } else {
@@ -1353,17 +1427,21 @@ fn render_inner(
         });
         sent = finished;
         clock = stats.phase(Phase::Rows, clock);
-        kept.extend(next);
+        let bufs: Vec<Hidden> = slots.into_iter().filter_map(OnceLock::into_inner).collect();
+        debug_assert_eq!(bufs.len(), buckets.cols);
         hidden.push_back((row, bufs));
-        // Filter the rows whose neighbours are now all hidden, while their samples are
-        // still in the caches.
-        while next_filter + ky <= row {
-            filter_row(&mut film, next_filter, &mut hidden);
-            finished = buckets.rect(0, next_filter).y1.max(0) as usize;
-            next_filter += 1;
+        kept.extend(next);
+        if let Some(f) = frow {
+            let t = Instant::now();
+            let tiles: Vec<crate::film::Tile> =
+                tiles.into_iter().filter_map(OnceLock::into_inner).collect();
+            film.put_tiles(&tiles);
+            stats.time(Stage::Filter, t);
+            finished = buckets.rect(0, f).y1.max(0) as usize;
+            next_filter = f + 1;
         }
         clock = stats.phase(Phase::Filter, clock);
-        // Drop the rows no row left to filter needs.
+        // Drop the rows no row left to filter needs (their storage kept for the next rows).
         while hidden.front().is_some_and(|(r, _)| r + ky < next_filter) {
             if let Some((_, hs)) = hidden.pop_front() {
                 for h in hs {
@@ -1374,16 +1452,16 @@ fn render_inner(
                 }
             }
         }
-        // Free the grids no later row needs.
-        kept.retain(|k| {
-            let keep = k.rows.1 > row;
-            if !keep {
-                stats.free(k.grid.bytes());
-            }
-            keep
-        });
+        // The grids no later row needs are freed during the next row.
+        let (live, gone): (Vec<Kept>, Vec<Kept>) = kept.into_iter().partition(|k| k.rows.1 > row);
+        kept = live;
+        for k in &gone {
+            stats.free(k.grid.bytes());
+        }
+        dead = gone;
         clock = stats.phase(Phase::Other, clock);
     }
+    drop(dead);
     while next_filter < buckets.rows {
         filter_row(&mut film, next_filter, &mut hidden);
         finished = buckets.rect(0, next_filter).y1.max(0) as usize;
@@ -1399,6 +1477,9 @@ fn render_inner(
     }
     frame.hider.finish(diags);
     stats.phase(Phase::Other, clock);
+    if let Some(t) = threads_clock {
+        t.stop(stats);
+    }
     stats.free(film_bytes);
     stats
         .wall_ns

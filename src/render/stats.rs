@@ -50,6 +50,9 @@ pub struct Stats {
     pub phase_wall: [AtomicU64; PHASES],
     pub phase_run: [AtomicU64; PHASES],
     pub phase_wait: [AtomicU64; PHASES],
+    /// Per render thread: nanoseconds it ran and waited for a CPU during the frame (an
+    /// uneven split is work one thread did alone; see [`ThreadClock`]).
+    pub thread_times: std::sync::Mutex<Vec<[u64; 2]>>,
 }
 
 /// The parts of a frame's wall time, in order, for `--stats`: how busy the threads were in
@@ -60,9 +63,10 @@ pub enum Phase {
     Setup = 0,
     /// The film's allocation alongside the first bucket row's surfaces.
     FirstRow = 1,
-    /// Hiding a bucket row alongside the next row's splitting, dicing and shading.
+    /// Hiding a bucket row (filtering the row above's tiles as their neighbours are hidden)
+    /// alongside the next row's splitting, dicing and shading.
     Rows = 2,
-    /// Filtering the rows whose neighbours are hidden, and putting them into the film.
+    /// Putting the filtered tiles into the film; at the end, filtering the last rows.
     Filter = 3,
     /// Freeing rows and grids no longer needed, and the end of the frame.
     Other = 4,
@@ -104,6 +108,39 @@ impl PhaseClock {
             wait,
         }
     }
+    /// The threads this clock times.
+    pub fn tids(&self) -> std::sync::Arc<Vec<u32>> {
+        self.tids.clone()
+    }
+}
+
+/// The CPU time of each render thread since the start of a frame (`--stats` only).
+#[derive(Clone, Debug)]
+pub struct ThreadClock {
+    tids: std::sync::Arc<Vec<u32>>,
+    start: Vec<[u64; 2]>,
+}
+
+impl ThreadClock {
+    pub fn now(tids: std::sync::Arc<Vec<u32>>) -> ThreadClock {
+        let start = tids.iter().map(|t| sched_time(*t)).collect();
+        ThreadClock { tids, start }
+    }
+    /// Stores each thread's time run and waited since [`ThreadClock::now`] in `stats`.
+    pub fn stop(&self, stats: &Stats) {
+        let times = self
+            .tids
+            .iter()
+            .zip(&self.start)
+            .map(|(t, s)| {
+                let n = sched_time(*t);
+                [n[0].saturating_sub(s[0]), n[1].saturating_sub(s[1])]
+            })
+            .collect();
+        if let Ok(mut v) = stats.thread_times.lock() {
+            *v = times;
+        }
+    }
 }
 
 /// The calling thread's id (None where `/proc/thread-self` does not exist).
@@ -125,18 +162,20 @@ pub fn pool_threads() -> Vec<u32> {
 /// Nanoseconds run and waited for a CPU by the threads `tids` (a thread that has ended
 /// counts nothing).
 fn sched_times(tids: &[u32]) -> (u64, u64) {
-    let mut total = (0u64, 0u64);
-    for tid in tids {
-        let Ok(text) = std::fs::read_to_string(format!("/proc/self/task/{tid}/schedstat")) else {
-            continue;
-        };
-        let mut f = text
-            .split_whitespace()
-            .map(|v| v.parse::<u64>().unwrap_or(0));
-        total.0 += f.next().unwrap_or(0);
-        total.1 += f.next().unwrap_or(0);
-    }
-    total
+    tids.iter()
+        .map(|t| sched_time(*t))
+        .fold((0, 0), |(r, w), [a, b]| (r + a, w + b))
+}
+
+/// Nanoseconds run and waited for a CPU by thread `tid` (zeros where unknown).
+fn sched_time(tid: u32) -> [u64; 2] {
+    let Ok(text) = std::fs::read_to_string(format!("/proc/self/task/{tid}/schedstat")) else {
+        return [0, 0];
+    };
+    let mut f = text
+        .split_whitespace()
+        .map(|v| v.parse::<u64>().unwrap_or(0));
+    [f.next().unwrap_or(0), f.next().unwrap_or(0)]
 }
 
 impl Stats {
@@ -213,6 +252,26 @@ impl fmt::Display for Stats {
             "  wall time        {:>10.3} s",
             g(&self.wall_ns) as f64 * 1e-9
         )?;
+        let times = self
+            .thread_times
+            .lock()
+            .map(|v| v.clone())
+            .unwrap_or_default();
+        if !times.is_empty() {
+            let list = |k: usize| {
+                times
+                    .iter()
+                    .map(|t| format!("{:.3}", t[k] as f64 * 1e-9))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
+            write!(
+                f,
+                "\n  render threads   run {} s, waiting for a CPU {} s",
+                list(0),
+                list(1)
+            )?;
+        }
         let threads = g(&self.threads);
         if threads > 0 && self.phase_wall.iter().any(|w| g(w) > 0) {
             write!(
@@ -268,10 +327,15 @@ mod tests {
         assert_eq!(Stats::get(&s.live_bytes), 40);
         assert_eq!(Stats::get(&s.peak_bytes), 150);
         Stats::add(&s.grids, 3);
+        *s.thread_times.lock().unwrap() = vec![[1_250_000_000, 10_000_000], [500_000_000, 0]];
         let text = s.to_string();
         assert!(text.contains("grids"));
         assert!(text
             .lines()
             .any(|l| l.contains("grids") && l.trim_end().ends_with('3')));
+        assert!(text
+            .lines()
+            .any(|l| l.trim()
+                == "render threads   run 1.250 0.500 s, waiting for a CPU 0.010 0.000 s"));
     }
 }
