@@ -2,6 +2,8 @@
 //! reads `s` and `t` as the pixel's raster position (Aqsis binds them so, and grain imagers
 //! call `noise(s, t)`), and a display's `"quantize" [zero one min max]` maps 0 to `zero`
 //! (PRMan's and Aqsis's display parameter; a picture of normals puts −1..1 into 1..255).
+//! A PNG's alpha is unassociated (PNG specification), so arbor's premultiplied colour is
+//! divided by alpha in a PNG with an alpha channel; without one the film's values are written.
 
 mod common;
 
@@ -81,4 +83,60 @@ fn display_quantize_zero_is_the_level_of_zero() {
     assert!(!log.contains("zero offset"), "{log}");
     let (px, _) = pixels(&dir, "cs.png");
     assert!(px.iter().all(|p| *p == [1, 128, 255]), "{:?}", &px[..4]);
+}
+
+/// A constant white square whose right edge halves pixel column 2 of a 4×4 picture, through
+/// a 1×1 box filter with 4×4 stratified samples (the edge on a stratum boundary: exactly 8 of
+/// 16 samples covered), written to `name` with `mode` and `quantize`.
+fn half_covered_white(dir: &Path, name: &str, mode: &str, quantize: &str) {
+    let out = dir.join(name).display().to_string();
+    let rib = format!(
+        "Format 4 4 1\nPixelSamples 4 4\nPixelFilter \"box\" 1 1\n{quantize}\n\
+         Projection \"orthographic\"\nScreenWindow -2 2 -2 2\n\
+         Display \"{out}\" \"png\" \"{mode}\"\nTranslate 0 0 5\nWorldBegin\n\
+         Surface \"constant\"\nPolygon \"P\" [-3 -3 0  0.5 -3 0  0.5 3 0  -3 3 0]\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(dir, &rib);
+    assert!(!failed, "{log}");
+}
+
+#[test]
+fn png_alpha_is_straight_and_rgb_png_premultiplied() {
+    let dir = common::scratch_dir("film_png_alpha");
+    // Default Quantize: 8 bits, dither 0.5.
+    half_covered_white(&dir, "rgba.png", "rgba", "");
+    half_covered_white(&dir, "rgb.png", "rgb", "");
+    let rgba = image::open(dir.join("rgba.png")).unwrap().to_rgba8();
+    let rgb = image::open(dir.join("rgb.png")).unwrap().to_rgb8();
+    for y in 0..4 {
+        assert_eq!(rgba.get_pixel(0, y).0, [255; 4], "covered");
+        assert_eq!(rgba.get_pixel(3, y).0, [0; 4], "uncovered");
+        // Half covered: white (not grey) at half alpha; a viewer compositing it over black
+        // shows 0.5, as the premultiplied film holds.
+        let [r, g, b, a] = rgba.get_pixel(2, y).0;
+        assert_eq!([r, g, b], [255; 3], "row {y}: straight white");
+        assert!((127..=128).contains(&a), "row {y}: alpha {a}");
+        // rgb: the film's (premultiplied) values, as before.
+        assert_eq!(rgb.get_pixel(0, y).0, [255; 3]);
+        for v in rgb.get_pixel(2, y).0 {
+            assert!((127..=128).contains(&v), "row {y}: rgb {v}");
+        }
+        assert_eq!(rgb.get_pixel(3, y).0, [0; 3]);
+    }
+    // 16 bits: the same.
+    half_covered_white(
+        &dir,
+        "rgba16.png",
+        "rgba",
+        "Quantize \"rgba\" 65535 0 65535 0.5",
+    );
+    let img = image::open(dir.join("rgba16.png")).unwrap();
+    assert_eq!(img.color(), image::ColorType::Rgba16);
+    let img = img.to_rgba16();
+    for y in 0..4 {
+        let [r, g, b, a] = img.get_pixel(2, y).0;
+        assert_eq!([r, g, b], [65535; 3], "row {y}");
+        assert!((32767..=32768).contains(&a), "row {y}: alpha {a}");
+        assert_eq!(img.get_pixel(3, y).0, [0; 4]);
+    }
 }

@@ -6,8 +6,11 @@
 //! 8-bit PNG displays of a whole frame are usually encoded during the render, band by band
 //! (`film::stream`, planned by [`plan_streams`]); here they are only written out.
 //! Invariants: every file is written to a temporary name in its own directory and renamed, so
-//! a failed write never leaves a partial image; colours stay premultiplied by alpha; requests
-//! this module cannot honour exactly produce a warning and the closest output, never silence.
+//! a failed write never leaves a partial image; colours stay premultiplied by alpha (TIFF says
+//! so in its ExtraSamples tag, EXR is premultiplied by convention) except in a PNG with an alpha
+//! channel, whose colour is straight as the PNG specification requires ([`straight_alpha`]);
+//! requests this module cannot honour exactly produce a warning and the closest output, never
+//! silence.
 //!
 //! Display types: `file` (TIFF; PNG/EXR when the name says so), `tiff`, `png`, `exr`/`openexr`,
 //! `zfile`, `shadow` (zfile for now), `framebuffer` (no window: a PNG named after the display).
@@ -25,7 +28,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use image::ImageEncoder;
 
-use super::quantize::{apply_background, apply_exposure, is_float, quantize, quantize_row_u8};
+use super::quantize::{
+    apply_background, apply_exposure, is_float, quantize, quantize_row_u8, unpremultiply,
+};
 use super::resolve::Film;
 use super::stream::{Layout, PngStream, Streams};
 use super::zfile::ZFile;
@@ -176,7 +181,42 @@ fn stream_layout(film: &Film, t: &Target, opts: &Options) -> Option<Layout> {
         return None;
     }
     let src: Option<Vec<usize>> = planes.iter().map(|p| p.src).collect();
-    Some(Layout { src: src?, q })
+    Some(Layout {
+        src: src?,
+        divide_by: straight_alpha(film, t.format, &planes),
+        q,
+    })
+}
+
+/// Which output planes are written as straight colour, and by which film channel they are
+/// divided: a PNG's alpha is unassociated (PNG specification, "Alpha channel"), while the film's
+/// colour is premultiplied (RISpec: `Ci` already holds `Oi`), so a PNG whose last sample is
+/// alpha (grey + alpha, or RGBA) and comes from the film's `a` gets its `r`, `g`, `b` planes
+/// divided by it. Other planes (output variables, whose meaning arbor does not know) and other
+/// formats keep the film's values: `None` for each.
+///
+/// The division comes before the quantizer (and its dither), on the float values: RISpec
+/// defines `Quantize` on the values a display receives, and a PNG display receives straight
+/// colour. Dividing the quantised bytes instead would multiply their rounding error by 1/alpha
+/// at thin edges (one level at alpha 1/8 becomes eight).
+fn straight_alpha(film: &Film, format: Format, planes: &[Plane]) -> Vec<Option<usize>> {
+    let none = vec![None; planes.len()];
+    let alpha = film.channel("a");
+    let colour = [film.channel("r"), film.channel("g"), film.channel("b")];
+    match planes.split_last() {
+        Some((last, rest))
+            if format == Format::Png
+                && matches!(planes.len(), 2 | 4)
+                && alpha.is_some()
+                && last.src == alpha =>
+        {
+            rest.iter()
+                .map(|p| p.src.filter(|c| colour.contains(&Some(*c))).and(alpha))
+                .chain([None])
+                .collect()
+        }
+        _ => none,
+    }
 }
 
 /// A band of the film through [`prepare`] (for the streamed displays; the warnings are
@@ -662,10 +702,16 @@ fn write_target(
         )
         .maybe_label(t.span, "this Display"));
     }
+    // Straight colour in a PNG with alpha (a `None` for every plane of other files).
+    let divide_by = straight_alpha(film, t.format, &planes[..nout.min(planes.len())]);
     let sample = |x: usize, y: usize, k: usize| -> f32 {
         let Some(p) = planes.get(k) else { return 0.0 };
         let Some(c) = p.src else { return 0.0 };
-        let v = film.data[(y * w + x) * film.channels() + c];
+        let px = &film.data[(y * w + x) * film.channels()..];
+        let v = match divide_by.get(k).copied().flatten() {
+            Some(a) => unpremultiply(px[c], px[a]),
+            None => px[c],
+        };
         match znorm {
             Some((lo, hi)) if p.depth => {
                 if v.is_finite() && hi > lo {
@@ -726,6 +772,7 @@ fn write_target(
                     && znorm.is_none()
                     && s.size() == (w, h)
                     && plain.as_ref() == Some(&s.layout.src)
+                    && s.layout.divide_by == divide_by
                     && s.layout.q == q
             })
             .and_then(PngStream::finish);
@@ -747,14 +794,17 @@ fn write_target(
                         .then(|| planes.iter().take(nout).map(|p| p.src).collect())
                         .flatten()
                         .filter(|v: &Vec<usize>| v.len() == nout);
-                    let nch = film.channels();
                     if let (Some(src), false) = (&plain, sixteen) {
-                        // A channel at a time through the vectorised row quantiser.
+                        // A channel at a time through the vectorised row quantiser, the
+                        // values read as the streamed path reads them.
+                        let layout = Layout {
+                            src: src.clone(),
+                            divide_by: divide_by.clone(),
+                            q,
+                        };
                         let (mut vals, mut q8) = (vec![0f32; w], vec![0u8; w]);
-                        for (k, &c) in src.iter().enumerate() {
-                            for (x, v) in vals.iter_mut().enumerate() {
-                                *v = film.data[(y * w + x) * nch + c];
-                            }
+                        for k in 0..nout {
+                            layout.row_values(film, y, k, &mut vals);
                             quantize_row_u8(&vals, &q, y as u32, k as u32, &mut q8);
                             for (x, &b) in q8.iter().enumerate() {
                                 row[x * nout + k] = b;
@@ -763,12 +813,8 @@ fn write_target(
                         return;
                     }
                     for x in 0..w {
-                        let px = &film.data[(y * w + x) * nch..(y * w + x + 1) * nch];
                         for k in 0..nout {
-                            let v = match &plain {
-                                Some(src) => px[src[k]],
-                                None => sample(x, y, k),
-                            };
+                            let v = sample(x, y, k);
                             let v = quantize(v, &q, x as u32, y as u32, k as u32);
                             let at = (x * nout + k) * bpv;
                             if sixteen {
@@ -1159,7 +1205,8 @@ mod tests {
     fn streamed_png_is_byte_identical_to_the_whole_image_path() {
         let dir = tmpdir("stream");
         let smooth = picture(37, 23, false);
-        for mode in ["rgba", "rgb", "a", "ra"] {
+        // `r,a`: grey + alpha, straight; the picture's alpha runs from −0.05 to 1.05.
+        for mode in ["rgba", "rgb", "a", "ra", "r,a"] {
             for dither in [0.0, 0.5] {
                 let mut o = opts(vec![display(&dir.join("x.png"), "png", mode)]);
                 o.quantize_rgba.dither = dither;
@@ -1252,16 +1299,52 @@ mod tests {
         let img = image::open(&p8).unwrap();
         assert_eq!(img.color(), image::ColorType::Rgba8);
         let img = img.to_rgba8();
+        // PNG alpha is straight: the film's premultiplied colour divided by its alpha 0.75.
         for y in 0..3u32 {
             for x in 0..4u32 {
                 let px = img.get_pixel(x, y).0;
                 assert_eq!(
                     px,
-                    [q8(x as f32 / 4.0), q8(y as f32 / 3.0), 128, 191],
+                    [
+                        q8(x as f32 / 4.0 / 0.75),
+                        q8(y as f32 / 3.0 / 0.75),
+                        q8(0.5 / 0.75),
+                        191
+                    ],
                     "at {x},{y}"
                 );
             }
         }
+        assert_eq!(img.get_pixel(3, 2).0, [255, 227, 170, 191]);
+        // rgb keeps the film's (premultiplied) values: no alpha to be straight against.
+        let prgb = dir.join("c.png");
+        write_displays(&f, &opts(vec![display(&prgb, "png", "rgb")]), &d, None).unwrap();
+        let img = image::open(&prgb).unwrap().to_rgb8();
+        assert_eq!(img.get_pixel(3, 2).0, [191, 170, 128]);
+        // 16 bits with alpha: straight too.
+        let p16a = dir.join("d.png");
+        let mut o = opts(vec![display(&p16a, "png", "rgba")]);
+        o.quantize_rgba = Quantize {
+            zero: 0.0,
+            one: 65535.0,
+            min: 0.0,
+            max: 65535.0,
+            dither: 0.0,
+        };
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p16a).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgba16);
+        let q16 = |v: f32| (65535.0 * v).round() as u16;
+        let px = img.to_rgba16().get_pixel(1, 2).0;
+        assert_eq!(
+            px,
+            [
+                q16(0.25 / 0.75),
+                q16(2.0 / 3.0 / 0.75),
+                q16(0.5 / 0.75),
+                49151
+            ]
+        );
         // 16 bits, rgb
         let p16 = dir.join("b.png");
         let mut o = opts(vec![display(&p16, "png", "rgb")]);
@@ -1278,6 +1361,63 @@ mod tests {
         let px = img.to_rgb16().get_pixel(3, 2).0;
         assert_eq!(px, [49151, 43690, 32768]);
         assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn only_colour_planes_of_a_png_with_alpha_are_straight() {
+        let names = Film::standard_channels(&["N.x".into(), "N.y".into(), "N.z".into()]);
+        let f = Film::new(1, 1, names);
+        let d = Diagnostics::new();
+        let divide = |format: Format, mode: &str| {
+            let t = Target {
+                path: "x".into(),
+                format,
+                mode: mode.into(),
+                params: ParamList::default(),
+                kind: "png".into(),
+                span: Span::default(),
+            };
+            straight_alpha(&f, format, &select_planes(&f, &t, &d))
+        };
+        let a = f.channel("a");
+        assert_eq!(divide(Format::Png, "rgba"), [a, a, a, None]);
+        assert_eq!(divide(Format::Png, "g,a"), [a, None]);
+        assert_eq!(divide(Format::Png, "rgb"), [None; 3]);
+        assert_eq!(divide(Format::Png, "a"), [None]);
+        assert_eq!(
+            divide(Format::Png, "N,a"),
+            [None; 4],
+            "output variables as they are"
+        );
+        assert_eq!(
+            divide(Format::Png, "a,r"),
+            [None; 2],
+            "the last sample is not alpha"
+        );
+        assert_eq!(
+            divide(Format::Tiff, "rgba"),
+            [None; 4],
+            "TIFF says premultiplied"
+        );
+        assert!(d.snapshot().is_empty(), "{:?}", d.snapshot());
+    }
+
+    #[test]
+    fn half_covered_white_is_white_at_half_alpha_in_png() {
+        // Premultiplied half-covered white (0.5, 0.5, 0.5, 0.5) and an uncovered pixel whose
+        // colour is filter ringing: straight white at alpha 128, and nothing.
+        let mut f = Film::new(2, 1, Film::standard_channels(&[]));
+        f.pixel_mut(0, 0)[..4].copy_from_slice(&[0.5, 0.5, 0.5, 0.5]);
+        f.pixel_mut(1, 0)[..4].copy_from_slice(&[0.01, 0.0, 0.02, 0.0]);
+        let dir = tmpdir("halfwhite");
+        let p = dir.join("w.png");
+        let d = Diagnostics::new();
+        let o = opts(vec![display(&p, "png", "rgba")]);
+        write_displays(&f, &o, &d, None).unwrap();
+        let img = image::open(&p).unwrap().to_rgba8();
+        assert_eq!(img.get_pixel(0, 0).0, [255, 255, 255, 128]);
+        assert_eq!(img.get_pixel(1, 0).0, [0, 0, 0, 0]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

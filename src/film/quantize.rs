@@ -66,6 +66,18 @@ fn color_channels(film: &Film) -> [Option<usize>; 3] {
     [film.channel("r"), film.channel("g"), film.channel("b")]
 }
 
+/// Straight (unassociated) colour from colour `c` premultiplied by alpha `a`: c / a where
+/// a > 0; 0 where nothing covers the pixel (a ≤ 0, or NaN), as there is no colour to recover.
+/// a = 1 returns `c` bit for bit, so fully covered pixels keep their values.
+#[inline]
+pub fn unpremultiply(c: f32, a: f32) -> f32 {
+    if a > 0.0 {
+        c / a
+    } else {
+        0.0
+    }
+}
+
 /// Deterministic dither noise in [−1, 1) for (x, y, channel).
 #[inline]
 pub fn dither_noise(x: u32, y: u32, channel: u32) -> f32 {
@@ -286,6 +298,26 @@ mod tests {
                 "{v}: {a} vs {b}"
             );
         }
+    }
+
+    #[test]
+    fn unpremultiply_recovers_straight_colour() {
+        assert_eq!(unpremultiply(0.5, 0.5), 1.0);
+        assert_eq!(unpremultiply(0.25, 0.5), 0.5);
+        assert_eq!(
+            unpremultiply(0.3, 1.0).to_bits(),
+            0.3f32.to_bits(),
+            "a = 1: unchanged"
+        );
+        assert_eq!(unpremultiply(0.2, 0.0), 0.0, "uncovered: no colour");
+        assert_eq!(
+            unpremultiply(0.2, -0.01),
+            0.0,
+            "negative alpha (filter ringing)"
+        );
+        assert_eq!(unpremultiply(0.2, f32::NAN), 0.0);
+        // Over-bright straight colour is left for the quantizer's clamp.
+        assert_eq!(unpremultiply(0.5, 0.25), 2.0);
     }
 
     #[test]

@@ -6,14 +6,14 @@
 //! render driver in scanline order). Output: a zlib stream per display, handed to
 //! `output::write_displays_streamed`, which writes the file (temporary name, renamed) when the
 //! frame is done.
-//! Invariants: the file is byte for byte what the whole-image path writes — the same
-//! quantiser, the same adaptive row filter choice as the `png` crate (Up, Sub, Avg, Paeth,
+//! Invariants: the file is byte for byte what the whole-image path writes — the same values
+//! ([`Layout::row_values`]: straight colour in a PNG with alpha), the same quantiser, the same adaptive row filter choice as the `png` crate (Up, Sub, Avg, Paeth,
 //! least sum of |byte as i8|, ties to the later filter, the first zero-cost filter wins), the
 //! same `fdeflate` compressor fed the same row records, one IDAT chunk. Where that crate would
 //! store the data uncompressed (the compressed stream is larger), or a row never arrived, the
 //! stream is dropped and the display is written the old way from the film.
 
-use super::quantize::quantize_row_u8;
+use super::quantize::{quantize_row_u8, unpremultiply};
 use super::resolve::Film;
 use crate::scene::Quantize;
 
@@ -28,7 +28,32 @@ pub trait RowSink {
 pub struct Layout {
     /// Film channel of each output channel (1 to 4 of them).
     pub src: Vec<usize>,
+    /// Per output channel, the film's alpha channel when that channel is written as straight
+    /// colour (a PNG with alpha: see `output::straight_alpha`), else `None`.
+    pub divide_by: Vec<Option<usize>>,
     pub q: Quantize,
+}
+
+impl Layout {
+    /// Output channel `k` of row `row` of `film` as the floats the quantiser takes, one per
+    /// pixel into `vals`: the film's values, divided by alpha where the display holds straight
+    /// colour. The streamed and the whole-image paths both read rows through here.
+    pub fn row_values(&self, film: &Film, row: usize, k: usize, vals: &mut [f32]) {
+        let (w, nch, c) = (film.width, film.channels(), self.src[k]);
+        let px = &film.data[row * w * nch..(row + 1) * w * nch];
+        match self.divide_by.get(k).copied().flatten() {
+            Some(a) => {
+                for (v, p) in vals.iter_mut().zip(px.chunks_exact(nch)) {
+                    *v = unpremultiply(p[c], p[a]);
+                }
+            }
+            None => {
+                for (v, p) in vals.iter_mut().zip(px.chunks_exact(nch)) {
+                    *v = p[c];
+                }
+            }
+        }
+    }
 }
 
 /// One PNG display being encoded.
@@ -76,13 +101,11 @@ impl PngStream {
             return;
         }
         let Some(z) = &mut self.deflate else { return };
-        let (w, nch, nout) = (self.width, film.channels(), self.layout.src.len());
-        // The same quantiser, a row and a channel at a time, as the whole-image path (the
-        // dither pattern follows the image's y).
-        for (k, &c) in self.layout.src.iter().enumerate() {
-            for (x, v) in self.vals.iter_mut().enumerate() {
-                *v = film.data[(row * w + x) * nch + c];
-            }
+        let nout = self.layout.src.len();
+        // The same values and quantiser, a row and a channel at a time, as the whole-image
+        // path (the dither pattern follows the image's y).
+        for k in 0..nout {
+            self.layout.row_values(film, row, k, &mut self.vals);
             quantize_row_u8(&self.vals, &self.layout.q, y as u32, k as u32, &mut self.q8);
             for (x, &b) in self.q8.iter().enumerate() {
                 self.cur[x * nout + k] = b;
