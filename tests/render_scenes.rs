@@ -197,6 +197,9 @@ fn to_rgba8(f: &Film) -> image::RgbaImage {
 }
 
 /// Compares a film's rgba with a reference PNG (16-bit, linear) within DESIGN.md's tolerance.
+/// The references hold the film's premultiplied values as they are (written here, not by
+/// arbor's PNG display, which writes straight colour where there is alpha): compare them as
+/// data, not as pictures.
 fn check_golden(name: &str, f: &Film) {
     let path = golden_dir().join(format!("{name}.png"));
     let actual: image::ImageBuffer<image::Rgba<u16>, Vec<u16>> =
