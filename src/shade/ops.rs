@@ -1250,15 +1250,19 @@ fn call(ex: &mut Exec, f: Builtin, dst: Reg, args: &[Reg], span: crate::diag::Sp
             // The two-argument form decides the side by the geometric normal Ng, as PRMan,
             // Aqsis and VEX do: a bumped N that tilts past the silhouette is kept, not flipped
             // to the far side (which turned grazing bumps black). Where the shader has no Ng
-            // (lights, volumes) or Ng is zero, N itself is the reference; so it is when N
-            // and I are both uniform, whose result the compiler treats as uniform.
+            // (lights, volumes) or Ng is zero, N itself is the reference. The compiler makes
+            // the result varying when Ng is, so uniform N and I follow the same rule.
             let (nn, i_) = (arg(ex, args, 0).t(), arg(ex, args, 1).t());
-            let ng = ex.prog.global("Ng").map(|g| ex.regs[g.reg as usize].t());
-            match ng.filter(|_| varying_any!()) {
-                Some(ng) => write_t(&mut out, n, true, |i| {
-                    let (nv, iv, gv) = (nn.at(i), i_.at(i), ng.at(i));
-                    face_forward(nv, iv, if gv == Vec3::ZERO { nv } else { gv })
-                }),
+            let ng = ex.prog.global("Ng").map(|g| &ex.regs[g.reg as usize]);
+            match ng {
+                Some(ng) => {
+                    let vary = varying_any!() || ng.is_varying();
+                    let ng = ng.t();
+                    write_t(&mut out, n, vary, |i| {
+                        let (nv, iv, gv) = (nn.at(i), i_.at(i), ng.at(i));
+                        face_forward(nv, iv, if gv == Vec3::ZERO { nv } else { gv })
+                    })
+                }
                 None => zip_tt(&mut out, n, nn, i_, |nv, iv| face_forward(nv, iv, nv)),
             }
         }

@@ -2379,6 +2379,8 @@ impl<'a> Lowerer<'a> {
             // faceforward(N, I) judges the side by Ng, named or not.
             if let Some(v) = self.lookup("Ng") {
                 self.mark_used(v.reg);
+                // Its result varies with Ng; a uniform target keeps it uniform, as random().
+                varying |= self.regs[v.reg as usize].varying && !self.uniform_target;
             }
         }
         for (i, (v, e)) in vals.iter().enumerate() {
