@@ -597,3 +597,39 @@ fn rgba_tiff_declares_its_premultiplied_alpha() {
         [px[0], px[1], px[2]]
     );
 }
+
+/// The mean of a white sphere of radius 0.5 whose surface shader pushes P out by 0.5 along N,
+/// seen face-on through a 4×4 orthographic window; `attrs` go before the sphere.
+fn swollen_sphere_coverage(attrs: &str) -> f64 {
+    let dir = common::scratch_dir("swell");
+    std::fs::write(
+        dir.join("swell.sl"),
+        "surface swell() { P += 0.5 * normalize(N); N = calculatenormal(P); Oi = 1; Ci = 1; }",
+    )
+    .unwrap();
+    let rib = format!(
+        "Format 64 64 1\nPixelSamples 4 4\nProjection \"orthographic\"\nScreenWindow -2 2 -2 2\n\
+         Translate 0 0 5\nWorldBegin\n{attrs}\nSurface \"swell\"\nSphere 0.5 -0.5 0.5 360\nWorldEnd\n"
+    );
+    common::film_mean(&common::render_rib(&rib, &[dir]))[0]
+}
+
+#[test]
+fn a_surface_shader_that_moves_p_moves_what_the_camera_sees_within_a_declared_bound() {
+    // PRMan and Aqsis hide micropolygons where the surface shader left P (fur, craters): a
+    // disk of radius 1 in a 4×4 window covers π/16 of it.
+    let moved = swollen_sphere_coverage("Attribute \"displacementbound\" \"sphere\" [0.6]");
+    assert!(
+        (moved - std::f64::consts::PI / 16.0).abs() < 0.01,
+        "{moved}"
+    );
+    // Without a bound (BMRT-era scenes) the points stay: radius 0.5, π/64 of the window.
+    let kept = swollen_sphere_coverage("");
+    assert!((kept - std::f64::consts::PI / 64.0).abs() < 0.005, "{kept}");
+    // So does BMRT's truedisplacement 0, bound or not.
+    let bmrt = swollen_sphere_coverage(
+        "Attribute \"displacementbound\" \"sphere\" [0.6]\n\
+         Attribute \"render\" \"truedisplacement\" [0]",
+    );
+    assert!((bmrt - std::f64::consts::PI / 64.0).abs() < 0.005, "{bmrt}");
+}

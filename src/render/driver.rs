@@ -781,23 +781,14 @@ impl Frame<'_> {
                 let undisplaced = grid.motion.as_ref().map(|_| grid.p.clone());
                 self.shader
                     .displace(self.scene, self.camera, prim, &mut grid);
-                if let (Some(before), Some(m)) = (undisplaced, grid.motion.as_mut()) {
-                    // Displaced at shutter open; every key carries the same offset.
-                    if before != grid.p {
-                        for key in m.p.iter_mut().skip(1) {
-                            for ((k, b), a) in key.iter_mut().zip(&before).zip(&grid.p) {
-                                *k += *a - *b;
-                            }
-                        }
-                    }
-                    if let Some(k0) = m.p.first_mut() {
-                        k0.clone_from(&grid.p);
-                    }
-                }
+                carry_to_motion_keys(undisplaced, &mut grid);
                 set_incident(&mut grid, self.camera.perspective);
                 self.stats.time(Stage::Displace, t1);
                 let t2 = Instant::now();
+                // The surface shader may move P too (see `surface_moves_points`).
+                let unshaded = grid.motion.as_ref().map(|_| grid.p.clone());
                 self.shader.shade(self.scene, self.camera, prim, &mut grid);
+                carry_to_motion_keys(unshaded, &mut grid);
                 if let Some(cut) = trimmed.filter(|c| c.len() == grid.ci.len()) {
                     for ((ci, oi), _) in grid
                         .ci
@@ -844,6 +835,24 @@ impl Frame<'_> {
                 (Outcome::Grid(Box::new(sg)), Vec::new())
             }
         }
+    }
+}
+
+/// A grid moved by a shader at shutter open (`before` is where its points were): every
+/// motion key carries the same offset, and the first key is the moved grid.
+fn carry_to_motion_keys(before: Option<Vec<Vec3>>, grid: &mut crate::shade::Grid) {
+    let (Some(before), Some(m)) = (before, grid.motion.as_mut()) else {
+        return;
+    };
+    if before != grid.p {
+        for key in m.p.iter_mut().skip(1) {
+            for ((k, b), a) in key.iter_mut().zip(&before).zip(&grid.p) {
+                *k += *a - *b;
+            }
+        }
+    }
+    if let Some(k0) = m.p.first_mut() {
+        k0.clone_from(&grid.p);
     }
 }
 

@@ -732,6 +732,18 @@ impl<'a> ShadeSystem<'a> {
             if let Some(g) = prog.global("Oi") {
                 grid.oi = own_vt(&mut regs[g.reg as usize], n);
             }
+            // A surface shader that moves P moves the micropolygons the camera sees, where
+            // the primitive declares room for it (see [`surface_moves_points`]).
+            if let Some(g) = prog.global("P").filter(|g| g.written) {
+                if !ctx.hits && ctx.depth == 0 && surface_moves_points(scene, &p.attributes) {
+                    let moved = slot_vt(&regs[g.reg as usize], n);
+                    for (p, m) in grid.p.iter_mut().zip(moved) {
+                        if m.is_finite() {
+                            *p = m;
+                        }
+                    }
+                }
+            }
             // Output parameters become arbitrary output variables.
             grid.outputs.clear();
             for par in prog
@@ -1444,6 +1456,17 @@ pub(crate) fn bump_only(scene: &Scene, attrs: &Attributes) -> bool {
         Some([x, ..]) => *x == 0.0,
         _ => scene.bmrt_displacement || !(attrs.displacement_bound > 0.0),
     }
+}
+
+/// Whether the P a surface shader writes becomes the position the camera sees (a PRMan
+/// scene's "displacement in the surface shader": `P += …; N = calculatenormal(P)`).
+///
+/// PRMan and Aqsis hide the micropolygons where shading left P, so fur and crater shaders
+/// written as surfaces stand out of the silhouette; such scenes declare a
+/// `displacementbound` for it. BMRT kept the points (its surface shaders bump only), and so
+/// does a primitive without a bound, as with displacement shaders (see [`bump_only`]).
+pub(crate) fn surface_moves_points(scene: &Scene, attrs: &Attributes) -> bool {
+    attrs.displacement_bound > 0.0 && !scene.bmrt_displacement && !bump_only(scene, attrs)
 }
 
 /// Bump mapped only for want of a `displacementbound` (see [`bump_only`]): the case a user
