@@ -633,3 +633,30 @@ fn a_surface_shader_that_moves_p_moves_what_the_camera_sees_within_a_declared_bo
     );
     assert!((bmrt - std::f64::consts::PI / 64.0).abs() < 0.005, "{bmrt}");
 }
+
+#[test]
+fn a_shader_renamed_with_its_authors_initials_is_found_by_its_old_name() {
+    // The RenderMan Repository renamed bubbly.sl to IDbubbly.sl, and its scene still says
+    // `Displacement "bubbly"`.
+    let dir = common::scratch_dir("initials");
+    std::fs::write(
+        dir.join("QXgreen.sl"),
+        "surface QXgreen() { Oi = 1; Ci = color(0, 1, 0); }",
+    )
+    .unwrap();
+    let rib = "Format 8 8 1\nPixelSamples 1 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\n\
+               Surface \"green\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n";
+    let (film, diags, _) = common::render_rib_with(
+        rib,
+        &[dir],
+        &arbor::render::driver::RenderOptions::default(),
+    );
+    let rgb = common::film_rgb(&film);
+    let k = (4 * film.width + 4) * 3;
+    assert_eq!([rgb[k], rgb[k + 1], rgb[k + 2]], [0.0, 1.0, 0.0]);
+    assert!(
+        diags.iter().any(|(d, _)| d.code == "shade::renamed"),
+        "{:?}",
+        diags.iter().map(|(d, _)| d.code).collect::<Vec<_>>()
+    );
+}

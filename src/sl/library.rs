@@ -357,6 +357,23 @@ impl ShaderLibrary {
             );
             return p;
         }
+        if let Some(path) = crate::sl::initials::find_initialled(&base, &opts.search_paths) {
+            let c = Candidate::File(path);
+            if let Some(p) = self.compile_candidate(&c, &base, name, opts, sources, diags) {
+                diags.report(
+                    Diag::warning(
+                        "shade::renamed",
+                        format!(
+                            "shader `{name}` not found; {} is used: the same name with its \
+                             author's initials in front",
+                            c.describe()
+                        ),
+                    )
+                    .help("the RenderMan Repository renamed its shaders so; name the file's shader in the scene"),
+                );
+                return p;
+            }
+        }
         diags.report(
             Diag::warning(
                 "shade::missing",

@@ -6,6 +6,7 @@
 pub mod ast;
 pub mod builtins;
 pub mod foreign;
+pub mod initials;
 pub mod ir;
 pub mod library;
 pub mod lower;
