@@ -481,9 +481,18 @@ fn job_cmd(
                 eprintln!("wrote {}", o.display());
             }
         }
-        None => print!("{text}"),
+        None => emit(&text),
     }
     ExitCode::SUCCESS
+}
+
+/// Writes `text` to standard output. A reader that stops early (`arbor info x | head`) closes
+/// the pipe: that ends the output quietly, as for other command-line tools, instead of
+/// panicking as `print!` does.
+fn emit(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes()).and_then(|_| out.flush());
 }
 
 /// Prints every diagnostic (warnings only unless quiet, notes only when verbose) and returns
@@ -702,10 +711,12 @@ fn main() -> ExitCode {
             let failed = report(&diags, &sources, cli.quiet, cli.verbose);
             match prog {
                 Some(p) => {
-                    println!("{} \"{}\"", p.kind.name(), p.name);
+                    use std::fmt::Write as _;
+                    let mut text = format!("{} \"{}\"\n", p.kind.name(), p.name);
                     for par in &p.params {
                         let arr = par.array.map(|n| format!("[{n}]")).unwrap_or_default();
-                        println!(
+                        let _ = writeln!(
+                            text,
                             "    \"{}\" \"{}{} {}{}\"",
                             par.name,
                             if par.output { "output " } else { "" },
@@ -713,11 +724,12 @@ fn main() -> ExitCode {
                             par.ty.name(),
                             arr
                         );
-                        println!("\t\tDefault value: {}", par.default_text);
+                        let _ = writeln!(text, "\t\tDefault value: {}", par.default_text);
                     }
                     if a.ir {
-                        println!("{p}");
+                        let _ = writeln!(text, "{p}");
                     }
+                    emit(&text);
                     if failed {
                         ExitCode::from(1)
                     } else {
@@ -816,7 +828,7 @@ fn main() -> ExitCode {
             Ok(reqs) => {
                 // The text the requests were read from (decoded, for binary RIB): comments kept.
                 let text = sources.get(0).map(|f| f.text.clone()).unwrap_or_default();
-                print!("{}", arbor::rib::format_source(&text, &reqs));
+                emit(&arbor::rib::format_source(&text, &reqs));
                 if report(&diags, &sources, cli.quiet, cli.verbose) {
                     ExitCode::from(1)
                 } else {

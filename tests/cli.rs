@@ -295,3 +295,28 @@ fn ignored_renderer_settings_show_only_with_verbose() {
         "{e}"
     );
 }
+
+#[test]
+fn a_reader_that_stops_early_ends_the_output_quietly() {
+    // `arbor format big.rib | head`: the pipe closes before the text is written (more than a
+    // pipe's buffer), which ends the output without a panic.
+    let dir = tmpdir("pipe");
+    let mut rib = String::from("WorldBegin\n");
+    for i in 0..4000 {
+        rib.push_str(&format!("Translate {i} 0 0\nSphere 1 -1 1 360\n"));
+    }
+    rib.push_str("WorldEnd\n");
+    std::fs::write(dir.join("big.rib"), &rib).unwrap();
+    let mut child = arbor()
+        .args(["format", "big.rib"])
+        .current_dir(&*dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+}
