@@ -225,8 +225,20 @@ fn surfaces_full(
                 .label(prim.span, "this primitive"),
         );
     };
-    if !m.is_finite() || m.determinant() == 0.0 {
-        invalid("the primitive's transform is singular or not finite");
+    if !m.is_finite() {
+        invalid("the primitive's transform is not finite");
+        return Vec::new();
+    }
+    if m.determinant() == 0.0 {
+        // Particle exporters write dead particles as `Scale 0 0 0`: legitimate, and nothing
+        // to see, so a warning (PRMan renders them silently).
+        diags.report(
+            Diag::warning(
+                "geom::singular",
+                "the primitive's transform is singular (a zero scale flattens it); the primitive is skipped",
+            )
+            .label(prim.span, "this primitive"),
+        );
         return Vec::new();
     }
     // Exporters (mtor, MayaMan) write camera matrices with ~1e-10 in the projective column:

@@ -1011,3 +1011,25 @@ fn displaced_triangles_become_three_quads_without_collapsed_rows() {
         assert!((g.primvar("fv").unwrap().floats[15] - 2.0).abs() < 1e-6);
     }
 }
+
+#[test]
+fn a_zero_scaled_primitive_is_skipped_with_a_warning_not_an_error() {
+    // Particle systems write dead particles as `Scale 0 0 0`; PRMan draws nothing, silently.
+    let d = Diagnostics::new();
+    let dead = prim(
+        Geometry::Sphere {
+            radius: 2.0,
+            zmin: -2.0,
+            zmax: 2.0,
+            thetamax: 360.0,
+        },
+        vec![],
+        Attributes::default(),
+        Mat4::from_scale(Vec3::ZERO),
+    );
+    assert!(surfaces_for(0, &dead, Mat4::IDENTITY, &d).is_empty());
+    assert!(!d.has_errors());
+    let s = d.snapshot();
+    assert_eq!(s.len(), 1);
+    assert_eq!(s[0].0.code, "geom::singular");
+}
