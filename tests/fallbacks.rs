@@ -342,3 +342,33 @@ fn a_missing_light_shaped_by_a_map_stays_out() {
     assert!(!log.contains("stands in"), "{log}");
     assert_eq!(px[(w / 2) * w + w / 2], 0);
 }
+
+#[test]
+fn a_shader_is_found_by_its_declared_name_in_a_shorter_file() {
+    // The RMR ships SIG2k_srf_contact as `SIG2k_srfconta.sl` (a file name cut short); PRMan
+    // names the compiled shader after its declaration, so a RIB asks for the long name.
+    let dir = common::scratch_dir("fallbacks_declared_name");
+    std::fs::write(
+        dir.join("decoy.sl"),
+        "/* surface long_grey_surface( is only mentioned here */\n\
+         surface long_grey_surfaceX() { Ci = 1; Oi = 1; }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("long_gre.sl"),
+        "surface\n  long_grey_surface ( float g = 0.25; )\n{ Ci = g; Oi = 1; }\n",
+    )
+    .unwrap();
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+         Surface \"long_grey_surface\" \"float g\" [0.5]\n\
+         Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+    );
+    let (log, px, _) = render(&dir, &rib, None);
+    assert!(!log.contains("shade::missing"), "{log}");
+    assert!(!log.contains("stand-in"), "{log}");
+    // g = 0.5 from the instance (dithered ±1): the file's shader ran, not the decoy's white
+    // nor a stand-in.
+    assert!(px.iter().all(|&v| v.abs_diff(128) <= 1), "{px:?}");
+}

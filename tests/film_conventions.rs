@@ -140,3 +140,24 @@ fn png_alpha_is_straight_and_rgb_png_premultiplied() {
         assert_eq!(img.get_pixel(3, y).0, [0; 4]);
     }
 }
+
+#[test]
+fn the_background_imager_takes_prman_color_parameter() {
+    // PRMan's built-in background imager names its colour "color" (solidThinking and
+    // mtor RIB write `Imager "background" "color" [0 0 0]`); read as unknown it left the
+    // RISpec default, white, behind a black starfield. An unknown name is reported.
+    let dir = common::scratch_dir("film_background_color");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Format 4 2 1\nQuantize \"rgba\" 255 0 255 0\nDisplay \"{out}\" \"png\" \"rgb\"\n\
+         Declare \"color\" \"color\"\n\
+         Imager \"background\" \"color\" [0.2 0.4 0.6] \"bgcolour\" [1 0 0]\n\
+         WorldBegin\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
+    assert_eq!(log.matches("film::imager").count(), 1, "{log}");
+    assert!(log.contains("no parameter `bgcolour`"), "{log}");
+    let (px, _) = pixels(&dir, "out.png");
+    assert!(px.iter().all(|p| *p == [51, 102, 153]), "{px:?}");
+}

@@ -1054,3 +1054,19 @@ fn quantize_of_a_named_display_variable_is_kept_for_that_mode() {
         b.errors()
     );
 }
+
+#[test]
+fn geometric_representation_primitive_is_silent() {
+    // WW3DKit's RIB (the RMR SWShaders spaceship) writes `GeometricRepresentation
+    // "primitive"`, PRMan's default and what arbor draws: nothing to warn about.
+    let b = build(
+        r#"WorldBegin
+GeometricRepresentation "primitive"
+Sphere 1 -1 1 360
+WorldEnd
+"#,
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
+    assert_eq!(b.one().primitives.len(), 1);
+}

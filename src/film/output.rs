@@ -35,7 +35,7 @@ use super::resolve::Film;
 use super::stream::{Layout, PngStream, Streams};
 use super::zfile::ZFile;
 use crate::diag::{Diag, Diagnostics, Span};
-use crate::scene::{Display, Options, ParamList, Quantize};
+use crate::scene::{Display, Options, ParamList, Quantize, ShaderRef};
 
 /// File formats the film can write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -248,17 +248,7 @@ fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, F
     }
     if let Some(imager) = &opts.imager {
         if imager.name == "background" {
-            let c = imager
-                .params
-                .floats("background")
-                .or_else(|| imager.params.floats("bgcolor"))
-                .filter(|f| !f.is_empty());
-            let color = match c {
-                Some(f) if f.len() >= 3 => [f[0], f[1], f[2]],
-                Some(f) => [f[0]; 3],
-                None => [1.0; 3],
-            };
-            apply_background(img.to_mut(), color);
+            apply_background(img.to_mut(), background_color(imager, diags));
         } else {
             diags.report(
                 Diag::warning(
@@ -274,6 +264,41 @@ fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, F
         }
     }
     img
+}
+
+/// The names the standard `background` imager's colour goes by: RISpec 3.2's `background`,
+/// BMRT's `bgcolor`, and `color`, the parameter of PRMan's built-in background imager that
+/// PRMan-era RIB writes (`Imager "background" "color" [0 0 0]`).
+const BACKGROUND_PARAMS: [&str; 3] = ["background", "bgcolor", "color"];
+
+/// The colour the `background` imager composites under the image: the first of its
+/// parameter names given (white when none is, as in RISpec). A parameter it does not have
+/// is reported, since the image then silently keeps the white default.
+fn background_color(imager: &ShaderRef, diags: &Diagnostics) -> [f32; 3] {
+    for p in imager.params.iter() {
+        if !BACKGROUND_PARAMS.contains(&&*p.name) {
+            diags.report(
+                Diag::warning(
+                    "film::imager",
+                    format!(
+                        "the `background` imager has no parameter `{}`; ignored",
+                        p.name
+                    ),
+                )
+                .maybe_label(p.span, "this parameter")
+                .help("its colour is \"background\" (also \"bgcolor\" or \"color\")"),
+            );
+        }
+    }
+    let c = BACKGROUND_PARAMS
+        .iter()
+        .find_map(|n| imager.params.floats(n))
+        .filter(|f| !f.is_empty());
+    match c {
+        Some(f) if f.len() >= 3 => [f[0], f[1], f[2]],
+        Some(f) => [f[0]; 3],
+        None => [1.0; 3],
+    }
 }
 
 /// The list of files to write, with the CLI override applied.

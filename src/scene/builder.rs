@@ -369,6 +369,16 @@ impl<'a> Builder<'a> {
         self.report(d);
     }
 
+    /// PRMan's `GeometricRepresentation`: `"primitive"`, its default, is what arbor draws, so
+    /// it is accepted silently (modellers such as WW3DKit write it before every object); any
+    /// other (`"lines"`, `"points"`, …) gets the not-implemented warning and the surface is
+    /// drawn.
+    pub(super) fn geometric_representation(&mut self, call: &Call<'_>) {
+        if call.pos[0].str() != "primitive" {
+            self.unimplemented(call);
+        }
+    }
+
     /// A note (shown at `-v`) for a known renderer-specific Option/Attribute arbor does not
     /// act on; the value is still stored for `attribute()`/`option()`.
     pub(super) fn note_if_ignored(&mut self, request: &str, cat: &str, p: &Param) {

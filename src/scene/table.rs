@@ -506,7 +506,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Bxdf", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
     req!("Pattern", ["name": Str, "handle": Str], ALL, true, "ext", B::unimplemented),
     // PRMan/3Delight requests beyond RISpec 3.2 that published RIB uses: a named warning each.
-    req!("GeometricRepresentation", ["type": Str], ALL, false, "ext", B::unimplemented),
+    req!("GeometricRepresentation", ["type": Str], ALL, false, "ext", B::geometric_representation),
     req!("System", ["cmdstring": Str], ALL, false, "ext", B::unimplemented),
     req!("MakeBrickMap", ["ptcnames": Strs, "bkmname": Str], ALL, true, "ext", B::unimplemented),
     req!("MakeOcclusion", ["picnames": Strs, "shadowname": Str], ALL, true, "ext", B::unimplemented),

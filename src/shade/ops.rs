@@ -107,6 +107,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             dst,
             a,
             b,
+            span,
         } => {
             let mut out = take(ex, *dst);
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
@@ -122,7 +123,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                             k2(&mut out, n, lanes, x, y, safe_div);
                             if zero {
                                 put(ex, *dst, out);
-                                ex.warn(ex.prog.span, "division by zero (result set to 0)");
+                                ex.warn(*span, "division by zero (result set to 0)");
                                 return;
                             }
                         }
@@ -311,7 +312,12 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             });
             put(ex, *dst, out);
         }
-        Instr::ColorFrom { dst, space, a } => {
+        Instr::ColorFrom {
+            dst,
+            space,
+            a,
+            span,
+        } => {
             let mut out = take(ex, *dst);
             let sp = ex.regs[*space as usize].s();
             let x = ex.regs[*a as usize].t();
@@ -320,14 +326,14 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             put(ex, *dst, out);
             if !ok {
                 ex.warn(
-                    ex.prog.span,
+                    *span,
                     format!("unknown colour space \"{sp}\" (treated as rgb)"),
                 );
             }
         }
-        Instr::SpaceMatrix { dst, space } => {
+        Instr::SpaceMatrix { dst, space, span } => {
             let sp = ex.regs[*space as usize].s();
-            let m = space_matrix(ex, &sp);
+            let m = space_matrix(ex, &sp, *span);
             put(ex, *dst, Slot::M(Box::new(m)));
         }
         Instr::Transform {
@@ -336,10 +342,11 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             from,
             to,
             a,
+            span,
         } => {
             let mut out = take(ex, *dst);
-            let fm = space_operand(ex, *from, true);
-            let tm = space_operand(ex, *to, false);
+            let fm = space_operand(ex, *from, true, *span);
+            let tm = space_operand(ex, *to, false, *span);
             let x = ex.regs[*a as usize].t();
             let v = x.is_varying() || fm.is_varying() || tm.is_varying();
             let k = *kind;
@@ -456,12 +463,12 @@ fn apply(k: XformKind, m: Mat4, p: Vec3) -> Vec3 {
 }
 
 /// camera_from_space for a named space; identity with a warning when unknown.
-fn space_matrix(ex: &Exec, name: &str) -> Mat4 {
+fn space_matrix(ex: &Exec, name: &str, span: crate::diag::Span) -> Mat4 {
     match (ex.env.spaces)(name) {
         Some(m) => m,
         None => {
             ex.warn(
-                ex.prog.span,
+                span,
                 format!("unknown coordinate system \"{name}\" (identity used)"),
             );
             Mat4::IDENTITY
@@ -471,11 +478,11 @@ fn space_matrix(ex: &Exec, name: &str) -> Mat4 {
 
 /// The matrix for a transform operand: `from` spaces map to current (camera), `to` spaces map
 /// from current.
-fn space_operand<'a>(ex: &'a Exec, s: Space, from: bool) -> M<'a> {
+fn space_operand<'a>(ex: &'a Exec, s: Space, from: bool, span: crate::diag::Span) -> M<'a> {
     match s {
         Space::Current => M::U(Mat4::IDENTITY),
         Space::Named(r) => {
-            let m = space_matrix(ex, &ex.regs[r as usize].s());
+            let m = space_matrix(ex, &ex.regs[r as usize].s(), span);
             M::U(if from { m } else { inverse(m) })
         }
         Space::Matrix(r) => {

@@ -106,6 +106,8 @@ pub enum Instr {
         dst: Reg,
         a: Reg,
         b: Reg,
+        /// The expression, for the division-by-zero warning to point at.
+        span: Span,
     },
     /// triple · float / float · triple scaling is lowered as Promote + Arith.
     Neg {
@@ -175,6 +177,8 @@ pub enum Instr {
         dst: Reg,
         space: Reg,
         a: Reg,
+        /// The cast, for the unknown-space warning to point at.
+        span: Span,
     },
     /// Transforms from `from` to `to` space.
     Transform {
@@ -183,11 +187,15 @@ pub enum Instr {
         from: Space,
         to: Space,
         a: Reg,
+        /// The call or cast, for the unknown-space warning to point at.
+        span: Span,
     },
     /// matrix "space" x: the matrix that maps `space` to current, times x.
     SpaceMatrix {
         dst: Reg,
         space: Reg,
+        /// The cast, for the unknown-space warning to point at.
+        span: Span,
     },
     /// Array element read with a (possibly varying) index; `base..base+len` hold the elements.
     GetIndex {
@@ -456,6 +464,7 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 dst,
                 a,
                 b,
+                ..
             } => writeln!(
                 f,
                 "{pad}{} = {:?}.{:?} {} {}",
@@ -537,7 +546,7 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
             out.push(*dst);
             out.extend(elems.iter());
         }
-        Instr::ColorFrom { dst, space, a } => out.extend([*dst, *space, *a]),
+        Instr::ColorFrom { dst, space, a, .. } => out.extend([*dst, *space, *a]),
         Instr::Transform {
             dst, from, to, a, ..
         } => {
@@ -545,7 +554,7 @@ fn instr_regs(ins: &Instr, out: &mut Vec<Reg>) {
             space(from, out);
             space(to, out);
         }
-        Instr::SpaceMatrix { dst, space } => out.extend([*dst, *space]),
+        Instr::SpaceMatrix { dst, space, .. } => out.extend([*dst, *space]),
         Instr::GetIndex {
             dst,
             base,

@@ -357,6 +357,21 @@ impl ShaderLibrary {
             );
             return p;
         }
+        if let Some((path, p)) = self.load_by_declared_name(&base, name, opts, sources, diags) {
+            diags.report(
+                Diag::note(
+                    "shade::declared-name",
+                    format!(
+                        "shader `{name}` found in `{}`, which declares it under another file name",
+                        path.display()
+                    ),
+                )
+                .help(format!(
+                    "PRMan names a compiled shader after its declaration, not its file; rename the file `{base}.sl` to find it directly"
+                )),
+            );
+            return p;
+        }
         if let Some(path) = crate::sl::initials::find_initialled(&base, &opts.search_paths) {
             let c = Candidate::File(path);
             if let Some(p) = self.compile_candidate(&c, &base, name, opts, sources, diags) {
@@ -381,6 +396,52 @@ impl ShaderLibrary {
             )
             .help("put the .sl file in the scene's folder or on the shader search path (--shaders, Option \"searchpath\" \"shader\")"),
         );
+        None
+    }
+
+    /// A `.sl` file on the search path (or in the working folder) that declares the shader
+    /// `base` under another file name, compiled: shader compilers name their output after the
+    /// declaration, so a RIB names `SIG2k_srf_contact` where the repository ships it as
+    /// `SIG2k_srfconta.sl` (a file name cut to fit an old file system). Files are tried in
+    /// name order, folders in search order; None when no file declares it.
+    fn load_by_declared_name(
+        &self,
+        base: &str,
+        name: &str,
+        opts: &CompileOptions,
+        sources: &SourceMap,
+        diags: &Diagnostics,
+    ) -> Option<(PathBuf, Option<Arc<Program>>)> {
+        let dirs = opts
+            .search_paths
+            .iter()
+            .cloned()
+            .chain(std::iter::once(PathBuf::from(".")));
+        for dir in dirs {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            let mut files: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "sl"))
+                .collect();
+            files.sort();
+            for path in files {
+                let Ok(text) = crate::encoding::read_text(&path) else {
+                    continue;
+                };
+                if !declares_shader(&text, base) {
+                    continue;
+                }
+                let c = Candidate::File(path.clone());
+                match self.compile_candidate(&c, base, name, opts, sources, diags) {
+                    // Declared in a conditional part the preprocessor left out: not this one.
+                    Some(Some(p)) if p.name != base => continue,
+                    Some(p) => return Some((path, p)),
+                    None => continue,
+                }
+            }
+        }
         None
     }
 
@@ -520,6 +581,65 @@ impl Candidate {
     }
 }
 
+/// Whether shading-language `text` declares a shader called `name`: the name follows a shader
+/// kind keyword (whitespace between) and precedes its parameter list's `(`.
+fn declares_shader(text: &str, name: &str) -> bool {
+    const KINDS: [&str; 6] = [
+        "surface",
+        "displacement",
+        "light",
+        "volume",
+        "imager",
+        "transformation",
+    ];
+    let is_ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let text = &strip_comments(text);
+    text.match_indices(name).any(|(at, _)| {
+        let before = &text[..at];
+        let after = &text[at + name.len()..];
+        if before.ends_with(is_ident) || !after.trim_start().starts_with('(') {
+            return false;
+        }
+        let before = before.trim_end();
+        // Past the last character that is not part of an identifier (any width: comments
+        // may hold UTF-8).
+        let word_start = before
+            .char_indices()
+            .rev()
+            .find(|&(_, c)| !is_ident(c))
+            .map(|(i, c)| i + c.len_utf8())
+            .unwrap_or(0);
+        KINDS.contains(&&before[word_start..])
+    })
+}
+
+/// `text` with its `/* */` and `//` comments blanked out (a comment that mentions a shader's
+/// declaration does not declare it).
+fn strip_comments(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    loop {
+        let block = rest.find("/*");
+        let line = rest.find("//");
+        match (block, line) {
+            (Some(b), l) if l.is_none_or(|l| b < l) => {
+                out.push_str(&rest[..b]);
+                out.push(' ');
+                rest = rest[b + 2..].split_once("*/").map_or("", |(_, r)| r);
+            }
+            (_, Some(l)) => {
+                out.push_str(&rest[..l]);
+                out.push(' ');
+                rest = rest[l..].split_once('\n').map_or("", |(_, r)| r);
+            }
+            _ => {
+                out.push_str(rest);
+                return out;
+            }
+        }
+    }
+}
+
 fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Option<Arc<Program>> {
     if progs.is_empty() {
         diags.report(Diag::error(
@@ -539,6 +659,18 @@ fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Opt
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn declared_names_are_found_past_whitespace_not_in_comments() {
+        let text = "/* surface fur( old */ // light fur(\n\
+                    #include \"x.h\"\nsurface\n  SIG2k_fur ( float a = 1; ) {}\n\
+                    é surface\tsmall(){}";
+        assert!(declares_shader(text, "SIG2k_fur"));
+        assert!(declares_shader(text, "small"));
+        assert!(!declares_shader(text, "fur"));
+        assert!(!declares_shader(text, "SIG2k"));
+        assert!(!declares_shader("float f() { return fur(1); }", "fur"));
+    }
 
     #[test]
     fn every_standard_shader_compiles() {

@@ -1750,6 +1750,7 @@ impl<'a> Lowerer<'a> {
                     dst: t.reg,
                     space: sp.reg,
                     a: v.reg,
+                    span,
                 });
                 t
             }
@@ -1758,6 +1759,7 @@ impl<'a> Lowerer<'a> {
                 self.emit(Instr::SpaceMatrix {
                     dst: m.reg,
                     space: sp.reg,
+                    span,
                 });
                 let t = self.temp(ty, v.varying);
                 // RSL row-vector product v * m  ==  glam m * v
@@ -1767,6 +1769,7 @@ impl<'a> Lowerer<'a> {
                     dst: t.reg,
                     a: v.reg,
                     b: m.reg,
+                    span,
                 });
                 t
             }
@@ -1786,6 +1789,7 @@ impl<'a> Lowerer<'a> {
                     from: Space::Named(sp.reg),
                     to: Space::Current,
                     a: v.reg,
+                    span,
                 });
                 t
             }
@@ -2011,6 +2015,7 @@ impl<'a> Lowerer<'a> {
                     dst: t.reg,
                     a: a.reg,
                     b: b.reg,
+                    span,
                 });
                 t
             }
@@ -2218,6 +2223,7 @@ impl<'a> Lowerer<'a> {
             dst: t.reg,
             a: a.reg,
             b: b.reg,
+            span,
         });
         t
     }
@@ -2888,6 +2894,7 @@ impl<'a> Lowerer<'a> {
             from,
             to,
             a: x.reg,
+            span,
         });
         t
     }

@@ -918,6 +918,7 @@ fn fragment_grid_blurred(
         }
         // Constant shading: the mean of the corners (see zbuffer::flat_shade).
         let (flat_c, flat_o) = super::zbuffer::flat_shade(g, &corner, &mut flat_aov);
+        let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
         for py in py0..=py1 {
             for px in px0..=px1 {
                 b.micro_pixels += 1;
@@ -939,8 +940,14 @@ fn fragment_grid_blurred(
                             continue;
                         }
                         let s = pix * n + j * w + i;
-                        let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
                         let pos = [x, y];
+                        if lens_bound
+                            .as_ref()
+                            .is_some_and(|lb| lb.misses(lens[s], pos))
+                        {
+                            continue;
+                        }
+                        let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
                         for tri in [[0usize, 1, 2], [0, 2, 3]] {
                             let Some((v, idx, dq, area)) =
                                 super::ccw_triangle(&p, &q, &corner, tri)

@@ -1391,7 +1391,14 @@ fn sample_grid_blurred(
             continue;
         }
         let (cc, co) = flat_shade(g, &corner, &mut mean_aov);
+        let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
         for_samples(b, bx, |b, s, pos| {
+            if lens_bound
+                .as_ref()
+                .is_some_and(|lb| lb.misses(lens[s], pos))
+            {
+                return;
+            }
             let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
             for (t, tri) in [[0usize, 1, 2], [0, 2, 3]].into_iter().enumerate() {
                 let Some((v, idx, dq, area)) = super::ccw_triangle(&p, &q, &corner, tri) else {
