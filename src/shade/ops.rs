@@ -107,6 +107,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
             dst,
             a,
             b,
+            span,
         } => {
             let mut out = take(ex, *dst);
             let (ra, rb) = (&ex.regs[*a as usize], &ex.regs[*b as usize]);
@@ -122,7 +123,7 @@ pub fn compute(ex: &mut Exec, ins: &Instr, mask: &crate::shade::exec::Mask) {
                             k2(&mut out, n, lanes, x, y, safe_div);
                             if zero {
                                 put(ex, *dst, out);
-                                ex.warn(ex.prog.span, "division by zero (result set to 0)");
+                                ex.warn(*span, "division by zero (result set to 0)");
                                 return;
                             }
                         }

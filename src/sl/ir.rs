@@ -106,6 +106,8 @@ pub enum Instr {
         dst: Reg,
         a: Reg,
         b: Reg,
+        /// The operator's expression, where a division by zero is reported.
+        span: Span,
     },
     /// triple · float / float · triple scaling is lowered as Promote + Arith.
     Neg {
@@ -456,6 +458,7 @@ fn list(f: &mut fmt::Formatter<'_>, instrs: &[Instr], depth: usize) -> fmt::Resu
                 dst,
                 a,
                 b,
+                ..
             } => writeln!(
                 f,
                 "{pad}{} = {:?}.{:?} {} {}",

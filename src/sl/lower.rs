@@ -1767,6 +1767,7 @@ impl<'a> Lowerer<'a> {
                     dst: t.reg,
                     a: v.reg,
                     b: m.reg,
+                    span,
                 });
                 t
             }
@@ -2011,6 +2012,7 @@ impl<'a> Lowerer<'a> {
                     dst: t.reg,
                     a: a.reg,
                     b: b.reg,
+                    span,
                 });
                 t
             }
@@ -2218,6 +2220,7 @@ impl<'a> Lowerer<'a> {
             dst: t.reg,
             a: a.reg,
             b: b.reg,
+            span,
         });
         t
     }
