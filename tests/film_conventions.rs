@@ -161,3 +161,24 @@ fn the_background_imager_takes_prman_color_parameter() {
     let (px, _) = pixels(&dir, "out.png");
     assert!(px.iter().all(|p| *p == [51, 102, 153]), "{px:?}");
 }
+
+#[test]
+fn clamptoalpha_is_a_standard_imager_that_clamps_colour_to_alpha() {
+    // BMRT shipped `clamptoalpha`; exporters name it (`Imager "clamptoalpha"`) without the
+    // source. A constant surface of colour (2, 0.5, 0) at opacity 0.4 leaves a premultiplied
+    // (0.8, 0.2, 0) over alpha 0.4: red is clamped to 0.4, green and blue stay.
+    let dir = common::scratch_dir("film_clamptoalpha");
+    let out = dir.join("out.png").display().to_string();
+    let rib = format!(
+        "Format 4 4 1\nPixelSamples 1 1\nQuantize \"rgba\" 255 0 255 0\n\
+         Projection \"orthographic\"\nScreenWindow -2 2 -2 2\n\
+         Display \"{out}\" \"png\" \"rgb\"\nImager \"clamptoalpha\"\nTranslate 0 0 5\n\
+         WorldBegin\nColor 2 0.5 0\nOpacity 0.4 0.4 0.4\nSurface \"constant\"\n\
+         Polygon \"P\" [-3 -3 0  3 -3 0  3 3 0  -3 3 0]\nWorldEnd\n"
+    );
+    let (log, failed) = common::render_scene_file(&dir, &rib);
+    assert!(!failed, "{log}");
+    assert!(!log.contains("clamptoalpha"), "found and run: {log}");
+    let (px, _) = pixels(&dir, "out.png");
+    assert!(px.iter().all(|p| *p == [102, 51, 0]), "{:?}", &px[..4]);
+}

@@ -793,3 +793,55 @@ fn unknown_space_points_at_the_call() {
     assert!(log.contains("spc.sl:4:16]"), "{log}");
     assert!(!log.contains("spc.sl:1:1]"), "{log}");
 }
+
+#[test]
+fn a_division_by_zero_is_reported_at_the_division() {
+    // RMR's KMLuna divides by the distance from the pole axis, 0 at the poles: the warning
+    // used to label the whole shader (every line of it printed) instead of the `/`.
+    let text = "surface divz()\n{\n    float a = 1;\n    float b = 2;\n    float c = 3;\n\
+                \x20   Ci = (a + b + c) / s;\n}\n";
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let mut progs = compile_source(
+        "divz.sl",
+        text,
+        None,
+        &sources,
+        &diags,
+        &CompileOptions::default(),
+    );
+    assert_eq!(progs.len(), 1, "{}", diags.render_plain(&sources));
+    let prog = progs.remove(0);
+    let n = 4;
+    let spaces = |_: &str| Some(Mat4::IDENTITY);
+    let info = |_: &str, _: &str| None;
+    let env = Env {
+        nu: n,
+        nv: 1,
+        spaces: &spaces,
+        lights: &[],
+        flip_normals: false,
+        near: 0.1,
+        far: 100.0,
+        shader_name: "divz",
+        diags: &diags,
+        info: &info,
+        textures: None,
+        seed: 7,
+        rays: None,
+        cones: None,
+    };
+    let mut ex = Exec::new(&prog, n, &env);
+    ex.run_init();
+    let s: Vec<f32> = (0..n).map(|i| i as f32 / n as f32).collect();
+    ex.set(prog.global("s").unwrap().reg, Slot::VF(s));
+    ex.run_body();
+    let ci = prog.global("Ci").unwrap().reg as usize;
+    let got: Vec<f32> = (0..n).map(|i| ex.regs[ci].t().at(i).x).collect();
+    assert_eq!(got, [0.0, 24.0, 12.0, 8.0]);
+    drop(ex);
+    let rendered = diags.render_plain(&sources);
+    assert!(rendered.contains("division by zero"), "{rendered}");
+    assert!(rendered.contains("divz.sl:6:11"), "{rendered}");
+    assert!(!rendered.contains("surface divz"), "{rendered}");
+}
