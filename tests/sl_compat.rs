@@ -742,29 +742,6 @@ fn faceforward_of_two_arguments_judges_the_side_by_ng() {
 }
 
 #[test]
-fn division_by_zero_points_at_the_division() {
-    // RudyCSkin's `1/win` and the fisheye lens's `ss/r` divide by zero at a few points; the
-    // warning used to label the whole shader (a hundred lines), not the expression.
-    let dir = common::scratch_dir("sl_div_zero_span");
-    std::fs::write(
-        dir.join("divz.sl"),
-        "surface divz()\n{\n    float z = s - s;\n    float q = (s + 1) / z;\n    Ci = q; Oi = 1;\n}\n",
-    )
-    .unwrap();
-    let out = dir.join("out.png").display().to_string();
-    let rib = format!(
-        "Format 4 4 1\nDisplay \"{out}\" \"png\" \"rgb\"\nProjection \"orthographic\"\n\
-         WorldBegin\nSurface \"divz\"\nPolygon \"P\" [-1 -1 1 1 -1 1 1 1 1 -1 1 1]\nWorldEnd\n"
-    );
-    let (log, failed) = common::render_scene_file(&dir, &rib);
-    assert!(!failed, "{log}");
-    assert!(log.contains("division by zero (result set to 0)"), "{log}");
-    // Line 4, from column 16: `s + 1) / z` (a parenthesised operand spans its inside).
-    assert!(log.contains("divz.sl:4:16]"), "{log}");
-    assert!(!log.contains("divz.sl:1:1]"), "{log}");
-}
-
-#[test]
 fn unknown_space_points_at_the_call() {
     // A scene that never declares the shader's coordinate system (`CoordinateSystem
     // "paintspace"` left out): the warning names the transform, not the whole shader.

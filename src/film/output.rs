@@ -1347,15 +1347,16 @@ mod tests {
         let img = image::open(&prgb).unwrap().to_rgb8();
         assert_eq!(img.get_pixel(3, 2).0, [191, 170, 128]);
         // 16 bits with alpha: straight too.
-        let p16a = dir.join("d.png");
-        let mut o = opts(vec![display(&p16a, "png", "rgba")]);
-        o.quantize_rgba = Quantize {
+        let sixteen = Quantize {
             zero: 0.0,
             one: 65535.0,
             min: 0.0,
             max: 65535.0,
             dither: 0.0,
         };
+        let p16a = dir.join("d.png");
+        let mut o = opts(vec![display(&p16a, "png", "rgba")]);
+        o.quantize_rgba = sixteen;
         write_displays(&f, &o, &d, None).unwrap();
         let img = image::open(&p16a).unwrap();
         assert_eq!(img.color(), image::ColorType::Rgba16);
@@ -1373,13 +1374,7 @@ mod tests {
         // 16 bits, rgb
         let p16 = dir.join("b.png");
         let mut o = opts(vec![display(&p16, "png", "rgb")]);
-        o.quantize_rgba = Quantize {
-            zero: 0.0,
-            one: 65535.0,
-            min: 0.0,
-            max: 65535.0,
-            dither: 0.0,
-        };
+        o.quantize_rgba = sixteen;
         write_displays(&f, &o, &d, None).unwrap();
         let img = image::open(&p16).unwrap();
         assert_eq!(img.color(), image::ColorType::Rgb16);
