@@ -529,29 +529,13 @@ fn eye_space_is_camera_space() {
     assert_eq!(common::film_mean(&film)[1], 1.0);
 }
 
-/// The value of TIFF tag `want` when it holds one SHORT (byte order from the header).
+/// The value of a one-number TIFF tag (read with the `tiff` crate arbor writes with).
 fn tiff_short_tag(bytes: &[u8], want: u16) -> Option<u16> {
-    let le = bytes.get(..2)? == b"II";
-    let u16_at = |i: usize| {
-        let b = [bytes[i], bytes[i + 1]];
-        if le {
-            u16::from_le_bytes(b)
-        } else {
-            u16::from_be_bytes(b)
-        }
-    };
-    let ifd = {
-        let b = [bytes[4], bytes[5], bytes[6], bytes[7]];
-        (if le {
-            u32::from_le_bytes(b)
-        } else {
-            u32::from_be_bytes(b)
-        }) as usize
-    };
-    (0..u16_at(ifd) as usize)
-        .map(|k| ifd + 2 + 12 * k)
-        .find(|&e| u16_at(e) == want)
-        .map(|e| u16_at(e + 8))
+    let mut d = tiff::decoder::Decoder::new(std::io::Cursor::new(bytes)).ok()?;
+    let v = d
+        .find_tag(tiff::tags::Tag::from_u16_exhaustive(want))
+        .ok()??;
+    v.into_u16().ok()
 }
 
 #[test]

@@ -1668,6 +1668,30 @@ mod tests {
         b
     }
 
+    /// The bucket [x0, x1) × [y0, y1) of a 4×4-sample `whole` buffer `w` pixels wide: a
+    /// sub-buffer holding the same samples.
+    fn bucket_of(
+        whole: &SampleBuffer,
+        w: usize,
+        x0: usize,
+        y0: usize,
+        x1: usize,
+        y1: usize,
+    ) -> SampleBuffer {
+        let mut b = SampleBuffer::new(x0 as i32, y0 as i32, x1 - x0, y1 - y0, 4, 4, 5);
+        b.positions.clear();
+        b.values.clear();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let s0 = (y * w + x) * 16;
+                b.positions.extend_from_slice(&whole.positions[s0..s0 + 16]);
+                b.values
+                    .extend_from_slice(&whole.values[s0 * 5..(s0 + 16) * 5]);
+            }
+        }
+        b
+    }
+
     fn film(w: usize, h: usize) -> Film {
         Film::new(w, h, Film::standard_channels(&[]))
     }
@@ -1713,20 +1737,7 @@ mod tests {
         let ctx = PrepareCtx::new(&f, &t, DepthFilter::Min);
         let one = gather_tile(&fm, &[&prepare(&whole, &ctx)], 0, 0, w, h);
         // Four buckets split at (4, 3), each a sub-buffer of the same samples.
-        let sub = |x0: usize, y0: usize, x1: usize, y1: usize| {
-            let mut b = SampleBuffer::new(x0 as i32, y0 as i32, x1 - x0, y1 - y0, 4, 4, 5);
-            b.positions.clear();
-            b.values.clear();
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let s0 = (y * w + x) * 16;
-                    b.positions.extend_from_slice(&whole.positions[s0..s0 + 16]);
-                    b.values
-                        .extend_from_slice(&whole.values[s0 * 5..(s0 + 16) * 5]);
-                }
-            }
-            prepare(&b, &ctx)
-        };
+        let sub = |x0, y0, x1, y1| prepare(&bucket_of(&whole, w, x0, y0, x1, y1), &ctx);
         let parts = [
             sub(0, 0, 4, 3),
             sub(4, 0, 9, 3),
@@ -1775,20 +1786,7 @@ mod tests {
             .collect();
         let at = (lonely.1 * w + lonely.0) * 5;
         assert_eq!(&one.data[at..at + 4], &mean[..]);
-        let sub = |x0: usize, y0: usize, x1: usize, y1: usize| {
-            let mut b = SampleBuffer::new(x0 as i32, y0 as i32, x1 - x0, y1 - y0, 4, 4, 5);
-            b.positions.clear();
-            b.values.clear();
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let s0 = (y * w + x) * 16;
-                    b.positions.extend_from_slice(&whole.positions[s0..s0 + 16]);
-                    b.values
-                        .extend_from_slice(&whole.values[s0 * 5..(s0 + 16) * 5]);
-                }
-            }
-            prepare(&b, &ctx)
-        };
+        let sub = |x0, y0, x1, y1| prepare(&bucket_of(&whole, w, x0, y0, x1, y1), &ctx);
         let rects = [(0, 0, 4, 3), (4, 0, 9, 3), (0, 3, 4, 7), (4, 3, 9, 7)];
         let mut parts = Vec::new();
         let mut partials = Vec::new();

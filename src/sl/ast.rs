@@ -16,6 +16,15 @@ pub enum ShaderKind {
 }
 
 impl ShaderKind {
+    pub const ALL: [ShaderKind; 6] = [
+        ShaderKind::Surface,
+        ShaderKind::Displacement,
+        ShaderKind::Light,
+        ShaderKind::Volume,
+        ShaderKind::Imager,
+        ShaderKind::Transformation,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             ShaderKind::Surface => "surface",

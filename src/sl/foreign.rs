@@ -63,7 +63,7 @@ pub fn foreign_language(file: u32, text: &str) -> Option<Diag> {
 }
 
 /// The text with `/* */` and `//` comments replaced by spaces (byte offsets kept).
-fn strip_comments(text: &str) -> String {
+pub(crate) fn strip_comments(text: &str) -> String {
     let b = text.as_bytes();
     let mut out = Vec::with_capacity(b.len());
     let mut i = 0;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use crate::diag::{Diag, Diagnostics, SourceMap};
-use crate::sl::ast::{Item, SourceFile};
+use crate::sl::ast::{Item, ShaderKind, SourceFile};
 use crate::sl::ir::Program;
 use crate::sl::preprocess::{preprocess, IncludeResolver, Preprocessed};
 
@@ -584,16 +584,9 @@ impl Candidate {
 /// Whether shading-language `text` declares a shader called `name`: the name follows a shader
 /// kind keyword (whitespace between) and precedes its parameter list's `(`.
 fn declares_shader(text: &str, name: &str) -> bool {
-    const KINDS: [&str; 6] = [
-        "surface",
-        "displacement",
-        "light",
-        "volume",
-        "imager",
-        "transformation",
-    ];
     let is_ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
-    let text = &strip_comments(text);
+    // A comment that mentions a shader's declaration does not declare it.
+    let text = &crate::sl::foreign::strip_comments(text);
     text.match_indices(name).any(|(at, _)| {
         let before = &text[..at];
         let after = &text[at + name.len()..];
@@ -609,35 +602,9 @@ fn declares_shader(text: &str, name: &str) -> bool {
             .find(|&(_, c)| !is_ident(c))
             .map(|(i, c)| i + c.len_utf8())
             .unwrap_or(0);
-        KINDS.contains(&&before[word_start..])
+        let word = &before[word_start..];
+        ShaderKind::ALL.iter().any(|k| k.name() == word)
     })
-}
-
-/// `text` with its `/* */` and `//` comments blanked out (a comment that mentions a shader's
-/// declaration does not declare it).
-fn strip_comments(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    loop {
-        let block = rest.find("/*");
-        let line = rest.find("//");
-        match (block, line) {
-            (Some(b), l) if l.is_none_or(|l| b < l) => {
-                out.push_str(&rest[..b]);
-                out.push(' ');
-                rest = rest[b + 2..].split_once("*/").map_or("", |(_, r)| r);
-            }
-            (_, Some(l)) => {
-                out.push_str(&rest[..l]);
-                out.push(' ');
-                rest = rest[l..].split_once('\n').map_or("", |(_, r)| r);
-            }
-            _ => {
-                out.push_str(rest);
-                return out;
-            }
-        }
-    }
 }
 
 fn pick(progs: Vec<Program>, base: &str, name: &str, diags: &Diagnostics) -> Option<Arc<Program>> {
