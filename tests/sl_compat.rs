@@ -37,7 +37,11 @@ fn compile_ok(text: &str) -> (Program, String) {
 /// Runs a surface program over `n` points (s = i/n, t = 0.5, P on the z = 1 plane, N = +z,
 /// I = +z) and returns Ci and Oi per point.
 fn run(prog: &Program, n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
-    let diags = Diagnostics::new();
+    run_reporting(prog, n, &Diagnostics::new())
+}
+
+/// [`run`], with the shader's runtime warnings going to `diags`.
+fn run_reporting(prog: &Program, n: usize, diags: &Diagnostics) -> (Vec<Vec3>, Vec<Vec3>) {
     let spaces = |_: &str| Some(Mat4::IDENTITY);
     let info = |_: &str, _: &str| None;
     let env = Env {
@@ -49,7 +53,7 @@ fn run(prog: &Program, n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
         near: 0.1,
         far: 100.0,
         shader_name: "test",
-        diags: &diags,
+        diags,
         info: &info,
         textures: None,
         seed: 7,
@@ -789,34 +793,9 @@ fn a_division_by_zero_is_reported_at_the_division() {
     );
     assert_eq!(progs.len(), 1, "{}", diags.render_plain(&sources));
     let prog = progs.remove(0);
-    let n = 4;
-    let spaces = |_: &str| Some(Mat4::IDENTITY);
-    let info = |_: &str, _: &str| None;
-    let env = Env {
-        nu: n,
-        nv: 1,
-        spaces: &spaces,
-        lights: &[],
-        flip_normals: false,
-        near: 0.1,
-        far: 100.0,
-        shader_name: "divz",
-        diags: &diags,
-        info: &info,
-        textures: None,
-        seed: 7,
-        rays: None,
-        cones: None,
-    };
-    let mut ex = Exec::new(&prog, n, &env);
-    ex.run_init();
-    let s: Vec<f32> = (0..n).map(|i| i as f32 / n as f32).collect();
-    ex.set(prog.global("s").unwrap().reg, Slot::VF(s));
-    ex.run_body();
-    let ci = prog.global("Ci").unwrap().reg as usize;
-    let got: Vec<f32> = (0..n).map(|i| ex.regs[ci].t().at(i).x).collect();
+    let (ci, _) = run_reporting(&prog, 4, &diags);
+    let got: Vec<f32> = ci.iter().map(|c| c.x).collect();
     assert_eq!(got, [0.0, 24.0, 12.0, 8.0]);
-    drop(ex);
     let rendered = diags.render_plain(&sources);
     assert!(rendered.contains("division by zero"), "{rendered}");
     assert!(rendered.contains("divz.sl:6:11"), "{rendered}");
