@@ -290,3 +290,43 @@ WorldEnd
     );
     assert!(common::film_rgb(&plain) == common::film_rgb(&bucket));
 }
+
+/// A patch with a point at 1e38 (a stray number an exporter wrote) crosses the eye plane in
+/// every piece it splits into, and each eye split doubles those pieces. With the "unlimited"
+/// eye splits exporters write (Houdini: 1000) that was 2^33 splits; arbor stops at
+/// `MAX_EYE_SPLITS`, drops the crossing pieces with a warning naming both numbers, and
+/// renders the rest of the frame.
+#[test]
+fn unlimited_eye_splits_are_held_so_a_stray_huge_point_cannot_split_for_hours() {
+    let rib = r#"Option "limits" "eyesplits" [1000]
+Format 24 18 1
+PixelSamples 1 1
+Projection "perspective" "fov" [90]
+Translate 0 0 2
+WorldBegin
+Color 1 1 1
+Surface "constant"
+Polygon "P" [-3 -3 1  -1 -3 1  -1 -1 1  -3 -1 1]
+Patch "bilinear" "P" [-1 -1 0  1 -1 0  -1 1 0  1 -1e38 0]
+WorldEnd
+"#;
+    let stats = arbor::render::Stats::new();
+    let opts = arbor::render::RenderOptions {
+        stats: Some(&stats),
+        ..Default::default()
+    };
+    let (film, diags, _) = common::render_rib_with(rib, &[], &opts);
+    let splits = stats.splits.load(std::sync::atomic::Ordering::Relaxed);
+    let max = arbor::render::limits::MAX_EYE_SPLITS;
+    assert!(splits < 1u64 << (max + 2), "{splits} splits");
+    assert!(
+        splits >= 1u64 << max,
+        "{splits} splits: the limit is not 16 any more?"
+    );
+    let warns = find(&diags, "render::eyesplits");
+    assert!(!warns.is_empty(), "{diags:#?}");
+    let help = warns[0].help.as_deref().unwrap_or("");
+    assert!(help.contains("1000") && help.contains("16"), "{help}");
+    // The square beside it renders.
+    assert!(common::film_mean(&film)[0] > 0.01);
+}

@@ -551,6 +551,9 @@ struct Frame<'a> {
     diags: &'a Diagnostics,
     aovs: Vec<Aov>,
     eye_split_limit: u32,
+    /// `Option "limits" "eyesplits"` when it asked for more than arbor does (see
+    /// `limits::MAX_EYE_SPLITS`): named in the warning when a piece is dropped at the limit.
+    eye_splits_asked: Option<f32>,
 }
 
 impl Frame<'_> {
@@ -710,13 +713,20 @@ impl Frame<'_> {
             Decision::Split { eye } => {
                 let span = self.scene.primitives[prim].span;
                 if eye && w.eye_splits >= self.eye_split_limit {
+                    let help = match self.eye_splits_asked {
+                        Some(asked) => format!(
+                            "the scene asks for {asked} eye splits; arbor stops at {} (each can double the pieces): move the camera or the geometry",
+                            self.eye_split_limit
+                        ),
+                        None => "move the camera or the geometry, or raise `Option \"limits\" \"eyesplits\"`".to_string(),
+                    };
                     self.diags.report(
                         Diag::warning(
                             "render::eyesplits",
                             "a surface still crosses the eye plane after the most eye splits; the piece is dropped",
                         )
                         .label(span, "this primitive")
-                        .help("move the camera or the geometry, or raise `Option \"limits\" \"eyesplits\"`"),
+                        .help(help),
                     );
                     return (Outcome::Nothing, Vec::new());
                 }
@@ -997,10 +1007,12 @@ fn render_inner(
         .user_floats("limits:gridsize")
         .and_then(|f| f.first())
         .map_or(DEFAULT_GRID, |&g| super::limits::grid_size(g, diags));
-    let eye_split_limit = options
-        .user_floats("limits:eyesplits")
-        .and_then(|f| f.first())
-        .map_or(DEFAULT_EYE_SPLITS, |&g| g.max(0.0) as u32);
+    let (eye_split_limit, eye_splits_asked) = super::limits::eye_splits(
+        options
+            .user_floats("limits:eyesplits")
+            .and_then(|f| f.first().copied()),
+        DEFAULT_EYE_SPLITS,
+    );
     let view = View::new(
         camera,
         crop.grow(margin[0], margin[1]).intersect(image),
@@ -1058,6 +1070,7 @@ fn render_inner(
         diags,
         aovs: opts.aovs.clone(),
         eye_split_limit,
+        eye_splits_asked,
     };
     let mut channel_names = Vec::new();
     for a in &opts.aovs {

@@ -27,6 +27,29 @@ pub const MAX_BUCKET: i32 = 1024;
 /// Most micropolygons in one grid (the picture does not depend on it).
 pub const MAX_GRID: usize = 65536;
 
+/// Most eye-plane splits of one surface (`Option "limits" "eyesplits"` above it is held here).
+/// Each eye split can double the pieces still crossing the eye plane — a surface through the
+/// eye point, or one with a point at 1e38 — so the work grows as 2^n: 16 is about 130 000
+/// pieces (well under a second), PRMan's default is 10, and exporters write "unlimited"
+/// values (Houdini: 1000) that would otherwise split for hours.
+pub const MAX_EYE_SPLITS: u32 = 16;
+
+/// The eye-split limit for a frame: `requested` (`Option "limits" "eyesplits"`; None or not a
+/// number: `default`), held at [`MAX_EYE_SPLITS`]. Also the value asked for when it was held,
+/// for the warning given if a piece is dropped at the limit (a scene that never reaches it
+/// renders as asked, so holding it is not reported up front).
+pub fn eye_splits(requested: Option<f32>, default: u32) -> (u32, Option<f32>) {
+    let Some(r) = requested.filter(|r| !r.is_nan()) else {
+        return (default.min(MAX_EYE_SPLITS), None);
+    };
+    let asked = r.max(0.0);
+    if asked > MAX_EYE_SPLITS as f32 {
+        (MAX_EYE_SPLITS, Some(asked))
+    } else {
+        (asked as u32, None)
+    }
+}
+
 /// A `limits` option's number, when the scene sets a usable one.
 fn option_limit(options: &Options, name: &str) -> Option<f32> {
     options
@@ -196,6 +219,20 @@ pub fn grid_size(requested: f32, diags: &Diagnostics) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn eye_splits_are_held_at_the_limit() {
+        assert_eq!(eye_splits(None, 10), (10, None));
+        assert_eq!(eye_splits(Some(4.0), 10), (4, None));
+        assert_eq!(eye_splits(Some(16.0), 10), (16, None));
+        assert_eq!(eye_splits(Some(1000.0), 10), (16, Some(1000.0)));
+        assert_eq!(
+            eye_splits(Some(f32::INFINITY), 10),
+            (16, Some(f32::INFINITY))
+        );
+        assert_eq!(eye_splits(Some(-3.0), 10), (0, None));
+        assert_eq!(eye_splits(Some(f32::NAN), 10), (10, None));
+    }
 
     #[test]
     fn ordinary_options_pass_through() {
