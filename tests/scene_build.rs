@@ -872,7 +872,8 @@ WorldEnd
         "{}",
         e[0]
     );
-    assert_eq!(b.warnings().len(), 1);
+    // `Detail` is applied at render time (level of detail), without a warning.
+    assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
     let s = b.one();
     assert!(s.coordinate_systems.contains_key("table"));
     assert!(!s.coordinate_systems.contains_key("shelf"));
@@ -1069,4 +1070,20 @@ WorldEnd
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
     assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
     assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn an_imager_inside_the_world_sets_the_frames_imager() {
+    // Pixar's Blobby application-note scenes (shipped with Aqsis) write
+    // `WorldBegin Imager "background" "color" [1 1 1]`; the imager runs after the world, so
+    // it applies to that frame, quietly. It does not leak into the next frame.
+    let b = build(
+        "FrameBegin 1\nWorldBegin\nImager \"background\" \"color\" [1 1 1]\nSphere 1 -1 1 360\nWorldEnd\nFrameEnd\n\
+         FrameBegin 2\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\nFrameEnd\n",
+    );
+    assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let im = b.scenes[0].options.imager.as_ref().expect("an imager");
+    assert_eq!(im.name, "background");
+    assert!(b.scenes[1].options.imager.is_none());
 }
