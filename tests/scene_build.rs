@@ -1087,3 +1087,29 @@ fn an_imager_inside_the_world_sets_the_frames_imager() {
     assert_eq!(im.name, "background");
     assert!(b.scenes[1].options.imager.is_none());
 }
+
+#[test]
+fn degenerate_crop_windows_and_opacities_warn_and_render() {
+    // Aqsis's regression scenes Bug1266044 (a CropWindow of zero size, where Aqsis crashed)
+    // and Bug1326794 (`Opacity [3 3 3]`): warnings, the frame uncropped, opacity clamped.
+    let b = build(
+        "CropWindow 0.8 0.8 0.45 0.45\nWorldBegin\nOpacity [3 3 3]\nSphere 1 -1 1 360\n\
+         Opacity [0.5 -1 0.25]\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    assert_eq!(b.warnings().len(), 3, "{:#?}", b.warnings());
+    let s = b.one();
+    assert_eq!(s.options.crop_window, [0.0, 1.0, 0.0, 1.0]);
+    assert_eq!(s.primitives[0].attributes.opacity, Vec3::ONE);
+    assert_eq!(
+        s.primitives[1].attributes.opacity,
+        Vec3::new(0.5, 0.0, 0.25)
+    );
+    // A reversed window is still an error.
+    assert_eq!(
+        build("CropWindow 0.8 0.2 0 1\nWorldBegin\nWorldEnd\n")
+            .errors()
+            .len(),
+        1
+    );
+}

@@ -73,9 +73,25 @@ impl Builder<'_> {
         self.attrs().color = c;
     }
 
+    /// Opacity is a fraction of coverage: components outside [0, 1] (Aqsis's regression scene
+    /// Bug1326794 gives `Opacity [3 3 3]`) are clamped, with a warning; unclamped, the
+    /// compositing `C + (1 − O)·behind` subtracted the surfaces behind and washed the colour out.
     pub(super) fn opacity(&mut self, call: &Call<'_>) {
         let c = self.color_arg(call);
-        self.attrs().opacity = c;
+        let clamped = c.clamp(glam::Vec3::ZERO, glam::Vec3::ONE);
+        if clamped != c {
+            self.report(
+                Diag::warning(
+                    "scene::opacity",
+                    format!(
+                        "`Opacity` {} {} {} is outside [0, 1]; clamped to {} {} {}",
+                        c.x, c.y, c.z, clamped.x, clamped.y, clamped.z
+                    ),
+                )
+                .label(call.span(), "here"),
+            );
+        }
+        self.attrs().opacity = clamped;
     }
 
     pub(super) fn texture_coordinates(&mut self, call: &Call<'_>) {

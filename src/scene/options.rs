@@ -112,7 +112,20 @@ impl Builder<'_> {
             return;
         }
         let w = [0, 1, 2, 3].map(|i| call.pos[i].num().clamp(0.0, 1.0));
-        if w[0] >= w[1] || w[2] >= w[3] {
+        if w[0] == w[1] || w[2] == w[3] {
+            // Zero width or height (Aqsis's regression scene Bug1266044, where Aqsis crashed):
+            // a degenerate request rather than a reversed one, so the frame renders uncropped.
+            self.report(
+                Diag::warning(
+                    "scene::crop-window",
+                    "`CropWindow` has zero width or height; it is ignored and the whole frame is rendered",
+                )
+                .label(call.span(), "here")
+                .help("xmin < xmax and ymin < ymax, all within [0, 1]"),
+            );
+            return;
+        }
+        if w[0] > w[1] || w[2] > w[3] {
             self.bad_arg(
                 call,
                 0,
