@@ -746,3 +746,26 @@ fn displacementbound_in_the_surface_shaders_space() {
     assert!(!err, "{text}");
     assert!(!text.contains("unknown coordinate system"), "{text}");
 }
+
+#[test]
+fn dented_is_in_the_standard_library_and_dents_inward() {
+    // Aqsis's vase scene and regression scene Bug1396028 name `Displacement "dented"`
+    // without shipping it. Displaced inward, a dented sphere covers less of the frame.
+    let dir = common::scratch_dir("dented");
+    let coverage = |disp: &str| {
+        let out = dir.join(format!("dent{}.png", disp.len()));
+        let rib = format!(
+            "Format 32 32 1\nDisplay \"{}\" \"file\" \"rgba\"\nProjection \"perspective\" \"fov\" 40\n\
+             WorldBegin\nAttribute \"displacementbound\" \"sphere\" [0.5]\n{disp}\nSurface \"constant\"\n\
+             Translate 0 0 3\nSphere 1 -1 1 360\nWorldEnd\n",
+            out.display()
+        );
+        let (text, err) = common::render_scene_file(&dir, &rib);
+        assert!(!err && !text.contains("not found"), "{text}");
+        let img = image::open(&out).unwrap().to_rgba8();
+        img.pixels().map(|p| p[3] as u64).sum::<u64>()
+    };
+    let plain = coverage("");
+    let dented = coverage("Displacement \"dented\" \"Km\" [0.5]");
+    assert!(dented < plain, "{dented} vs {plain}");
+}
