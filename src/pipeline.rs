@@ -187,7 +187,7 @@ pub fn render_paths(
     let mut first_display = true;
     for path in paths {
         let first_source = sources.len() as u32;
-        let scenes = load_scenes(path, settings, sources, diags);
+        let mut scenes = load_scenes(path, settings, sources, diags);
         let scene_sources = first_source..sources.len() as u32;
         let archive_only = || {
             diags
@@ -201,7 +201,7 @@ pub fn render_paths(
                 format!("`{}` contains no world block to render", path.display()),
             ));
         }
-        for scene in &scenes {
+        for scene in &mut scenes {
             // Make* jobs first: a shadow pass's zfile from an earlier frame is there now.
             let tex_search = texture_search_for(scene, settings);
             for job in &scene.texture_jobs {
@@ -265,6 +265,7 @@ pub fn render_paths(
                 },
                 None => None,
             };
+            crate::render::lod::select_for(scene, &opts);
             system.preload_lights(scene);
             let start = Instant::now();
             // 8-bit PNG displays of a whole frame are encoded as its rows finish.
@@ -575,9 +576,9 @@ pub fn render_text(
         frames: settings.frames,
         procedurals: settings.procedurals(),
     };
-    let scenes = build_scenes(requests, &ctx);
+    let mut scenes = build_scenes(requests, &ctx);
     let mut films = Vec::new();
-    for scene in &scenes {
+    for scene in &mut scenes {
         let library = library_for(scene, settings);
         let aovs = aovs_for(scene);
         let system = ShadeSystem {
@@ -598,6 +599,7 @@ pub fn render_text(
             progress: None,
             aovs,
         };
+        crate::render::lod::select_for(scene, &opts);
         let mut film = render_frame(scene, &system, &opts, diags);
         system.run_imager(scene, &crate::render::Camera::new(scene), &mut film);
         films.push(film);

@@ -170,3 +170,35 @@ fn bad_code_arrays_are_diagnosed() {
     ));
     assert!(report.contains("ground.zfile"), "{report}");
 }
+
+#[test]
+fn prman_application_note_blobs_render_as_written() {
+    // Pixar's Blobby application-note scenes as Aqsis ships them (`check.rib`, `blend.rib`,
+    // Air's `blobplane.rib`): `Imager` inside the world block, a per-blob "vertex mpoint
+    // Pref", one `"color Cs"` for three blobs, and a field plug-in (opcode 9000) arbor cannot
+    // load. All render, with warnings only.
+    let world = format!(
+        "Imager \"background\" \"color\" [1 1 1]\n\
+         Blobby 3 [1001 0 1001 16 9000 2 0 32 0 3 0 1 2] [{} {} {}] [\"dbo_plane\"]\n\
+         \"vertex mpoint Pref\" [{} {} {}]\n\
+         \"color Cs\" [0.1 0.9 0.2]\n",
+        blob(1.0, -0.3, 0.0, 0.0),
+        blob(1.0, 0.3, 0.0, 0.0),
+        blob(1.0, 5.0, 5.0, 0.0),
+        blob(1.0, -0.3, 0.0, 0.0),
+        blob(1.0, 0.3, 0.0, 0.0),
+        blob(1.0, 0.0, 0.0, 0.0),
+    );
+    let (films, report, errors) = render_report(&world);
+    assert!(!errors, "{report}");
+    assert!(report.contains("`dbo_plane`"), "{report}");
+    assert!(report.contains("read as constant"), "{report}");
+    assert!(!report.contains("has no effect"), "{report}");
+    let f = &films[0];
+    // The blob is Cs (the background imager is applied when the display is written; see
+    // scene_build's `an_imager_inside_the_world_sets_the_frames_imager`).
+    let mid = f.pixel(N / 2, N / 2);
+    for (got, want) in mid[..3].iter().zip([0.1, 0.9, 0.2]) {
+        assert!((got - want).abs() < 1e-3, "{mid:?}");
+    }
+}

@@ -403,10 +403,24 @@ fn rsl2_classes_and_slim_palettes_get_one_diagnostic_each() {
 }
 
 #[test]
-fn an_unknown_function_mentions_dso_shadeops() {
-    let (_, text, err) = compile("d.sl", "surface d() { frobnicatebox(P); Ci = 1; }");
-    assert!(err);
-    assert!(text.contains("DSO shadeop"), "{text}");
+fn an_unknown_function_is_a_dso_shadeop_that_warns_and_returns_zero() {
+    // Aqsis's sci_volumes example: `float sample_vol(samplePos)` calls a DSO shadeop. The
+    // shader compiles, with one warning naming it; the call yields 0.
+    let (n, text, err) = compile(
+        "d.sl",
+        "surface d() { float x = float sample_vol(P); color c = frobnicatebox(P); Ci = x + c; }",
+    );
+    assert!(!err && n == 1, "{text}");
+    assert_eq!(text.matches("DSO shadeop").count(), 2, "{text}");
+    assert!(
+        text.contains("`sample_vol`") && text.contains("returns 0"),
+        "{text}"
+    );
+    assert!(text.contains("returns (0, 0, 0)"), "{text}");
+    // A near miss of a known name is still a typo, and an error.
+    let (_, text, err) = compile("t.sl", "surface t() { Ci = nosie(P); }");
+    assert!(err, "{text}");
+    assert!(text.contains("did you mean `noise`?"), "{text}");
 }
 
 #[test]
@@ -643,4 +657,115 @@ fn a_shader_renamed_with_its_authors_initials_is_found_by_its_old_name() {
         "{:?}",
         diags.iter().map(|(d, _)| d.code).collect::<Vec<_>>()
     );
+}
+
+#[test]
+fn aqsis_automatic_shadows_cast_traced_shadows_quietly() {
+    // Aqsis 1.0's `Option "render" "auto_shadows"` with `Attribute "light" "shadows" "on"`,
+    // and Aqsis 1.6's `Attribute "autoshadows" "shadowmapname"`: both lights cast shadows
+    // (traced: arbor renders no map), and none of the settings warns as undeclared.
+    let b = build(
+        r#"Option "render" "auto_shadows" ["on"]
+WorldBegin
+Attribute "render" "shadow_shadingrate" [4]
+AttributeBegin
+Attribute "light" "shadows" ["on"] "shadowmapsize" [256 256] "shadowangle" [57.3] "shadowmapname" ["key.map"]
+LightSource "shadowspot" 1 "string shadowname" ["key.map"]
+AttributeEnd
+AttributeBegin
+Attribute "autoshadows" "string shadowmapname" ["autoshadow.map"] "integer res" [300]
+LightSource "shadowspot" 2 "shadowname" ["autoshadow.map"]
+AttributeEnd
+LightSource "spotlight" 3
+WorldEnd
+"#,
+    );
+    let w = b.of(Severity::Warning);
+    assert!(w.is_empty(), "{w:#?}");
+    let lights = &b.scenes[0].lights;
+    assert!(lights[0].ray_shadows && lights[1].ray_shadows && !lights[2].ray_shadows);
+}
+
+#[test]
+fn a_shader_of_the_wrong_kind_warns_once_and_the_stand_in_renders() {
+    // Aqsis's Blobby example `repel.rib` names the displacement shader `lumpy` in `Surface`.
+    let dir = common::scratch_dir("wrong-kind");
+    std::fs::write(
+        dir.join("lumpy.sl"),
+        "displacement lumpy(float a = 0.5) { P += a * noise(P) * normalize(N); N = calculatenormal(P); }\n",
+    )
+    .unwrap();
+    let rib = format!(
+        "Format 16 16 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"perspective\" \"fov\" 40\n\
+         WorldBegin\nSurface \"lumpy\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n",
+        dir.join("k.png").display()
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err, "{text}");
+    assert_eq!(
+        text.matches("is a displacement shader, used as a surface shader")
+            .count(),
+        1,
+        "{text}"
+    );
+    assert!(text.contains("name it in `Displacement`"), "{text}");
+}
+
+#[test]
+fn extra_array_initialisers_warn_and_are_dropped() {
+    // Aqsis's regression shader `splinetst`: a colour map[4] given five colours.
+    let (n, text, err) = compile(
+        "splinetst.sl",
+        "surface splinetst() { color map[4] = { color (1,0,0), color (1,0,0), color (1,1,0), \
+         color (1,1,1), color (1,1,1) }; Ci = spline(v, map); Oi = 1; }",
+    );
+    assert!(!err && n == 1, "{text}");
+    assert!(
+        text.contains("array of 4 initialised with 5 values; the last 1 are ignored"),
+        "{text}"
+    );
+    let (_, text, err) = compile(
+        "few.sl",
+        "surface few() { float a[3] = { 1, 2 }; Ci = a[0]; }",
+    );
+    assert!(err, "{text}");
+}
+
+#[test]
+fn displacementbound_in_the_surface_shaders_space() {
+    // PRMan's Blobby application note: `"coordinatesystem" "surface"` names the surface
+    // shader's space; it is not an unknown space.
+    let dir = common::scratch_dir("dispbound-surface");
+    let rib = format!(
+        "Format 16 16 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"perspective\" \"fov\" 40\n\
+         WorldBegin\nAttribute \"displacementbound\" \"sphere\" .2 \"coordinatesystem\" \"surface\"\n\
+         Surface \"matte\"\nPolygon \"P\" [-9 -9 5  9 -9 5  9 9 5  -9 9 5]\nWorldEnd\n",
+        dir.join("d.png").display()
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err, "{text}");
+    assert!(!text.contains("unknown coordinate system"), "{text}");
+}
+
+#[test]
+fn dented_is_in_the_standard_library_and_dents_inward() {
+    // Aqsis's vase scene and regression scene Bug1396028 name `Displacement "dented"`
+    // without shipping it. Displaced inward, a dented sphere covers less of the frame.
+    let dir = common::scratch_dir("dented");
+    let coverage = |disp: &str| {
+        let out = dir.join(format!("dent{}.png", disp.len()));
+        let rib = format!(
+            "Format 32 32 1\nDisplay \"{}\" \"file\" \"rgba\"\nProjection \"perspective\" \"fov\" 40\n\
+             WorldBegin\nAttribute \"displacementbound\" \"sphere\" [0.5]\n{disp}\nSurface \"constant\"\n\
+             Translate 0 0 3\nSphere 1 -1 1 360\nWorldEnd\n",
+            out.display()
+        );
+        let (text, err) = common::render_scene_file(&dir, &rib);
+        assert!(!err && !text.contains("not found"), "{text}");
+        let img = image::open(&out).unwrap().to_rgba8();
+        img.pixels().map(|p| p[3] as u64).sum::<u64>()
+    };
+    let plain = coverage("");
+    let dented = coverage("Displacement \"dented\" \"Km\" [0.5]");
+    assert!(dented < plain, "{dented} vs {plain}");
 }

@@ -872,7 +872,8 @@ WorldEnd
         "{}",
         e[0]
     );
-    assert_eq!(b.warnings().len(), 1);
+    // `Detail` is applied at render time (level of detail), without a warning.
+    assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
     let s = b.one();
     assert!(s.coordinate_systems.contains_key("table"));
     assert!(!s.coordinate_systems.contains_key("shelf"));
@@ -1069,4 +1070,46 @@ WorldEnd
     assert!(b.errors().is_empty(), "{:#?}", b.errors());
     assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
     assert_eq!(b.one().primitives.len(), 1);
+}
+
+#[test]
+fn an_imager_inside_the_world_sets_the_frames_imager() {
+    // Pixar's Blobby application-note scenes (shipped with Aqsis) write
+    // `WorldBegin Imager "background" "color" [1 1 1]`; the imager runs after the world, so
+    // it applies to that frame, quietly. It does not leak into the next frame.
+    let b = build(
+        "FrameBegin 1\nWorldBegin\nImager \"background\" \"color\" [1 1 1]\nSphere 1 -1 1 360\nWorldEnd\nFrameEnd\n\
+         FrameBegin 2\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\nFrameEnd\n",
+    );
+    assert!(b.warnings().is_empty(), "{:#?}", b.warnings());
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    let im = b.scenes[0].options.imager.as_ref().expect("an imager");
+    assert_eq!(im.name, "background");
+    assert!(b.scenes[1].options.imager.is_none());
+}
+
+#[test]
+fn degenerate_crop_windows_and_opacities_warn_and_render() {
+    // Aqsis's regression scenes Bug1266044 (a CropWindow of zero size, where Aqsis crashed)
+    // and Bug1326794 (`Opacity [3 3 3]`): warnings, the frame uncropped, opacity clamped.
+    let b = build(
+        "CropWindow 0.8 0.8 0.45 0.45\nWorldBegin\nOpacity [3 3 3]\nSphere 1 -1 1 360\n\
+         Opacity [0.5 -1 0.25]\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(b.errors().is_empty(), "{:#?}", b.errors());
+    assert_eq!(b.warnings().len(), 3, "{:#?}", b.warnings());
+    let s = b.one();
+    assert_eq!(s.options.crop_window, [0.0, 1.0, 0.0, 1.0]);
+    assert_eq!(s.primitives[0].attributes.opacity, Vec3::ONE);
+    assert_eq!(
+        s.primitives[1].attributes.opacity,
+        Vec3::new(0.5, 0.0, 0.25)
+    );
+    // A reversed window is still an error.
+    assert_eq!(
+        build("CropWindow 0.8 0.2 0 1\nWorldBegin\nWorldEnd\n")
+            .errors()
+            .len(),
+        1
+    );
 }

@@ -234,6 +234,13 @@ fn prim_info(
                 .as_ref()
                 .map(|d| camera.camera_from_world * d.world_from_shader)
                 .or(Some(camera.camera_from_world * *prim.world_from_object)),
+            // PRMan's Blobby application note writes "coordinatesystem" "surface": the
+            // surface shader's space.
+            "surface" => a
+                .surface
+                .as_ref()
+                .map(|s| camera.camera_from_world * s.world_from_shader)
+                .or(Some(camera.camera_from_world * *prim.world_from_object)),
             other => camera.camera_from_space(other),
         };
         let m = m.unwrap_or_else(|| {

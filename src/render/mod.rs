@@ -5,7 +5,7 @@
 //! depend on the bucket size or the thread count.
 //!
 //! Modules: [`camera`] (projection, crop, named spaces), [`dice`] (cull / split / dice
-//! decisions), [`limits`] (clamps on absurd requests), [`driver`] (buckets, forwarding, shading, parallelism), [`hider`] (the shared
+//! decisions), [`limits`] (clamps on absurd requests), [`lod`] (level of detail: which representation is drawn), [`driver`] (buckets, forwarding, shading, parallelism), [`hider`] (the shared
 //! `ShadedGrid` form and the hiders: [`hider::zbuffer`]; an A-buffer plugs in as another
 //! [`hider::Hider`]), [`sampler`] (hashed jittered sample positions), [`stats`] (`--stats`).
 
@@ -15,6 +15,7 @@ pub mod dispbound;
 pub mod driver;
 pub mod hider;
 pub mod limits;
+pub mod lod;
 pub mod motion;
 pub mod sampler;
 pub mod stats;

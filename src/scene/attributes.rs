@@ -73,9 +73,25 @@ impl Builder<'_> {
         self.attrs().color = c;
     }
 
+    /// Opacity is a fraction of coverage: components outside [0, 1] (Aqsis's regression scene
+    /// Bug1326794 gives `Opacity [3 3 3]`) are clamped, with a warning; unclamped, the
+    /// compositing `C + (1 − O)·behind` subtracted the surfaces behind and washed the colour out.
     pub(super) fn opacity(&mut self, call: &Call<'_>) {
         let c = self.color_arg(call);
-        self.attrs().opacity = c;
+        let clamped = c.clamp(glam::Vec3::ZERO, glam::Vec3::ONE);
+        if clamped != c {
+            self.report(
+                Diag::warning(
+                    "scene::opacity",
+                    format!(
+                        "`Opacity` {} {} {} is outside [0, 1]; clamped to {} {} {}",
+                        c.x, c.y, c.z, clamped.x, clamped.y, clamped.z
+                    ),
+                )
+                .label(call.span(), "here"),
+            );
+        }
+        self.attrs().opacity = clamped;
     }
 
     pub(super) fn texture_coordinates(&mut self, call: &Call<'_>) {
@@ -150,12 +166,18 @@ impl Builder<'_> {
             return;
         }
         let mut shader = self.shader_ref(call);
-        let ray_shadows = self
-            .attrs()
-            .user
+        // BMRT's `Attribute "light" "shadows" "on"` (also Aqsis 1.0's automatic shadows),
+        // or Aqsis's `Attribute "autoshadows" "shadowmapname"`: Aqsis renders that map before
+        // the frame; arbor traces the same shadows instead (the map itself stays missing).
+        let user = &self.attrs().user;
+        let ray_shadows = user
             .get("light:shadows")
             .and_then(|p| p.data.strings().first().cloned())
-            .is_some_and(|s| s.eq_ignore_ascii_case("on"));
+            .is_some_and(|s| s.eq_ignore_ascii_case("on"))
+            || user
+                .get("autoshadows:shadowmapname")
+                .and_then(|p| p.data.strings().first().cloned())
+                .is_some_and(|s| !s.is_empty());
         let samples = self
             .attrs()
             .user
@@ -285,15 +307,20 @@ impl Builder<'_> {
         self.attrs().bound = Some(b);
     }
 
+    /// `Detail`: the box whose raster size picks the representation (`DetailRange`) drawn;
+    /// kept as world-space corners, since the primitives after it may move further.
     pub(super) fn detail(&mut self, call: &Call<'_>) {
-        let b = Self::six(call);
-        self.attrs().detail = Some(b);
-        let d = Diag::warning(
-            "scene::unimplemented",
-            "`Detail` (level of detail) is not implemented yet; every detail level is drawn",
-        )
-        .label(call.span(), "ignored by the renderer");
-        self.report(d);
+        let [x0, x1, y0, y1, z0, z1] = Self::six(call);
+        let m = self.world_from_current();
+        let corners = std::array::from_fn(|i| {
+            let p = glam::Vec3::new(
+                if i & 1 == 0 { x0 } else { x1 },
+                if i & 2 == 0 { y0 } else { y1 },
+                if i & 4 == 0 { z0 } else { z1 },
+            );
+            m.transform_point3(p)
+        });
+        self.attrs().detail = Some(corners);
     }
 
     pub(super) fn detail_range(&mut self, call: &Call<'_>) {

@@ -124,6 +124,7 @@ pub fn decode(
         ));
     }
     let mut ops: Vec<BlobOp> = Vec::new();
+    let mut plugins: Vec<String> = Vec::new();
     let mut c = 0usize;
     let word = |at: usize, what: &str, ninstr: usize| -> Result<i64, DecodeError> {
         code.get(at).copied().ok_or_else(|| {
@@ -240,11 +241,37 @@ pub fn decode(
                     BlobOp::Identity(a)
                 }
             }
+            1004.. => {
+                // A field plug-in (PRMan 1004: name, nfloat, float index, nstring, string
+                // index; Air's 9000: an operand count, then name and data indices): a DSO
+                // arbor cannot load. It stays a leaf (it is counted by nleaf) whose field is
+                // zero, so the rest of the surface still renders.
+                let operands = if opcode == 1004 {
+                    5
+                } else {
+                    let count = word(c, "an operand count", n)?;
+                    c += 1;
+                    usize::try_from(count)
+                        .ok()
+                        .filter(|&k| c + k <= code.len())
+                        .ok_or_else(|| err(1, format!("instruction {n} (opcode {opcode}) has an operand count of {count}"), OPS_HELP))?
+                };
+                let first = word(c, "a plug-in name index", n)?;
+                c += operands;
+                let plugin = usize::try_from(first)
+                    .ok()
+                    .and_then(|i| strings.get(i))
+                    .map_or_else(|| format!("opcode {opcode}"), |s| format!("`{s}`"));
+                plugins.push(format!(
+                    "instruction {n} is a field plug-in ({plugin}), a compiled DSO arbor cannot load; its field is left out (zero)"
+                ));
+                BlobOp::Constant(0.0)
+            }
             other => {
                 return Err(err(
                     1,
                     format!("instruction {n} has unknown opcode {other}"),
-                    "Blobby opcodes: 1000 constant, 1001 ellipsoid, 1002 segment, 1003 repelling plane, 0 add, 1 multiply, 2 max, 3 min, 4 subtract, 5 divide, 6 negate, 7 identity",
+                    "Blobby opcodes: 1000 constant, 1001 ellipsoid, 1002 segment, 1003 repelling plane, 1004 and up field plug-ins, 0 add, 1 multiply, 2 max, 3 min, 4 subtract, 5 divide, 6 negate, 7 identity",
                 ))
             }
         };
@@ -257,7 +284,7 @@ pub fn decode(
             OPS_HELP,
         ));
     }
-    let mut warnings = Vec::new();
+    let mut warnings = plugins;
     let leaves = ops.iter().filter(|o| o.is_leaf()).count();
     if leaves != nleaf as usize {
         warnings.push(format!(
@@ -378,6 +405,37 @@ mod tests {
         assert!(e.message.contains("ends after"));
         let e = decode(1, &[999, 0], &I, &[]).err().unwrap();
         assert!(e.message.contains("unknown opcode 999"));
+    }
+
+    #[test]
+    fn field_plugins_are_zero_leaves_with_a_warning() {
+        // Aqsis's examples/features/blobby/air/blobplane.rib: five ellipsoids and Air's
+        // plug-in plane `9000 4 0 80 1 96` (operand count 4), all six added.
+        let mut f: Vec<f32> = (0..5).flat_map(|_| I).collect();
+        f.extend_from_slice(&I);
+        f.push(2.0);
+        let code = [
+            1001, 0, 1001, 16, 1001, 32, 1001, 48, 1001, 64, 9000, 4, 0, 80, 1, 96, 0, 6, 0, 1, 2,
+            3, 4, 5,
+        ];
+        let (p, w) = decode(6, &code, &f, &["dbo_plane".into()]).ok().unwrap();
+        assert_eq!(p.ops.len(), 7);
+        assert_eq!(p.ops[5], BlobOp::Constant(0.0));
+        assert_eq!(p.ops[6], BlobOp::Add(vec![0, 1, 2, 3, 4, 5]));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("`dbo_plane`"), "{}", w[0]);
+        // PRMan's 1004: name, nfloat, float index, nstring, string index.
+        let (p, w) = decode(
+            2,
+            &[1001, 0, 1004, 0, 0, 0, 0, 0, 0, 2, 0, 1],
+            &I,
+            &["fieldplug".into()],
+        )
+        .ok()
+        .unwrap();
+        assert_eq!(p.ops[1], BlobOp::Constant(0.0));
+        assert_eq!(p.ops[2], BlobOp::Add(vec![0, 1]));
+        assert!(w[0].contains("`fieldplug`"), "{w:?}");
     }
 
     #[test]

@@ -122,6 +122,14 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("light:shadows", "uniform string", Used),
     ("light:nsamples", "uniform integer", Used),
     ("light:samplingstrategy", "uniform string", Ignored),
+    // Aqsis's automatic shadow maps (`Option "render" "auto_shadows"`): arbor renders no map,
+    // but a light with `"shadows" "on"` casts traced shadows (the BMRT attribute above), so
+    // the picture has them; the map the light shader names is then missing (one warning).
+    ("render:auto_shadows", "uniform string", Ignored),
+    ("render:shadow_shadingrate", "uniform float", Ignored),
+    ("light:shadowmapsize", "uniform integer[2]", Ignored),
+    ("light:shadowangle", "uniform float", Ignored),
+    ("light:shadowmapname", "uniform string", Ignored),
     ("light:emitphotons", "uniform string", Ignored),
     ("radiosity:averagecolor", "uniform color", Ignored),
     ("radiosity:emissioncolor", "uniform color", Ignored),
@@ -186,7 +194,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("grouping:membership", "uniform string", Ignored),
     ("grouping:tracesubset", "uniform string", Ignored),
     ("autoshadows:res", "uniform integer", Ignored),
-    ("autoshadows:shadowmapname", "uniform string", Ignored),
+    ("autoshadows:shadowmapname", "uniform string", Used),
     ("aqsis:expandgrids", "uniform float", Ignored),
     ("motion:displacement", "uniform integer", Ignored),
 ];

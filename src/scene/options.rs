@@ -112,7 +112,20 @@ impl Builder<'_> {
             return;
         }
         let w = [0, 1, 2, 3].map(|i| call.pos[i].num().clamp(0.0, 1.0));
-        if w[0] >= w[1] || w[2] >= w[3] {
+        if w[0] == w[1] || w[2] == w[3] {
+            // Zero width or height (Aqsis's regression scene Bug1266044, where Aqsis crashed):
+            // a degenerate request rather than a reversed one, so the frame renders uncropped.
+            self.report(
+                Diag::warning(
+                    "scene::crop-window",
+                    "`CropWindow` has zero width or height; it is ignored and the whole frame is rendered",
+                )
+                .label(call.span(), "here")
+                .help("xmin < xmax and ymin < ymax, all within [0, 1]"),
+            );
+            return;
+        }
+        if w[0] > w[1] || w[2] > w[3] {
             self.bad_arg(
                 call,
                 0,
@@ -338,13 +351,33 @@ impl Builder<'_> {
     }
 
     pub(super) fn imager(&mut self, call: &Call<'_>) {
-        if !self.option_allowed(call) {
+        if self.world.is_some() {
+            self.imager_in_world(call);
             return;
         }
         let mut s = self.shader_ref(call);
         // Before WorldBegin: keep camera_from_shader; world_begin makes it world_from_shader.
         s.world_from_shader = self.camera_from_current();
         self.options.imager = if s.name == "null" { None } else { Some(s) };
+    }
+
+    /// `Imager` inside the world block sets this frame's imager. RISpec makes it an option,
+    /// but the imager runs only after the world is hidden, so nothing frozen is changed, and
+    /// Pixar's Blobby application-note scenes (shipped with Aqsis) write
+    /// `WorldBegin Imager "background" "color" [1 1 1]`: PRMan and Aqsis honour it.
+    fn imager_in_world(&mut self, call: &Call<'_>) {
+        let mut s = self.shader_ref(call);
+        s.world_from_shader = self.world_from_current();
+        self.report(
+            Diag::note(
+                "scene::imager-in-world",
+                "`Imager` inside the world block applies to this frame only",
+            )
+            .label(call.span(), "here"),
+        );
+        if let Some(scene) = self.world.as_mut() {
+            scene.options.imager = if s.name == "null" { None } else { Some(s) };
+        }
     }
 
     pub(super) fn quantize(&mut self, call: &Call<'_>) {

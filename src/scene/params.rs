@@ -103,11 +103,13 @@ fn parse_type(w: &str) -> Result<ParamType, String> {
         "vector" => ParamType::Vector,
         "normal" => ParamType::Normal,
         "hpoint" => ParamType::HPoint,
-        "matrix" => ParamType::Matrix,
+        // PRMan's Blobby "mpoint": a point with its own coordinate system, written as 16
+        // numbers like a matrix (the blob's reference frame, e.g. "vertex mpoint Pref").
+        "matrix" | "mpoint" => ParamType::Matrix,
         _ => {
             let types = [
                 "float", "integer", "string", "color", "point", "vector", "normal", "hpoint",
-                "matrix",
+                "matrix", "mpoint",
             ];
             let mut m = format!("unknown type `{w}`");
             if let Some(c) = did_you_mean(w, types) {
@@ -556,6 +558,26 @@ pub fn validate_counts(
             }
             return true;
         }
+        if p.data.len() == p.decl.width() && p.decl.ty != ParamType::String {
+            // One value where one per element was declared (PRMan's Blobby examples give
+            // `"color Cs" [.1 .9 .2]` to three blobs, `Cs` being varying): one value for the
+            // whole primitive, which is what other renderers make of it.
+            report(
+                Diag::warning(
+                    "scene::count",
+                    format!(
+                        "`{request}`: \"{}\" ({}) needs {want} {unit}, found one value; it is \
+                         read as constant",
+                        p.name,
+                        decl_text(&p.decl),
+                    ),
+                )
+                .label(p.span, format!("{} {unit}", p.data.len()))
+                .help("declare it \"constant\" (or \"uniform\") to say so"),
+            );
+            p.decl.class = Class::Constant;
+            return true;
+        }
         report(
             Diag::error(
                 "scene::count",
@@ -703,6 +725,43 @@ mod tests {
             "{}",
             errs[0].message
         );
+    }
+
+    #[test]
+    fn one_value_for_a_varying_variable_is_read_as_constant() {
+        // PRMan's Blobby example check.rib: `"color Cs" [.1 .9 .2]` on three blobs, and the
+        // "mpoint" type of its `"vertex mpoint Pref"` (16 numbers per blob).
+        let dict = Dictionary::default();
+        let rest = vec![
+            arg(Value::Str("color Cs".into()), 0),
+            arg(Value::FloatArray(vec![0.1, 0.9, 0.2]), 2),
+            arg(Value::Str("vertex mpoint Pref".into()), 4),
+            arg(Value::FloatArray(vec![1.0; 48]), 6),
+        ];
+        let mut errs = vec![];
+        let mut l = parse_params(
+            &rest,
+            &dict,
+            ParamUse::Primitive,
+            None,
+            "Blobby",
+            &mut |d| errs.push(d),
+        );
+        assert!(errs.is_empty(), "{errs:?}");
+        let c = Counts {
+            uniform: 1,
+            varying: 3,
+            vertex: 3,
+            facevarying: 3,
+            facevertex: 3,
+        };
+        validate_counts(&mut l, &c, "Blobby", &mut |d| errs.push(d));
+        assert_eq!(l.0.len(), 2);
+        assert_eq!(l.0[0].decl.class, Class::Constant);
+        assert_eq!(l.0[1].decl.ty, ParamType::Matrix);
+        assert_eq!(errs.len(), 1);
+        assert!(!errs[0].is_error(), "{}", errs[0].message);
+        assert!(errs[0].message.contains("read as constant"));
     }
 
     #[test]

@@ -418,7 +418,10 @@ pub struct AttributeState {
     pub smooth_shading: bool,
     pub matte: bool,
     pub bound: Option<[f32; 6]>,
-    pub detail: Option<[f32; 6]>,
+    /// `Detail`: the bounding box given, as its eight corners in world space (the box is in
+    /// the object space current at the `Detail` request).
+    pub detail: Option<[Vec3; 8]>,
+    /// `DetailRange`: minvisible, lowertransition, uppertransition, maxvisible.
     pub detail_range: [f32; 4],
     pub sides: u32,
     /// Orientation: true when the current orientation is "inside"/flipped relative to the

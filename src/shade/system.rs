@@ -251,17 +251,25 @@ impl<'a> ShadeSystem<'a> {
             k => p.kind == k || (sref.name == "null"),
         };
         if !ok {
+            // A warning, reported once: the primitive goes on with the stand-in a missing
+            // shader gets (Aqsis's Blobby example `repel.rib` names the displacement `lumpy`
+            // as its `Surface`; an error for every grid buried the rest of the report).
             self.diags.report(
-                Diag::error(
+                Diag::warning(
                     "shade::kind",
                     format!(
-                        "`{}` is a {} shader, used as a {} shader",
+                        "`{}` is a {} shader, used as a {} shader; it is not run",
                         sref.name,
                         p.kind.name(),
                         kind.name()
                     ),
                 )
-                .label(sref.span, "named here"),
+                .label(sref.span, "named here")
+                .help(format!(
+                    "name it in `{}` instead, or give a {} shader here",
+                    p.kind.request(),
+                    kind.name()
+                )),
             );
             return None;
         }

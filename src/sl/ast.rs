@@ -35,6 +35,18 @@ impl ShaderKind {
             ShaderKind::Transformation => "transformation",
         }
     }
+
+    /// The RIB request that names a shader of this kind.
+    pub fn request(self) -> &'static str {
+        match self {
+            ShaderKind::Surface => "Surface",
+            ShaderKind::Displacement => "Displacement",
+            ShaderKind::Light => "LightSource",
+            ShaderKind::Volume => "Atmosphere",
+            ShaderKind::Imager => "Imager",
+            ShaderKind::Transformation => "Deformation",
+        }
+    }
 }
 
 /// The base types of the language.

@@ -403,6 +403,43 @@ impl<'a> Lowerer<'a> {
         Some(self.const_val(value, ty))
     }
 
+    /// A call of a name that is neither a built-in nor a function of the shader, and not
+    /// near one: published shaders call compiled C plug-ins (PRMan and Aqsis DSO shadeops,
+    /// e.g. Aqsis's volume example's `sample_vol`) this way. arbor cannot load those, so the
+    /// call warns by name and yields zero of the type the context asks for (float when it
+    /// asks nothing), and the rest of the shader still runs.
+    fn dso_shadeop(&mut self, name: &str, span: Span, hint: Option<BaseType>) -> Val {
+        let ty = match hint {
+            Some(t @ (BaseType::Color | BaseType::Point | BaseType::Vector | BaseType::Normal)) => {
+                t
+            }
+            Some(BaseType::String) => BaseType::String,
+            Some(BaseType::Matrix) => BaseType::Matrix,
+            _ => BaseType::Float,
+        };
+        let (value, what) = match ty {
+            BaseType::String => (Const::S("".into()), "\"\""),
+            BaseType::Matrix => (Const::M(Mat4::ZERO), "a zero matrix"),
+            BaseType::Float => (Const::F(0.0), "0"),
+            _ => (Const::T(Vec3::ZERO), "(0, 0, 0)"),
+        };
+        self.diags.push(
+            Diag::warning(
+                "sl::dso-shadeop",
+                format!(
+                    "`{name}` is not a built-in or a function of this shader: taken as a DSO \
+                     shadeop (a compiled C plug-in), which arbor cannot load; it returns {what}"
+                ),
+            )
+            .label(span, "not defined here")
+            .help(format!(
+                "define `{name}` as a shading-language function, or include the header that \
+                 does, if it is not a plug-in"
+            )),
+        );
+        self.const_val(value, ty)
+    }
+
     fn error_val(&self) -> Val {
         Val {
             reg: self.error_reg,
@@ -595,11 +632,25 @@ impl<'a> Lowerer<'a> {
     fn init_var(&mut self, var: &Var, e: &Expr) {
         match (&e.kind, var.array) {
             (ExprKind::ArrayLit(items), Some(n)) => {
-                if items.len() != n {
+                if items.len() < n {
                     self.diags.push(
                         Diag::error(
                             "sl::array",
                             format!("array of {n} initialised with {} values", items.len()),
+                        )
+                        .label(e.span, "initialiser"),
+                    );
+                } else if items.len() > n {
+                    // Aqsis's regression shader `splinetst` gives a colour map[4] five
+                    // values; the array keeps the first n, as Aqsis's compiler did.
+                    self.diags.push(
+                        Diag::warning(
+                            "sl::array",
+                            format!(
+                                "array of {n} initialised with {} values; the last {} are ignored",
+                                items.len(),
+                                items.len() - n
+                            ),
                         )
                         .label(e.span, "initialiser"),
                     );
@@ -2302,22 +2353,16 @@ impl<'a> Lowerer<'a> {
             for s in &self.funcs {
                 candidates.extend(s.keys().cloned());
             }
-            let mut d = Diag::error("sl::name", format!("unknown function `{name}`"))
-                .label(name_span, "not defined");
-            if let Some(m) = did_you_mean(name, candidates.iter().map(String::as_str)) {
-                d = d.help(format!("did you mean `{m}`?"));
-            } else {
-                // Published shaders call compiled C plug-ins (PRMan DSO shadeops) this way.
-                d = d.help(format!(
-                    "define it as a shading-language function, or include the header that \
-                     does; if `{name}` is a DSO shadeop (a compiled C plug-in), arbor cannot \
-                     load those"
-                ));
-            }
             for a in args {
                 self.expr(a, None);
             }
-            return self.error(d);
+            if let Some(m) = did_you_mean(name, candidates.iter().map(String::as_str)) {
+                let d = Diag::error("sl::name", format!("unknown function `{name}`"))
+                    .label(name_span, "not defined")
+                    .help(format!("did you mean `{m}`?"));
+                return self.error(d);
+            }
+            return self.dso_shadeop(name, name_span, hint);
         }
         // Lower arguments once, with a hint when every overload agrees on the code.
         let mut vals = Vec::new();
