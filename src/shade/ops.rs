@@ -25,7 +25,17 @@ fn take(ex: &mut Exec, r: Reg) -> Slot {
 }
 
 fn put(ex: &mut Exec, r: Reg, s: Slot) {
-    ex.regs[r as usize] = s;
+    let slot = &mut ex.regs[r as usize];
+    match slot {
+        // What `take` left (or another plain value): nothing to drop, so no call of the
+        // slot's destructor per instruction.
+        Slot::F(_) | Slot::T(_) => {
+            // SAFETY: `slot` is a valid, initialised `Slot` whose variant owns no heap
+            // memory, so overwriting it without dropping it leaks nothing.
+            unsafe { std::ptr::write(slot, s) }
+        }
+        _ => *slot = s,
+    }
 }
 
 /// `a / b`, 0 where `b` is 0 (as a select, so loops of it vectorise).
