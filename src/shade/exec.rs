@@ -1633,8 +1633,9 @@ crate::shade::value::kernel! {
         for (mc, cc) in bits.chunks_mut(1024).zip(c.chunks(1024)) {
             let mut k = 0u32;
             for (m, &c) in mc.iter_mut().zip(cc) {
-                let b = *m & (c != 0.0);
-                *m = b;
+                // As bytes: `bool & bool` stayed a loop per flag.
+                let b = (*m as u8) & ((c != 0.0) as u8);
+                *m = b != 0;
                 k += b as u32;
             }
             count += k as usize;
@@ -1650,8 +1651,8 @@ crate::shade::value::kernel! {
         for (mc, oc) in bits.chunks_mut(1024).zip(other.chunks(1024)) {
             let mut k = 0u32;
             for (m, &o) in mc.iter_mut().zip(oc) {
-                let b = *m & !o;
-                *m = b;
+                let b = (*m as u8) & !(o as u8) & 1;
+                *m = b != 0;
                 k += b as u32;
             }
             count += k as usize;
@@ -1840,5 +1841,72 @@ pub fn category_matches(pattern: &str, category: &str) -> bool {
         true
     } else {
         cats.contains(&pattern)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Flags from a simple hash, so runs of set and clear flags of every length show up.
+    fn flags(n: usize, salt: u32) -> Vec<bool> {
+        (0..n as u32)
+            .map(|i| crate::pattern::hash::hash_u32(i ^ salt) % 3 != 0)
+            .collect()
+    }
+
+    #[test]
+    fn loop_mask_updates_match_one_flag_at_a_time() {
+        // Lengths around the 1024-flag chunks and the 8-lane vectors.
+        for n in [0, 1, 7, 8, 9, 1023, 1024, 1025, 3000] {
+            let start = flags(n, 1);
+            let c: Vec<f32> = flags(n, 2)
+                .iter()
+                .enumerate()
+                .map(|(i, &b)| if b { i as f32 + 0.5 } else { 0.0 })
+                .collect();
+            let broken = flags(n, 3);
+
+            let mut m = Mask::from_bits(start.clone());
+            assert_eq!(m.count, start.iter().filter(|&&b| b).count());
+            m.and_nonzero(&c);
+            let want: Vec<bool> = start.iter().zip(&c).map(|(&b, &c)| b && c != 0.0).collect();
+            assert_eq!(m.bits, want);
+            assert_eq!(m.count, want.iter().filter(|&&b| b).count());
+
+            m.and_not(&broken);
+            let want: Vec<bool> = want.iter().zip(&broken).map(|(&b, &o)| b && !o).collect();
+            assert_eq!(m.bits, want);
+            assert_eq!(m.count, want.iter().filter(|&&b| b).count());
+            // Few running points are listed; many are not.
+            if m.count * SPARSE_DIVISOR <= n {
+                let idx: Vec<u32> = (0..n as u32).filter(|&i| want[i as usize]).collect();
+                assert_eq!(m.idx, idx);
+            } else {
+                assert!(m.idx.is_empty());
+            }
+        }
+    }
+
+    #[test]
+    fn shorter_updates_leave_the_other_flags_counted() {
+        let mut m = Mask::all(10);
+        m.and_not(&[true, true, false]);
+        assert_eq!(m.count, 8);
+        m.and_nonzero(&[1.0, 1.0, 0.0, 1.0]);
+        assert_eq!(m.count, 7);
+        assert_eq!(m.bits[..4], [false, false, false, true]);
+    }
+
+    #[test]
+    fn select_masks_follow_the_flags() {
+        let mut m = Mask::from_bits(vec![true, false, true]);
+        assert_eq!(&*m.sel_f(), &[u32::MAX, 0, u32::MAX]);
+        assert_eq!(
+            &*m.sel_t(),
+            &[u32::MAX, u32::MAX, u32::MAX, 0, 0, 0, u32::MAX, u32::MAX, u32::MAX]
+        );
+        m.and_not(&[true, false, false]);
+        assert_eq!(&*m.sel_f(), &[0, 0, u32::MAX]);
     }
 }

@@ -55,11 +55,19 @@ fn divides_by_zero(y: F, mask: &crate::shade::exec::Mask) -> bool {
         F::U(v) => v == 0.0,
         F::V(v) => match mask.lanes() {
             Lanes::Some(idx) => idx.iter().any(|&i| v[i as usize] == 0.0),
-            Lanes::All => v
-                .iter()
-                .zip(&mask.bits)
-                .fold(false, |z, (&x, &m)| z | (m & (x == 0.0))),
+            Lanes::All => zero_at_running(v, &mask.bits),
         },
+    }
+}
+
+crate::shade::value::kernel! {
+    /// Whether `v` is zero at a point whose flag is set (no early exit: a vector loop).
+    fn zero_at_running<>(v: &[f32], running: &[bool]) -> bool {
+        let mut z = 0u8;
+        for (&x, &m) in v.iter().zip(running) {
+            z |= (m as u8) & ((x == 0.0) as u8);
+        }
+        z != 0
     }
 }
 
