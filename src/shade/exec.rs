@@ -1904,7 +1904,17 @@ mod tests {
         assert_eq!(&*m.sel_f(), &[u32::MAX, 0, u32::MAX]);
         assert_eq!(
             &*m.sel_t(),
-            &[u32::MAX, u32::MAX, u32::MAX, 0, 0, 0, u32::MAX, u32::MAX, u32::MAX]
+            &[
+                u32::MAX,
+                u32::MAX,
+                u32::MAX,
+                0,
+                0,
+                0,
+                u32::MAX,
+                u32::MAX,
+                u32::MAX
+            ]
         );
         m.and_not(&[true, false, false]);
         assert_eq!(&*m.sel_f(), &[0, 0, u32::MAX]);
