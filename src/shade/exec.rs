@@ -81,15 +81,33 @@ impl Mask {
         self.count == 0
     }
     pub fn and_not(&mut self, other: &[bool]) {
-        for (b, &o) in self.bits.iter_mut().zip(other) {
-            *b &= !o;
+        let count = and_not(&mut self.bits, other);
+        if other.len() < self.bits.len() {
+            // The flags past `other` stay as they were: count them all.
+            self.recount();
+        } else {
+            self.set_count(count);
         }
-        self.recount();
     }
     /// Counts the running points (and lists them when they are few).
     pub fn recount(&mut self) {
+        let count = count_true(&self.bits);
+        self.set_count(count);
+    }
+    /// Keeps only the points where `c` is not zero (a loop's condition) and recounts, in
+    /// one pass over the flags.
+    fn and_nonzero(&mut self, c: &[f32]) {
+        let count = and_nonzero(&mut self.bits, c);
+        if c.len() < self.bits.len() {
+            self.recount();
+        } else {
+            self.set_count(count);
+        }
+    }
+    /// After a change of `bits`: `count` of them are set.
+    fn set_count(&mut self, count: usize) {
         self.changed();
-        self.count = self.bits.iter().filter(|&&b| b).count();
+        self.count = count;
         self.idx.clear();
         if self.sparse() {
             self.idx.extend(
@@ -133,8 +151,8 @@ impl Mask {
             let mut s = self.sel.borrow_mut();
             if !s.f_ok {
                 let SelMasks { f, f_ok, .. } = &mut *s;
-                f.clear();
-                f.extend(self.bits.iter().map(|&b| 0u32.wrapping_sub(b as u32)));
+                f.resize(self.bits.len(), 0);
+                sel_from_bits(f, &self.bits);
                 *f_ok = true;
             }
         }
@@ -146,11 +164,8 @@ impl Mask {
             let mut s = self.sel.borrow_mut();
             if !s.t_ok {
                 let SelMasks { t, t_ok, .. } = &mut *s;
-                t.clear();
-                t.extend(self.bits.iter().flat_map(|&b| {
-                    let k = 0u32.wrapping_sub(b as u32);
-                    [k, k, k]
-                }));
+                t.resize(3 * self.bits.len(), 0);
+                sel3_from_bits(t, &self.bits);
                 *t_ok = true;
             }
         }
@@ -900,12 +915,7 @@ impl<'a> Exec<'a> {
             scratch.copy_from(&live);
             self.block(cond_code, &mut scratch);
             match &self.regs[cond as usize] {
-                Slot::VF(c) => {
-                    for (m, &c) in live.bits.iter_mut().zip(c) {
-                        *m &= c != 0.0;
-                    }
-                    live.recount();
-                }
+                Slot::VF(c) => live.and_nonzero(c),
                 s => {
                     if s.f().first() == 0.0 {
                         break;
@@ -997,7 +1007,13 @@ impl<'a> Exec<'a> {
         for &(r, u) in regs {
             let slot = &mut self.regs[r as usize];
             let cut = match (u, &*slot) {
-                (CompactUse::Temp, _) => Slot::F(0.0),
+                // The loop computes it before reading it, and nothing after the loop reads
+                // it: its buffer goes in as it is (a computation over every point of the
+                // smaller grid shortens it in place, no new buffer, no zero-fill).
+                (CompactUse::Temp, _) => {
+                    saved.push(Slot::F(0.0));
+                    continue;
+                }
                 (_, Slot::VF(v)) => {
                     let mut c = crate::shade::value::grid_vf(m);
                     for (o, &i) in c.iter_mut().zip(&idx) {
@@ -1036,6 +1052,10 @@ impl<'a> Exec<'a> {
         // the loop keep that value). Registers only read, and temporaries, get their
         // whole-grid values back.
         for (&(r, u), old) in regs.iter().zip(saved) {
+            if u == CompactUse::Temp {
+                // Left as the loop left it (see above); nothing reads it.
+                continue;
+            }
             let new = std::mem::take(&mut self.regs[r as usize]);
             if u != CompactUse::Stored {
                 crate::shade::value::recycle([new]);
@@ -1165,7 +1185,11 @@ impl<'a> Exec<'a> {
                 _ => false,
             };
             if fits {
-                self.regs[dst as usize] = std::mem::take(&mut self.regs[src as usize]);
+                // Swapped, not taken: the temporary keeps the variable's old buffer, which
+                // its next computation (a loop's next iteration) writes in place instead of
+                // allocating and zero-filling a new one. Nothing reads the temporary but this
+                // store, and the old values are this run's own.
+                self.regs.swap(dst as usize, src as usize);
                 return;
             }
         }
@@ -1592,6 +1616,72 @@ impl<'a> Exec<'a> {
     }
 }
 
+crate::shade::value::kernel! {
+    /// How many of `bits` are set (a vectorised sum; `filter().count()` was a loop per flag).
+    fn count_true<>(bits: &[bool]) -> usize {
+        // Counted in 32-bit lanes per chunk (eight to a vector), added up per chunk.
+        bits.chunks(1024)
+            .map(|c| c.iter().map(|&b| b as u32).sum::<u32>() as usize)
+            .sum()
+    }
+}
+
+crate::shade::value::kernel! {
+    /// `bits[i] &= c[i] != 0`; returns how many are set after.
+    fn and_nonzero<>(bits: &mut [bool], c: &[f32]) -> usize {
+        let mut count = 0usize;
+        for (mc, cc) in bits.chunks_mut(1024).zip(c.chunks(1024)) {
+            let mut k = 0u32;
+            for (m, &c) in mc.iter_mut().zip(cc) {
+                // As bytes: `bool & bool` stayed a loop per flag.
+                let b = (*m as u8) & ((c != 0.0) as u8);
+                *m = b != 0;
+                k += b as u32;
+            }
+            count += k as usize;
+        }
+        count
+    }
+}
+
+crate::shade::value::kernel! {
+    /// `bits[i] &= !other[i]`; returns how many are set after.
+    fn and_not<>(bits: &mut [bool], other: &[bool]) -> usize {
+        let mut count = 0usize;
+        for (mc, oc) in bits.chunks_mut(1024).zip(other.chunks(1024)) {
+            let mut k = 0u32;
+            for (m, &o) in mc.iter_mut().zip(oc) {
+                let b = (*m as u8) & !(o as u8) & 1;
+                *m = b != 0;
+                k += b as u32;
+            }
+            count += k as usize;
+        }
+        count
+    }
+}
+
+crate::shade::value::kernel! {
+    /// One select mask per point: all ones where the flag is set.
+    fn sel_from_bits<>(k: &mut [u32], bits: &[bool]) {
+        for (o, &b) in k.iter_mut().zip(bits) {
+            *o = 0u32.wrapping_sub(b as u32);
+        }
+    }
+}
+
+crate::shade::value::kernel! {
+    /// Three select masks per point (one per component of a triple).
+    fn sel3_from_bits<>(k: &mut [u32], bits: &[bool]) {
+        for (o, &b) in k.chunks_exact_mut(3).zip(bits) {
+            let x = 0u32.wrapping_sub(b as u32);
+            o[0] = x;
+            o[1] = x;
+            o[2] = x;
+        }
+    }
+}
+
 /// `v = a` at the running points of `mask`: a copy when every point runs, the listed points
 /// when few do, otherwise `select` over every point (as bit masks, which vectorise).
 #[inline]
@@ -1751,5 +1841,82 @@ pub fn category_matches(pattern: &str, category: &str) -> bool {
         true
     } else {
         cats.contains(&pattern)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Flags from a simple hash, so runs of set and clear flags of every length show up.
+    fn flags(n: usize, salt: u32) -> Vec<bool> {
+        (0..n as u32)
+            .map(|i| crate::pattern::hash::hash_u32(i ^ salt) % 3 != 0)
+            .collect()
+    }
+
+    #[test]
+    fn loop_mask_updates_match_one_flag_at_a_time() {
+        // Lengths around the 1024-flag chunks and the 8-lane vectors.
+        for n in [0, 1, 7, 8, 9, 1023, 1024, 1025, 3000] {
+            let start = flags(n, 1);
+            let c: Vec<f32> = flags(n, 2)
+                .iter()
+                .enumerate()
+                .map(|(i, &b)| if b { i as f32 + 0.5 } else { 0.0 })
+                .collect();
+            let broken = flags(n, 3);
+
+            let mut m = Mask::from_bits(start.clone());
+            assert_eq!(m.count, start.iter().filter(|&&b| b).count());
+            m.and_nonzero(&c);
+            let want: Vec<bool> = start.iter().zip(&c).map(|(&b, &c)| b && c != 0.0).collect();
+            assert_eq!(m.bits, want);
+            assert_eq!(m.count, want.iter().filter(|&&b| b).count());
+
+            m.and_not(&broken);
+            let want: Vec<bool> = want.iter().zip(&broken).map(|(&b, &o)| b && !o).collect();
+            assert_eq!(m.bits, want);
+            assert_eq!(m.count, want.iter().filter(|&&b| b).count());
+            // Few running points are listed; many are not.
+            if m.count * SPARSE_DIVISOR <= n {
+                let idx: Vec<u32> = (0..n as u32).filter(|&i| want[i as usize]).collect();
+                assert_eq!(m.idx, idx);
+            } else {
+                assert!(m.idx.is_empty());
+            }
+        }
+    }
+
+    #[test]
+    fn shorter_updates_leave_the_other_flags_counted() {
+        let mut m = Mask::all(10);
+        m.and_not(&[true, true, false]);
+        assert_eq!(m.count, 8);
+        m.and_nonzero(&[1.0, 1.0, 0.0, 1.0]);
+        assert_eq!(m.count, 7);
+        assert_eq!(m.bits[..4], [false, false, false, true]);
+    }
+
+    #[test]
+    fn select_masks_follow_the_flags() {
+        let mut m = Mask::from_bits(vec![true, false, true]);
+        assert_eq!(&*m.sel_f(), &[u32::MAX, 0, u32::MAX]);
+        assert_eq!(
+            &*m.sel_t(),
+            &[
+                u32::MAX,
+                u32::MAX,
+                u32::MAX,
+                0,
+                0,
+                0,
+                u32::MAX,
+                u32::MAX,
+                u32::MAX
+            ]
+        );
+        m.and_not(&[true, false, false]);
+        assert_eq!(&*m.sel_f(), &[0, 0, u32::MAX]);
     }
 }

@@ -25,7 +25,17 @@ fn take(ex: &mut Exec, r: Reg) -> Slot {
 }
 
 fn put(ex: &mut Exec, r: Reg, s: Slot) {
-    ex.regs[r as usize] = s;
+    let slot = &mut ex.regs[r as usize];
+    match slot {
+        // What `take` left (or another plain value): nothing to drop, so no call of the
+        // slot's destructor per instruction.
+        Slot::F(_) | Slot::T(_) => {
+            // SAFETY: `slot` is a valid, initialised `Slot` whose variant owns no heap
+            // memory, so overwriting it without dropping it leaks nothing.
+            unsafe { std::ptr::write(slot, s) }
+        }
+        _ => *slot = s,
+    }
 }
 
 /// `a / b`, 0 where `b` is 0 (as a select, so loops of it vectorise).
@@ -45,11 +55,19 @@ fn divides_by_zero(y: F, mask: &crate::shade::exec::Mask) -> bool {
         F::U(v) => v == 0.0,
         F::V(v) => match mask.lanes() {
             Lanes::Some(idx) => idx.iter().any(|&i| v[i as usize] == 0.0),
-            Lanes::All => v
-                .iter()
-                .zip(&mask.bits)
-                .fold(false, |z, (&x, &m)| z | (m & (x == 0.0))),
+            Lanes::All => zero_at_running(v, &mask.bits),
         },
+    }
+}
+
+crate::shade::value::kernel! {
+    /// Whether `v` is zero at a point whose flag is set (no early exit: a vector loop).
+    fn zero_at_running<>(v: &[f32], running: &[bool]) -> bool {
+        let mut z = 0u8;
+        for (&x, &m) in v.iter().zip(running) {
+            z |= (m as u8) & ((x == 0.0) as u8);
+        }
+        z != 0
     }
 }
 

@@ -352,15 +352,15 @@ pub fn has_avx2() -> bool {
 /// dispatch, the closures stayed calls per point) running `$body`, in a copy compiled for
 /// AVX2 when the CPU has it.
 macro_rules! kernel {
-    ($(#[$m:meta])* $vis:vis fn $name:ident <$($gen:ident $(: $bound:path)?),*> ($($arg:ident : $ty:ty),* $(,)?) $body:block) => {
+    ($(#[$m:meta])* $vis:vis fn $name:ident <$($gen:ident $(: $bound:path)?),*> ($($arg:ident : $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$m])*
         #[inline(never)]
-        $vis fn $name<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+        $vis fn $name<$($gen $(: $bound)?),*>($($arg: $ty),*) $(-> $ret)? {
             #[inline(always)]
-            fn body<$($gen $(: $bound)?),*>($($arg: $ty),*) $body
+            fn body<$($gen $(: $bound)?),*>($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx2")]
-            unsafe fn body_avx2<$($gen $(: $bound)?),*>($($arg: $ty),*) {
+            unsafe fn body_avx2<$($gen $(: $bound)?),*>($($arg: $ty),*) $(-> $ret)? {
                 body($($arg),*)
             }
             #[cfg(target_arch = "x86_64")]
