@@ -5,11 +5,11 @@
 //! queries along a ray segment, and closest hits of many rays with their walks interleaved
 //! (`interleave`).
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
-//! every hit) is the same whatever the thread count; nodes are 4 wide (a binned-SAH binary
-//! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to four
-//! children, tested together, quantised to one 64-byte cache line, see `qbox`; leaves of up
-//! to 8 quads, their SAH cost counted in groups of four, the groups the leaf test takes at
-//! once on x86-64, see `quad4`); a quad is
+//! every hit) is the same whatever the thread count; nodes are 8 wide (a binned-SAH binary
+//! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to eight
+//! children, tested together, quantised to one 64-byte cache line, see `qbox`, with the
+//! children's indices on a second line; leaves of up to 8 quads, their SAH cost counted in
+//! groups of four, the groups the leaf test takes at once on x86-64, see `quad4`); a quad is
 //! intersected, watertight, as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)` and
 //! reports bilinear-style coordinates `(a, b)` in `[0, 1]²` across the quad. Traversal visits
 //! the nearest child in reach first (ties by lane), pushing the others farthest first.
@@ -18,7 +18,7 @@
 //! second linear-algebra crate beside glam) and its traversal returns a `Vec` of every shape
 //! whose box the ray crosses (an allocation and no closest-hit pruning per ray); `obvhs` is
 //! glam-based and fast (CWBVH, PLOC) but young (three 0.x releases within a year, API changed
-//! each time) and brings its own dependency tree. A binned-SAH BVH4 with ordered traversal is
+//! each time) and brings its own dependency tree. A binned-SAH BVH8 with ordered traversal is
 //! ~500 lines, deterministic by construction, and its leaves hold micropolygons with the
 //! watertight test they need (see `benches/rays.rs` for its speed).
 
@@ -51,13 +51,18 @@ impl Quad {
     }
 }
 
-/// A 4-wide node in one 64-byte cache line: the boxes of up to four children side by side
-/// (lane `i` of each row), quantised to 8-bit steps of a power-of-two quantum per axis from
-/// the node's low corner (see `qbox`: the dequantised planes enclose each child's exact box),
-/// so one ray tests all four with the same few vector instructions.
+/// Children a node holds.
+const WIDTH: usize = 8;
+
+/// An 8-wide node in two 64-byte cache lines. The first holds all the slab test reads: the
+/// node's low corner, a power-of-two quantum per axis and the boxes of up to eight children
+/// side by side (lane `i` of each row) in 8-bit steps of the quantum from that corner (see
+/// `qbox`: the dequantised planes enclose each child's exact box), so one ray tests all
+/// eight with the same few vector instructions (AVX2; two SSE halves' worth otherwise). The
+/// second holds the children themselves, read for those in reach.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-struct Node4 {
+struct Node8 {
     /// The node's low corner: step 0 on each axis.
     origin: [f32; 3],
     /// Per axis the quantum's biased exponent (`qbox::quantum`).
@@ -65,23 +70,31 @@ struct Node4 {
     /// A bit per lane holding a child (the others are never visited).
     valid: u8,
     /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
-    q: [[u8; 4]; 6],
+    q: [[u8; WIDTH]; 6],
     /// Interior child: node index. Leaf child: its first quad.
-    child: [u32; 4],
+    child: [u32; WIDTH],
     /// Quads in a leaf child (at most `MAX_LEAF`); 0 for an interior child and an empty lane.
-    count: [u8; 4],
+    count: [u8; WIDTH],
+    /// Per axis the quantum itself, `qbox::quantum(exp)` (read by the vector slab test,
+    /// which then broadcasts it instead of rebuilding it from the exponent's bits).
+    scale: [f32; 3],
 }
 
-const _: () = assert!(std::mem::size_of::<Node4>() == 64 && MAX_LEAF <= u8::MAX as usize);
+const _: () = assert!(
+    std::mem::size_of::<Node8>() == 128
+        && std::mem::offset_of!(Node8, child) == 64
+        && MAX_LEAF <= u8::MAX as usize
+);
 
-impl Node4 {
-    const EMPTY: Node4 = Node4 {
+impl Node8 {
+    const EMPTY: Node8 = Node8 {
         origin: [0.0; 3],
         exp: [1; 3],
         valid: 0,
-        q: [[0; 4]; 6],
-        child: [0; 4],
-        count: [0; 4],
+        q: [[0; WIDTH]; 6],
+        child: [0; WIDTH],
+        count: [0; WIDTH],
+        scale: [0.0; 3],
     };
 }
 
@@ -98,7 +111,7 @@ pub struct Hit {
 
 #[derive(Default, Debug)]
 pub struct Bvh {
-    nodes: Vec<Node4>,
+    nodes: Vec<Node8>,
     pub quads: Vec<Quad>,
     /// The quads' corners (see [`Quad`]), then one padding element (the four-quad test
     /// loads 16 bytes a corner).
@@ -165,7 +178,7 @@ fn groups(n: u32) -> f32 {
     n.div_ceil(4) as f32
 }
 
-/// A node of the binary tree built first (then collapsed to 4-wide nodes).
+/// A node of the binary tree built first (then collapsed to 8-wide nodes).
 #[derive(Clone, Copy)]
 struct Node2 {
     bb: Aabb,
@@ -177,7 +190,7 @@ struct Node2 {
 
 impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
-    /// in place), collapsed into 4-wide nodes. Sequential and a function of the input order
+    /// in place), collapsed into 8-wide nodes. Sequential and a function of the input order
     /// alone (see the module invariants).
     pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
@@ -343,12 +356,12 @@ impl Bvh {
         bvh
     }
 
-    /// Makes the 4-wide node for binary interior node `i` (children first-come first-placed:
+    /// Makes the 8-wide node for binary interior node `i` (children first-come first-placed:
     /// the root is node 0); returns its index.
     fn collapse(&mut self, nodes: &[Node2], i: usize) -> u32 {
-        // Open the interior child with the largest box until there are four.
+        // Open the interior child with the largest box until there are eight.
         let mut kids: Vec<usize> = vec![nodes[i].first as usize, nodes[i].first as usize + 1];
-        while kids.len() < 4 {
+        while kids.len() < WIDTH {
             let pick = kids
                 .iter()
                 .enumerate()
@@ -362,8 +375,8 @@ impl Bvh {
             kids.insert(pos + 1, l + 1);
         }
         let me = self.nodes.len();
-        self.nodes.push(Node4::EMPTY);
-        let mut node = Node4::EMPTY;
+        self.nodes.push(Node8::EMPTY);
+        let mut node = Node8::EMPTY;
         let mut bb = Aabb::EMPTY;
         for &k in &kids {
             bb.grow(&nodes[k].bb);
@@ -371,6 +384,7 @@ impl Bvh {
         node.origin = bb.min.to_array();
         for axis in 0..3 {
             node.exp[axis] = qbox::exponent(bb.min[axis], bb.max[axis]);
+            node.scale[axis] = qbox::quantum(node.exp[axis]);
         }
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
@@ -473,51 +487,48 @@ impl Bvh {
         super::quad4::leaf(quads, &self.verts, &ray.w4, &ray.wt, tmin, tmax, on_hit)
     }
 
-    /// Asks for the cache line of a pushed child (an interior node, or a leaf's first quads):
-    /// a later visit then finds it on the way. No effect on results.
+    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's first
+    /// quads): a later visit then finds them on the way. No effect on results.
     #[inline(always)]
     fn prefetch(&self, child: u32, count: u32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            // A prefetch never faults, so the address needs no bounds check (wrapping_add
-            // only computes it).
-            let p: *const i8 = if count == 0 {
-                self.nodes.as_ptr().wrapping_add(child as usize).cast()
-            } else {
-                // Not the corners: finding them would wait for the quad.
-                self.quads.as_ptr().wrapping_add(child as usize).cast()
-            };
-            // SAFETY: SSE is the x86-64 baseline; a prefetch reads nothing architecturally.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
+        if count == 0 {
+            let p = self.nodes.as_ptr().wrapping_add(child as usize);
+            memhint::prefetch(p);
+            memhint::prefetch(p.cast::<u8>().wrapping_add(64));
+        } else {
+            // Not the corners: finding them would wait for the quad.
+            memhint::prefetch(self.quads.as_ptr().wrapping_add(child as usize));
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = (child, count);
     }
 
     /// Visits node `n`: pushes the children in reach other than the one to visit now
     /// (farthest first, each prefetched) and returns that one as (child, quad count), if
     /// any. With `ORDERED` the nearest child in reach is visited first (ties by lane).
+    /// `AVX2`: the slab test in AVX2 (only where the CPU has it; the same results).
     #[inline(always)]
-    fn visit<const ORDERED: bool>(
+    fn visit<const ORDERED: bool, const AVX2: bool>(
         &self,
-        n: &Node4,
+        n: &Node8,
         rb: &SlabRay,
         tmin: f32,
         tmax: f32,
         stack: &mut Stack,
     ) -> Option<(u32, u32)> {
-        let (mask, tnear) = slab4(n, rb, tmin, tmax);
+        let (mask, tnear) = slab8::<AVX2>(n, rb, tmin, tmax);
         let first = if mask == 0 {
             return None;
         } else if mask & (mask - 1) == 0 {
             // One child in reach (the common case deep in the tree): no ordering.
-            mask.trailing_zeros() as usize & 3
-        } else if mask.count_ones() == 2 {
+            mask.trailing_zeros() as usize & 7
+        } else if {
+            // Exactly two (without a population count: not in the baseline instruction set).
+            let rest = mask & (mask - 1);
+            rest & (rest - 1) == 0
+        } {
             // Two (most of the rest): one comparison of the sort keys below, (distance
             // bits, lane); the farther one is pushed.
-            let i = mask.trailing_zeros() as usize & 3;
-            let j = (mask & (mask - 1)).trailing_zeros() as usize & 3;
+            let i = mask.trailing_zeros() as usize & 7;
+            let j = (mask & (mask - 1)).trailing_zeros() as usize & 7;
             let (near, far) = if ORDERED && tnear[j].to_bits() < tnear[i].to_bits() {
                 (j, i)
             } else {
@@ -528,38 +539,78 @@ impl Bvh {
             stack.push(e);
             near
         } else {
-            // Sort keys (a sorting network, branch-free): the entry distance's bits
-            // (distances are ≥ tmin ≥ 0, whose bits order as the numbers do) above the
-            // lane when `ordered`, the lane alone otherwise; lanes out of reach sort last.
-            let key = sort4(std::array::from_fn(|i| {
-                let t = if ORDERED {
-                    u64::from(tnear[i].to_bits()) << 2
+            // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
+            // order as the numbers do) above the lane when `ordered`, the lane alone
+            // otherwise; an insertion sort of the lanes in reach (three or four, usually).
+            let mut key = [0u64; WIDTH];
+            let mut c = 0;
+            let mut m = mask;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize & 7;
+                m &= m - 1;
+                let k = if ORDERED {
+                    u64::from(tnear[i].to_bits()) << 3 | i as u64
                 } else {
-                    0
+                    i as u64
                 };
-                if mask & (1 << i) != 0 {
-                    t | i as u64
-                } else {
-                    u64::MAX
+                let mut j = c;
+                while j > 0 && key[j - 1] > k {
+                    key[j] = key[j - 1];
+                    j -= 1;
                 }
-            }));
+                key[j] = k;
+                c += 1;
+            }
             // Push all but the first, farthest first; visit the first now (as if pushed
             // and popped at once: the same order).
-            let c = mask.count_ones() as usize;
             for &kk in key[1..c].iter().rev() {
-                let i = (kk & 3) as usize;
+                let i = (kk & 7) as usize;
                 let e = (n.child[i], u32::from(n.count[i]), tnear[i]);
                 self.prefetch(e.0, e.1);
                 stack.push(e);
             }
-            (key[0] & 3) as usize
+            (key[0] & 7) as usize
         };
         Some((n.child[first], u32::from(n.count[first])))
     }
 
     /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
-    /// shrink `tmax`; returning true stops the walk.
+    /// shrink `tmax`; returning true stops the walk. Compiled for AVX2 where the CPU has it
+    /// (no FMA: the same bits).
     fn walk<const ORDERED: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: &mut f32,
+        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 was detected just above.
+            unsafe { self.walk_avx2::<ORDERED>(o, d, tmin, tmax, on_hit) };
+            return;
+        }
+        self.walk_with::<ORDERED, false>(o, d, tmin, tmax, on_hit);
+    }
+
+    /// [`Bvh::walk_with`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn walk_avx2<const ORDERED: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: &mut f32,
+        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+    ) {
+        self.walk_with::<ORDERED, true>(o, d, tmin, tmax, on_hit);
+    }
+
+    /// The body of [`Bvh::walk`].
+    #[inline(always)]
+    fn walk_with<const ORDERED: bool, const AVX2: bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -580,7 +631,7 @@ impl Bvh {
         let mut cur = 0u32;
         loop {
             let n = &self.nodes[cur as usize];
-            if let Some((c, count)) = self.visit::<ORDERED>(n, &rb, tmin, *tmax, &mut stack) {
+            if let Some((c, count)) = self.visit::<ORDERED, AVX2>(n, &rb, tmin, *tmax, &mut stack) {
                 if count == 0 {
                     cur = c;
                     continue;
@@ -657,24 +708,6 @@ impl Stack {
     }
 }
 
-/// Sorts four keys ascending: the five compare-exchanges of the optimal network, each a
-/// pair of conditional moves (no branches to mispredict on the children's order).
-#[inline(always)]
-fn sort4(mut k: [u64; 4]) -> [u64; 4] {
-    #[inline(always)]
-    fn ce(k: &mut [u64; 4], a: usize, b: usize) {
-        let (x, y) = (k[a], k[b]);
-        k[a] = x.min(y);
-        k[b] = x.max(y);
-    }
-    ce(&mut k, 0, 1);
-    ce(&mut k, 2, 3);
-    ce(&mut k, 0, 2);
-    ce(&mut k, 1, 3);
-    ce(&mut k, 1, 2);
-    k
-}
-
 /// A ray prepared for the leaves' quad tests.
 struct LeafRay {
     wt: WtRay,
@@ -695,17 +728,10 @@ impl LeafRay {
 }
 
 /// A ray prepared for the slab test: the reciprocal direction and the origin scaled by it
-/// (a plane `p` is crossed at `p · inv − oi`), on x86-64 also splatted across four lanes
-/// (made once a ray instead of at each of its node visits).
+/// (a plane `p` is crossed at `p · inv − oi`).
 struct SlabRay {
-    #[cfg(not(target_arch = "x86_64"))]
     inv: [f32; 3],
-    #[cfg(not(target_arch = "x86_64"))]
     oi: [f32; 3],
-    #[cfg(target_arch = "x86_64")]
-    inv4: [std::arch::x86_64::__m128; 3],
-    #[cfg(target_arch = "x86_64")]
-    oi4: [std::arch::x86_64::__m128; 3],
 }
 
 impl SlabRay {
@@ -721,26 +747,14 @@ impl SlabRay {
         };
         let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
         let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::_mm_set1_ps;
-            // SAFETY: SSE is part of the x86-64 baseline.
-            unsafe {
-                SlabRay {
-                    inv4: inv.map(|x| _mm_set1_ps(x)),
-                    oi4: oi.map(|x| _mm_set1_ps(x)),
-                }
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
         SlabRay { inv, oi }
     }
 }
 
-/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
-/// SSE (baseline on x86-64): the same operations in the same order as the portable form
-/// (`minps`/`maxps` return their second operand exactly where `vmin`/`vmax` do), so the
-/// same children are visited.
+/// The slab test of a node's eight boxes: a bit per child hit, and the entry distances.
+/// `AVX2` (only where the CPU has it) runs it as eight-lane vectors: the same operations in
+/// the same order as the portable form (`vminps`/`vmaxps` return their second operand
+/// exactly where `vmin`/`vmax` do), so the same children are visited.
 ///
 /// Each box side is first dequantised to the `f32` plane the build checked (`qbox::plane`),
 /// then crossed as an exact box's side would be (`p · inv − oi`, both rounded monotonically
@@ -748,84 +762,72 @@ impl SlabRay {
 /// earlier. Per axis the near side is the smaller crossing and the far side the larger (for
 /// a box with `lo ≤ hi` that is picking the low or high side by the direction's sign; empty
 /// lanes are masked out by the node's `valid` bits instead).
+#[inline(always)]
+fn slab8<const AVX2: bool>(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only set in code compiled for (and run where the CPU has) AVX2.
+        return unsafe { slab8_avx2(n, r, tmin, tmax) };
+    }
+    slab8_portable(n, r, tmin, tmax)
+}
+
+/// [`slab8`] in AVX2 intrinsics (the caller makes sure the CPU has AVX2).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
+unsafe fn slab8_avx2(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
     use std::arch::x86_64::*;
-    // SAFETY: SSE2 is part of the x86-64 baseline; the loads read inside the 64-byte node
-    // (origin and exponents: bytes 0–15, steps: bytes 16–39) and the store writes a
-    // [f32; 4], all unaligned-safe.
-    unsafe {
-        let base: *const u8 = (n as *const Node4).cast();
-        let z = _mm_setzero_si128();
-        // Origin in lanes 0–2; the exponents (and `valid`) as the bytes of lane 3.
-        let head = _mm_loadu_si128(base.cast());
-        let origin = _mm_castsi128_ps(head);
-        let exps = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_srli_si128::<12>(head), z), z);
-        let quantum = _mm_castsi128_ps(_mm_slli_epi32::<23>(exps));
-        let q03 = _mm_loadu_si128(base.add(16).cast());
-        let q45 = _mm_loadl_epi64(base.add(32).cast());
-        let (r01, r23, r45) = (
-            _mm_unpacklo_epi8(q03, z),
-            _mm_unpackhi_epi8(q03, z),
-            _mm_unpacklo_epi8(q45, z),
+    // SAFETY (of the loads): each reads 8 bytes of a row of `q`, inside the node; the store
+    // writes a [f32; 8].
+    let q: *const u8 = n.q.as_ptr().cast();
+    let cross = |row: usize, a: usize| {
+        let steps = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
+            q.add(row * WIDTH).cast(),
+        )));
+        let p = _mm256_add_ps(
+            _mm256_set1_ps(n.origin[a]),
+            _mm256_mul_ps(steps, _mm256_set1_ps(n.scale[a])),
         );
-        let steps = [
-            _mm_unpacklo_epi16(r01, z), // low x
-            _mm_unpackhi_epi16(r01, z), // low y
-            _mm_unpacklo_epi16(r23, z), // low z
-            _mm_unpackhi_epi16(r23, z), // high x
-            _mm_unpacklo_epi16(r45, z), // high y
-            _mm_unpackhi_epi16(r45, z), // high z
-        ];
-        let splat = |v: __m128, a: usize| match a {
-            0 => _mm_shuffle_ps::<0x00>(v, v),
-            1 => _mm_shuffle_ps::<0x55>(v, v),
-            _ => _mm_shuffle_ps::<0xaa>(v, v),
-        };
-        let cross = |row: usize, a: usize| {
-            let p = _mm_add_ps(
-                splat(origin, a),
-                _mm_mul_ps(_mm_cvtepi32_ps(steps[row]), splat(quantum, a)),
-            );
-            _mm_sub_ps(_mm_mul_ps(p, r.inv4[a]), r.oi4[a])
-        };
-        let (lx, hx) = (cross(0, 0), cross(3, 0));
-        let (ly, hy) = (cross(1, 1), cross(4, 1));
-        let (lz, hz) = (cross(2, 2), cross(5, 2));
-        let t0 = _mm_max_ps(
-            _mm_max_ps(_mm_min_ps(lx, hx), _mm_min_ps(ly, hy)),
-            _mm_max_ps(_mm_min_ps(lz, hz), _mm_set1_ps(tmin)),
-        );
-        let f = _mm_min_ps(
-            _mm_min_ps(_mm_max_ps(lx, hx), _mm_max_ps(ly, hy)),
-            _mm_max_ps(lz, hz),
-        );
-        let t1 = _mm_min_ps(_mm_mul_ps(f, _mm_set1_ps(1.000_000_24)), _mm_set1_ps(tmax));
-        let mask = _mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32 & u32::from(n.valid);
-        let mut out = [0f32; 4];
-        _mm_storeu_ps(out.as_mut_ptr(), t0);
-        (mask, out)
-    }
+        _mm256_sub_ps(
+            _mm256_mul_ps(p, _mm256_set1_ps(r.inv[a])),
+            _mm256_set1_ps(r.oi[a]),
+        )
+    };
+    let (lx, hx) = (cross(0, 0), cross(3, 0));
+    let (ly, hy) = (cross(1, 1), cross(4, 1));
+    let (lz, hz) = (cross(2, 2), cross(5, 2));
+    let t0 = _mm256_max_ps(
+        _mm256_max_ps(_mm256_min_ps(lx, hx), _mm256_min_ps(ly, hy)),
+        _mm256_max_ps(_mm256_min_ps(lz, hz), _mm256_set1_ps(tmin)),
+    );
+    let f = _mm256_min_ps(
+        _mm256_min_ps(_mm256_max_ps(lx, hx), _mm256_max_ps(ly, hy)),
+        _mm256_max_ps(lz, hz),
+    );
+    let t1 = _mm256_min_ps(
+        _mm256_mul_ps(f, _mm256_set1_ps(1.000_000_24)),
+        _mm256_set1_ps(tmax),
+    );
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32 & u32::from(n.valid);
+    let mut out = [0f32; WIDTH];
+    _mm256_storeu_ps(out.as_mut_ptr(), t0);
+    (mask, out)
 }
 
 /// Lane-wise minimum and maximum, written so they compile to `minps`/`maxps`.
-#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn vmin(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+fn vmin(a: [f32; WIDTH], b: [f32; WIDTH]) -> [f32; WIDTH] {
     std::array::from_fn(|i| if a[i] < b[i] { a[i] } else { b[i] })
 }
-#[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn vmax(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+fn vmax(a: [f32; WIDTH], b: [f32; WIDTH]) -> [f32; WIDTH] {
     std::array::from_fn(|i| if a[i] > b[i] { a[i] } else { b[i] })
 }
 
-/// The slab test of a node's four boxes: a bit per child hit, and the entry distances.
-#[cfg(not(target_arch = "x86_64"))]
+/// [`slab8`] lane by lane.
 #[inline(always)]
-fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
-    let cross = |row: usize, a: usize| -> [f32; 4] {
+fn slab8_portable(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
+    let cross = |row: usize, a: usize| -> [f32; WIDTH] {
         std::array::from_fn(|i| {
             qbox::plane(n.origin[a], n.exp[a], n.q[row][i]) * r.inv[a] - r.oi[a]
         })
@@ -835,13 +837,13 @@ fn slab4(n: &Node4, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; 4]) {
     let (lz, hz) = (cross(2, 2), cross(5, 2));
     let t0 = vmax(
         vmax(vmin(lx, hx), vmin(ly, hy)),
-        vmax(vmin(lz, hz), [tmin; 4]),
+        vmax(vmin(lz, hz), [tmin; WIDTH]),
     );
     let f = vmin(vmin(vmax(lx, hx), vmax(ly, hy)), vmax(lz, hz));
     // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
-    let t1 = vmin(std::array::from_fn(|i| f[i] * 1.000_000_24), [tmax; 4]);
+    let t1 = vmin(std::array::from_fn(|i| f[i] * 1.000_000_24), [tmax; WIDTH]);
     let mut mask = 0;
-    for i in 0..4 {
+    for i in 0..WIDTH {
         mask |= u32::from(t0[i] <= t1[i]) << i;
     }
     (mask & u32::from(n.valid), t0)
@@ -1157,7 +1159,7 @@ mod tests {
             }
         } else {
             let c = node.child[lane] as usize;
-            for l in 0..4 {
+            for l in 0..WIDTH {
                 if bvh.nodes[c].valid & (1 << l) != 0 {
                     exact.grow(&enclosed(bvh, c, l));
                 }
@@ -1165,6 +1167,7 @@ mod tests {
         }
         for a in 0..3 {
             let (o, e) = (node.origin[a], node.exp[a]);
+            assert_eq!(node.scale[a].to_bits(), qbox::quantum(e).to_bits());
             let lo = qbox::plane(o, e, node.q[a][lane]);
             let hi = qbox::plane(o, e, node.q[3 + a][lane]);
             assert!(
@@ -1203,12 +1206,60 @@ mod tests {
         let bvh = Bvh::build(quads, verts);
         assert!(bvh.nodes.len() > 100);
         let mut total = Aabb::EMPTY;
-        for l in 0..4 {
+        for l in 0..WIDTH {
             if bvh.nodes[0].valid & (1 << l) != 0 {
                 total.grow(&enclosed(&bvh, 0, l));
             }
         }
         assert!(total.max.x - total.min.x > 1e7);
+    }
+
+    /// The AVX2 slab test gives the portable one's mask and entry distances bit for bit, on
+    /// every node of a tree and rays from inside and outside it (some axis-aligned).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn vector_slab_test_is_the_portable_one() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut h = 31u32;
+        let mut rnd = || {
+            h = crate::pattern::hash::hash_u32(h);
+            (h as f32 / u32::MAX as f32) * 2.0 - 1.0
+        };
+        let mut quads = Vec::new();
+        let mut verts = Vec::new();
+        for k in 0..2000 {
+            let c = Vec3::new(rnd(), rnd(), rnd()) * 20.0;
+            let u = Vec3::new(rnd(), rnd(), rnd()) * 0.5;
+            let v = Vec3::new(rnd(), rnd(), rnd()) * 0.5;
+            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
+        }
+        let bvh = Bvh::build(quads, verts);
+        assert!(bvh.nodes.len() > 30);
+        let mut hits = 0;
+        for r in 0..400 {
+            let o = Vec3::new(rnd(), rnd(), rnd()) * 30.0;
+            let mut d = Vec3::new(rnd(), rnd(), rnd());
+            if r % 7 == 0 {
+                d.y = 0.0;
+            }
+            let ray = SlabRay::new(o, d);
+            let (tmin, tmax) = if r % 3 == 0 {
+                (0.5, 20.0)
+            } else {
+                (0.0, f32::INFINITY)
+            };
+            for n in &bvh.nodes {
+                let (m0, t0) = slab8::<false>(n, &ray, tmin, tmax);
+                // SAFETY: AVX2 was detected above.
+                let (m1, t1) = unsafe { slab8_avx2(n, &ray, tmin, tmax) };
+                assert_eq!(m0, m1, "ray {r}");
+                assert_eq!(t0.map(f32::to_bits), t1.map(f32::to_bits), "ray {r}");
+                hits += m0.count_ones();
+            }
+        }
+        assert!(hits > 1000, "{hits} children in reach");
     }
 
     #[test]

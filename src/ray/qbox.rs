@@ -1,4 +1,4 @@
-//! Quantised child boxes for the BVH's one-cache-line nodes.
+//! Quantised child boxes for the BVH's nodes (their slab data one cache line).
 //!
 //! Input: a node's box (the union of its children's) and a child's exact box. Output: per
 //! axis a quantum `2^e` (stored as the biased exponent `e + 127`, 1…254) and for the child
@@ -11,8 +11,8 @@
 //! quantum), so a plane is one rounding of one addition, monotone in `q`; the traversal's slab
 //! test on these planes therefore never rejects a box the test on the exact box accepts.
 //!
-//! Why: a node of four `f32` boxes is 128 bytes, two cache lines, and the BVH walk of a
-//! million-quad scene waits on memory; with 8-bit steps a node fits one 64-byte line.
+//! Why: a node of eight `f32` boxes is 192 bytes of planes, three cache lines, and the BVH
+//! walk of a million-quad scene waits on memory; with 8-bit steps they fit one 64-byte line.
 
 /// The largest step.
 pub const QMAX: u8 = 255;

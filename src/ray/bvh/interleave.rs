@@ -120,7 +120,7 @@ impl Bvh {
 
     /// The tree's size in bytes: nodes, quads and corners.
     fn bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<super::Node4>()
+        self.nodes.len() * std::mem::size_of::<super::Node8>()
             + self.quads.len() * std::mem::size_of::<Quad>()
             + self.verts.len() * std::mem::size_of::<Vec3>()
     }
@@ -130,10 +130,11 @@ impl Bvh {
     /// hit callback with the ray's index and a per-ray slot (returning true ends that ray's
     /// walk); `done(ray, best)` is called as each walk ends. Needs a tree of nodes.
     ///
-    /// Where the CPU has AVX the walks run compiled for it: the same SSE operations in their
-    /// three-operand (VEX) encoding, without the register copies two-operand SSE needs and
-    /// with broadcasts from memory (no FMA is enabled, so every result is bit for bit the
-    /// SSE one; the leaves already do the same, see `quad4`).
+    /// Where the CPU has AVX2 the walks run compiled for it: the node's slab test as
+    /// eight-lane vectors, and the other SSE operations in their three-operand (VEX)
+    /// encoding, without the register copies two-operand SSE needs and with broadcasts from
+    /// memory (no FMA is enabled, so every result is bit for bit the portable one; the leaves
+    /// do the same, see `quad4`).
     #[inline(always)]
     fn interleave<const ORDERED: bool>(
         &self,
@@ -145,18 +146,18 @@ impl Bvh {
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: AVX was detected just above.
-            unsafe { self.interleave_avx::<ORDERED>(o, d, tmin, tmax, on_hit, done) };
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 was detected just above.
+            unsafe { self.interleave_avx2::<ORDERED>(o, d, tmin, tmax, on_hit, done) };
             return;
         }
-        self.interleave_lanes::<ORDERED>(o, d, tmin, tmax, on_hit, done);
+        self.interleave_lanes::<ORDERED, false>(o, d, tmin, tmax, on_hit, done);
     }
 
-    /// [`Bvh::interleave_lanes`] compiled for AVX (see [`Bvh::interleave`]).
+    /// [`Bvh::interleave_lanes`] compiled for AVX2 (see [`Bvh::interleave`]).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    unsafe fn interleave_avx<const ORDERED: bool>(
+    #[target_feature(enable = "avx2")]
+    unsafe fn interleave_avx2<const ORDERED: bool>(
         &self,
         o: &[Vec3],
         d: &[Vec3],
@@ -165,12 +166,12 @@ impl Bvh {
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
-        self.interleave_lanes::<ORDERED>(o, d, tmin, tmax, on_hit, done);
+        self.interleave_lanes::<ORDERED, true>(o, d, tmin, tmax, on_hit, done);
     }
 
     /// The body of [`Bvh::interleave`].
     #[inline(always)]
-    fn interleave_lanes<const ORDERED: bool>(
+    fn interleave_lanes<const ORDERED: bool, const AVX2: bool>(
         &self,
         o: &[Vec3],
         d: &[Vec3],
@@ -193,7 +194,7 @@ impl Bvh {
         while !lanes.is_empty() {
             let mut i = 0;
             while i < lanes.len() {
-                if self.step::<ORDERED>(&mut lanes[i], on_hit) {
+                if self.step::<ORDERED, AVX2>(&mut lanes[i], on_hit) {
                     i += 1;
                     continue;
                 }
@@ -213,7 +214,7 @@ impl Bvh {
     /// One step of a lane's walk (see [`Bvh::interleave`]); false when the walk is over.
     /// The steps in sequence are [`Bvh::walk`]'s loop for `ORDERED`.
     #[inline(always)]
-    fn step<const ORDERED: bool>(
+    fn step<const ORDERED: bool, const AVX2: bool>(
         &self,
         l: &mut Lane,
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
@@ -221,7 +222,7 @@ impl Bvh {
         match l.step {
             Step::Node(c) => {
                 let n = &self.nodes[c as usize];
-                match self.visit::<ORDERED>(n, &l.rb, l.tmin, l.tmax, &mut l.stack) {
+                match self.visit::<ORDERED, AVX2>(n, &l.rb, l.tmin, l.tmax, &mut l.stack) {
                     Some((c, 0)) => {
                         self.prefetch(c, 0);
                         l.step = Step::Node(c);
