@@ -41,6 +41,7 @@ use super::hider::csg::{CsgPrim, CsgTree};
 use super::hider::{
     make_hider, orientation, Aov, DepthFilter, GridInfo, GridSource, Hider, HiderConfig, ShadedGrid,
 };
+use super::packed::PackedGrid;
 use super::sampler::mix64;
 use super::stats::{Phase, PhaseClock, Stage, Stats};
 use super::GridShader;
@@ -423,7 +424,7 @@ struct LazyGrid {
 
 /// A grid waiting for its surface shader.
 struct Pending {
-    grid: crate::shade::Grid,
+    grid: PackedGrid,
     prim: usize,
     /// Points cut away by trimming curves (None: untrimmed).
     trimmed: Option<Vec<bool>>,
@@ -443,12 +444,6 @@ impl LazyGrid {
                 .map_or(0, |p| p.as_ref().map_or(0, |p| p.bytes)),
         }
     }
-}
-
-/// Approximate heap size of a diced grid, for the memory statistic.
-fn grid_bytes(g: &crate::shade::Grid) -> usize {
-    let vectors = 11 + g.motion.as_ref().map_or(0, |m| m.p.len());
-    g.p.len() * (vectors * 12 + 4 * 4)
 }
 
 thread_local! {
@@ -891,7 +886,8 @@ impl Frame<'_> {
                 ]);
                 let (pre_bound, zmin) = self.pre_bound(&grid, &info, clip);
                 let moving = grid.motion.is_some();
-                let bytes = grid_bytes(&grid);
+                let grid = PackedGrid::pack(grid);
+                let bytes = grid.bytes();
                 let info = GridInfo {
                     key: w.key,
                     matte: info.matte,
@@ -973,13 +969,14 @@ impl Frame<'_> {
     /// it; None when nothing of it is left to hide.
     fn shade(&self, p: Pending, zmin: f32) -> Option<Box<ShadedGrid>> {
         let Pending {
-            mut grid,
+            grid,
             prim,
             trimmed,
             info,
             bytes,
         } = p;
         self.stats.free(bytes);
+        let mut grid = grid.unpack();
         let t2 = Instant::now();
         let n = grid.nu * grid.nv;
         // The surface shader may move P too (see `surface_moves_points`).
@@ -2008,8 +2005,12 @@ mod tests {
 
     #[test]
     fn grids_behind_an_opaque_wall_are_not_shaded_and_the_picture_is_the_same() {
-        let run = |cull: bool, threads: usize, size: [u32; 2]| {
-            let (s, quads) = walled_scene(cull);
+        // `wall_only`: the wall without what lies behind it.
+        let run = |cull: bool, wall_only: bool, threads: usize, size: [u32; 2]| {
+            let (s, mut quads) = walled_scene(cull);
+            if wall_only {
+                quads.truncate(1);
+            }
             let stats = Stats::new();
             let opts = RenderOptions {
                 threads,
@@ -2023,7 +2024,7 @@ mod tests {
             let bits: Vec<u32> = film.data.iter().map(|v| v.to_bits()).collect();
             (bits, film, stats)
         };
-        let (all_bits, all_film, all) = run(false, 1, [16, 16]);
+        let (all_bits, all_film, all) = run(false, false, 1, [16, 16]);
         // The wall alone shows: every pixel is its colour at depth 2.
         let p = all_film.pixel(20, 15);
         assert!((p[0] - 0.8).abs() < 1e-6 && (p[3] - 1.0).abs() < 1e-6 && p[4] == 2.0);
@@ -2031,22 +2032,29 @@ mod tests {
         assert_eq!(Stats::get(&all.grids_unshaded), 0);
         let grids = Stats::get(&all.grids);
         let points = Stats::get(&all.shaded_points);
-        assert!(grids >= 17, "{grids} grids");
+        let (wall_bits, _, wall) = run(true, true, 1, [16, 16]);
+        assert!(wall_bits == all_bits, "nothing behind the wall shows");
+        let wall_points = Stats::get(&wall.shaded_points);
+        assert!(wall_points * 3 < points, "{wall_points} of {points}");
         for (threads, size) in [(1, [16, 16]), (2, [16, 16]), (2, [7, 5]), (2, [64, 64])] {
-            let (bits, _, st) = run(true, threads, size);
+            let (bits, _, st) = run(true, false, threads, size);
             assert!(
                 bits == all_bits,
                 "threads {threads}, bucket {size:?}: picture differs"
             );
             assert_eq!(Stats::get(&st.grids), grids, "the same grids are diced");
             // Only the wall's grids are shaded: the 16 quads behind it are not, in any bucket.
-            let shaded = Stats::get(&st.shaded_points);
-            assert!(
-                shaded * 4 < points,
-                "threads {threads}, bucket {size:?}: {shaded} of {points} points shaded"
+            assert_eq!(
+                Stats::get(&st.shaded_points),
+                wall_points,
+                "threads {threads}, bucket {size:?}"
             );
-            assert!(Stats::get(&st.grids_unshaded) >= 16);
-            assert!(Stats::get(&st.grids_occluded) >= 16);
+            let behind = grids - Stats::get(&wall.grids);
+            assert!(behind >= 16);
+            assert_eq!(
+                Stats::get(&st.grids_unshaded),
+                behind + Stats::get(&wall.grids_unshaded)
+            );
         }
     }
 

@@ -16,6 +16,7 @@ pub mod driver;
 pub mod hider;
 pub mod limits;
 pub mod motion;
+pub mod packed;
 pub mod sampler;
 pub mod stats;
 
