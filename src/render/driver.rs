@@ -926,14 +926,23 @@ impl Frame<'_> {
         clip: [f32; 4],
     ) -> ([f32; 4], f32) {
         let keys = grid.motion.as_ref().map_or(&[][..], |m| &m.p[..]);
-        let mut b = Bound::EMPTY;
-        let mut finite = true;
-        for p in grid.p.iter().chain(keys.iter().flatten()) {
-            finite &= p.is_finite();
-            b.min = b.min.min(*p);
-            b.max = b.max.max(*p);
+        let points = std::iter::once(&grid.p).chain(keys);
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        // NaN propagates through the sum (and ±∞ leaves it non-finite), where the compares
+        // below would pass it over: one test for all the points.
+        let mut sum = 0f32;
+        for p in points.flatten() {
+            for (c, v) in [p.x, p.y, p.z].into_iter().enumerate() {
+                lo[c] = if v < lo[c] { v } else { lo[c] };
+                hi[c] = if v > hi[c] { v } else { hi[c] };
+                sum += v * 0.0;
+            }
         }
-        if !finite || b.is_empty() {
+        let mut b = Bound {
+            min: Vec3::from(lo),
+            max: Vec3::from(hi),
+        };
+        if sum != 0.0 || b.is_empty() || !(b.min.is_finite() && b.max.is_finite()) {
             return (clip, f32::NEG_INFINITY);
         }
         if info.moves_points {

@@ -24,33 +24,52 @@ enum Col<T> {
     Like,
 }
 
-/// Values compared by their bits (so −0 and NaNs survive the round trip).
-trait Bits: Copy {
-    fn same(&self, o: &Self) -> bool;
+/// Plain values made of `WORDS` f32s and nothing else, compared by their bits (so −0 and
+/// NaNs survive the round trip).
+///
+/// # Safety
+/// Implementors must be `repr(C)` (or primitive) with exactly `WORDS` f32 fields and no
+/// padding: their slices are read as `u32` words.
+unsafe trait Bits: Copy {
+    const WORDS: usize;
 }
 
-impl Bits for f32 {
-    fn same(&self, o: &Self) -> bool {
-        self.to_bits() == o.to_bits()
-    }
+unsafe impl Bits for f32 {
+    const WORDS: usize = 1;
 }
 
-impl Bits for Vec3 {
-    fn same(&self, o: &Self) -> bool {
-        self.x.same(&o.x) && self.y.same(&o.y) && self.z.same(&o.z)
-    }
+// glam's Vec3 is `#[repr(C)] { x, y, z: f32 }` (Vec3A is the padded one).
+unsafe impl Bits for Vec3 {
+    const WORDS: usize = 3;
+}
+const _: () = assert!(std::mem::size_of::<Vec3>() == 12 && std::mem::align_of::<Vec3>() == 4);
+
+/// The bits of `v`, as words.
+fn words<T: Bits>(v: &[T]) -> &[u32] {
+    // SAFETY: `Bits` types are `WORDS` f32s without padding (so every byte is initialised
+    // and u32-aligned), and the slice covers exactly `v`'s memory.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u32>(), v.len() * T::WORDS) }
+}
+
+/// Whether `a` and `b` hold the same bits (a memcmp: the packing runs on every diced grid).
+fn same_bits<T: Bits>(a: &[T], b: &[T]) -> bool {
+    words(a) == words(b)
 }
 
 impl<T: Bits> Col<T> {
-    /// Packs `v`, against the column `like` when given.
-    fn pack(v: Vec<T>, like: Option<&[T]>) -> Col<T> {
-        if let Some(l) = like {
-            if l.len() == v.len() && !v.is_empty() && l.iter().zip(&v).all(|(a, b)| a.same(b)) {
-                return Col::Like;
-            }
+    /// `v`, as a reference when it has the bits of `like`.
+    fn pack_like(v: Vec<T>, like: &[T]) -> Col<T> {
+        if !v.is_empty() && same_bits(&v, like) {
+            Col::Like
+        } else {
+            Col::Each(v)
         }
+    }
+
+    /// `v`, as one value when every point has the same bits.
+    fn pack_same(v: Vec<T>) -> Col<T> {
         match v.first() {
-            Some(f) if v.iter().all(|x| x.same(f)) => Col::Same(*f, v.len()),
+            Some(f) if same_bits(&v[1..], &v[..v.len() - 1]) => Col::Same(*f, v.len()),
             _ => Col::Each(v),
         }
     }
@@ -101,25 +120,26 @@ impl PackedGrid {
         let ng = take3(&mut g.ng);
         let u = take1(&mut g.u);
         let v = take1(&mut g.v);
-        let n = Col::pack(take3(&mut g.n), Some(&ng));
-        let i = Col::pack(take3(&mut g.i), Some(&p));
-        let s = Col::pack(take1(&mut g.s), Some(&u));
-        let t = Col::pack(take1(&mut g.t), Some(&v));
-        let cs = Col::pack(take3(&mut g.cs), None);
-        let os = Col::pack(take3(&mut g.os), None);
-        let ci = Col::pack(take3(&mut g.ci), None);
-        let oi = Col::pack(take3(&mut g.oi), None);
-        let dpdu = Col::pack(take3(&mut g.dpdu), None);
-        let dpdv = Col::pack(take3(&mut g.dpdv), None);
+        // Position, normal, derivatives and parameters vary over any grid worth shading.
+        let n = Col::pack_like(take3(&mut g.n), &ng);
+        let i = Col::pack_like(take3(&mut g.i), &p);
+        let s = Col::pack_like(take1(&mut g.s), &u);
+        let t = Col::pack_like(take1(&mut g.t), &v);
+        let cs = Col::pack_same(take3(&mut g.cs));
+        let os = Col::pack_same(take3(&mut g.os));
+        let ci = Col::pack_same(take3(&mut g.ci));
+        let oi = Col::pack_same(take3(&mut g.oi));
+        let dpdu = Col::Each(take3(&mut g.dpdu));
+        let dpdv = Col::Each(take3(&mut g.dpdv));
         PackedGrid {
             rest: g,
-            p: Col::pack(p, None),
-            ng: Col::pack(ng, None),
+            p: Col::Each(p),
+            ng: Col::Each(ng),
             n,
             dpdu,
             dpdv,
-            u: Col::pack(u, None),
-            v: Col::pack(v, None),
+            u: Col::Each(u),
+            v: Col::Each(v),
             s,
             t,
             cs,
@@ -212,12 +232,13 @@ mod tests {
         g.du = 0.25;
         let want = bits(&g);
         let packed = PackedGrid::pack(g.clone());
-        // p, ng, dpdu, u, v, t, cs and os are kept; n, i, s, dpdv, ci and oi are not.
-        let n = (nu * nv) as usize;
-        assert_eq!(packed.bytes(), n * (12 * 5 + 4 * 3));
+        // p, ng, dpdu, dpdv, u, v, t, cs and os are kept; n, i, s, ci and oi are not.
+        let n = nu * nv;
+        assert_eq!(packed.bytes(), n * (12 * 6 + 4 * 3));
         assert!(matches!(packed.n, Col::Like) && matches!(packed.i, Col::Like));
         assert!(matches!(packed.s, Col::Like) && matches!(packed.t, Col::Each(_)));
-        assert!(matches!(packed.ci, Col::Same(..)) && matches!(packed.dpdv, Col::Same(..)));
+        assert!(matches!(packed.ci, Col::Same(..)) && matches!(packed.oi, Col::Same(..)));
+        assert!(matches!(packed.cs, Col::Each(_)) && matches!(packed.os, Col::Each(_)));
         assert_eq!(bits(&packed.unpack()), want);
         // An empty grid round-trips too.
         let e = Grid::default();
