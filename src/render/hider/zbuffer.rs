@@ -502,8 +502,9 @@ impl Hider for ZBuffer {
 /// by their zmin. A shaded grid is next when its zmin is below the bound of every unshaded
 /// grid (which lies at or behind its own bound); otherwise the first unshaded grid is
 /// shaded, unless its bound lies behind `far`, the farthest opaque front of the bucket: then
-/// the grid changes no sample and is never shaded here. Fronts only come nearer, so a grid
-/// culled by its bound would also have been skipped by its zmin in the shaded order.
+/// the grid, wholly behind every opaque sample, changes no sample and is not shaded here.
+/// Fronts only come nearer, so in the shaded order the grid would also have lain behind
+/// them: the picture is the same.
 struct Order<'g> {
     unshaded: Vec<&'g dyn GridSource>,
     next_unshaded: usize,
