@@ -6,10 +6,12 @@
 //!   surface and the camera; split children get keys derived from their parent's, so every
 //!   grid has the same identity whatever the bucket layout;
 //! * buckets are processed row by row: first every surface whose bound first reaches the row
-//!   is split/diced/shaded (in parallel over surfaces), then the row's buckets are hidden (in
-//!   parallel over buckets) from the shaded grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open rows. The surfaces
-//!   of row r + 1 are split, diced and shaded alongside the hiding of row r; the tile of a
+//!   is split/diced/displaced (in parallel over surfaces), then the row's buckets are hidden
+//!   (in parallel over buckets) from the grids overlapping them, then grids no later row
+//!   needs are freed — memory holds only the grids overlapping the open rows. A grid's
+//!   surface is shaded when the first bucket hiding it asks for it (a [`LazyGrid`]): a grid
+//!   behind every opaque sample of each bucket it overlaps is never shaded. The surfaces
+//!   of row r + 1 are split, diced and displaced alongside the hiding of row r; the tile of a
 //!   bucket of row r − 1 is filtered during the hiding of row r, by the thread that hides the
 //!   last bucket of row r within its reach, and the row's tiles go into the film (one
 //!   writer) after it;
@@ -20,9 +22,10 @@
 //! * a bucket samples its pixels plus the filter margin, and every sample sees every grid that
 //!   covers it, so the image is identical for any bucket size or thread count.
 
+use std::cell::Cell;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
 use glam::Vec3;
@@ -36,8 +39,9 @@ use super::camera::{check_options, crop_region, Camera, PixelRect};
 use super::dice::{decide, Decision, View};
 use super::hider::csg::{CsgPrim, CsgTree};
 use super::hider::{
-    make_hider, orientation, Aov, DepthFilter, GridInfo, Hider, HiderConfig, ShadedGrid,
+    make_hider, orientation, Aov, DepthFilter, GridInfo, GridSource, Hider, HiderConfig, ShadedGrid,
 };
+use super::packed::PackedGrid;
 use super::sampler::mix64;
 use super::stats::{Phase, PhaseClock, Stage, Stats};
 use super::GridShader;
@@ -214,6 +218,12 @@ struct PrimInfo {
     /// `GeometricApproximation "motionfactor"` / `"focusfactor"` (0: off).
     motion_factor: f32,
     focus_factor: f32,
+    /// The surface shader may move P, within the displacement bound (see
+    /// [`crate::shade::system::surface_moves_points`]).
+    moves_points: bool,
+    /// `Attribute "cull" "hidden" [0]`: grids are shaded even where hidden (for shaders
+    /// whose effects go beyond the picture, such as `bake3d`).
+    shade_hidden: bool,
 }
 
 fn prim_info(
@@ -264,7 +274,6 @@ fn prim_info(
             disp = 0.0;
         }
     }
-    let _ = scene;
     let factor = |k: &str| {
         a.geometric_approximation
             .get(k)
@@ -292,6 +301,12 @@ fn prim_info(
         csg: None,
         motion_factor: factor("motionfactor"),
         focus_factor: factor("focusfactor"),
+        moves_points: crate::shade::system::surface_moves_points(scene, a),
+        shade_hidden: a
+            .user
+            .get("cull:hidden")
+            .and_then(|p| p.data.floats().first().copied())
+            .is_some_and(|v| v == 0.0),
     }
 }
 
@@ -387,14 +402,91 @@ struct Work {
 
 enum Outcome {
     Nothing,
-    Grid(Box<ShadedGrid>),
+    Grid(Box<LazyGrid>),
 }
 
-/// A shaded grid kept until the last bucket row that needs it is done.
+/// A grid kept until the last bucket row that needs it is done.
 struct Kept {
-    grid: Box<ShadedGrid>,
+    grid: Box<LazyGrid>,
     rows: (usize, usize),
     cols: (usize, usize),
+}
+
+/// A diced and displaced grid whose surface is shaded when a bucket first asks for it (see
+/// [`GridSource`]), with what is known of the shaded grid before: hiders skip a grid whose
+/// bound lies behind every opaque sample of their bucket without shading it.
+struct LazyGrid {
+    key: u64,
+    /// At most the shaded grid's [`ShadedGrid::zmin`].
+    zmin: f32,
+    /// Holds the shaded grid's [`ShadedGrid::bound`].
+    bound: [f32; 4],
+    moving: bool,
+    /// The grid and what shading needs, until it is shaded.
+    pending: Mutex<Option<Pending>>,
+    /// The shaded grid (None when nothing of it is left to hide), set by the first bucket
+    /// that asks; buckets asking meanwhile wait for it.
+    shaded: OnceLock<Option<Box<ShadedGrid>>>,
+}
+
+/// A grid waiting for its surface shader.
+struct Pending {
+    grid: PackedGrid,
+    prim: usize,
+    /// Points cut away by trimming curves (None: untrimmed).
+    trimmed: Option<Vec<bool>>,
+    info: GridInfo,
+    /// What the grid holds, for the memory statistic.
+    bytes: usize,
+}
+
+impl LazyGrid {
+    /// Bytes held: the diced grid until it is shaded, then the shaded grid.
+    fn bytes(&self) -> usize {
+        match self.shaded.get() {
+            Some(g) => g.as_ref().map_or(0, |g| g.bytes()),
+            None => self
+                .pending
+                .lock()
+                .map_or(0, |p| p.as_ref().map_or(0, |p| p.bytes)),
+        }
+    }
+}
+
+thread_local! {
+    /// Nanoseconds this thread spent shading grids asked for by a hider: the bucket's hiding
+    /// time leaves them out (they count as shading).
+    static SHADING_NS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// A lazy grid with the frame that shades it: what a hider receives.
+struct Source<'k, 'f> {
+    frame: &'k Frame<'f>,
+    grid: &'k LazyGrid,
+}
+
+impl GridSource for Source<'_, '_> {
+    fn key(&self) -> u64 {
+        self.grid.key
+    }
+    fn zmin(&self) -> f32 {
+        self.grid.zmin
+    }
+    fn bound(&self) -> [f32; 4] {
+        self.grid.bound
+    }
+    fn moving(&self) -> bool {
+        self.grid.moving
+    }
+    fn shaded(&self) -> Option<&ShadedGrid> {
+        self.grid
+            .shaded
+            .get_or_init(|| {
+                let p = self.grid.pending.lock().ok().and_then(|mut p| p.take())?;
+                self.frame.shade(p, self.grid.zmin)
+            })
+            .as_deref()
+    }
 }
 
 /// A hidden bucket waiting for its row (and the rows either side) to be filtered: its
@@ -801,33 +893,18 @@ impl Frame<'_> {
                 carry_to_motion_keys(undisplaced, &mut grid);
                 set_incident(&mut grid, self.camera.perspective);
                 self.stats.time(Stage::Displace, t1);
-                let t2 = Instant::now();
-                // The surface shader may move P too (see `surface_moves_points`).
-                let unshaded = grid.motion.as_ref().map(|_| grid.p.clone());
-                self.shader.shade(self.scene, self.camera, prim, &mut grid);
-                carry_to_motion_keys(unshaded, &mut grid);
-                if let Some(cut) = trimmed.filter(|c| c.len() == grid.ci.len()) {
-                    for ((ci, oi), _) in grid
-                        .ci
-                        .iter_mut()
-                        .zip(&mut grid.oi)
-                        .zip(&cut)
-                        .filter(|(_, c)| **c)
-                    {
-                        *ci = Vec3::ZERO;
-                        *oi = Vec3::ZERO;
-                    }
-                }
-                self.stats.time(Stage::Shade, t2);
                 Stats::add(&self.stats.grids, 1);
                 Stats::add(&self.stats.micropolygons, (nu * nv) as u64);
-                Stats::add(&self.stats.shaded_points, n as u64);
                 let clip = self.view.raster_bound(&bound).unwrap_or([
                     f32::NEG_INFINITY,
                     f32::NEG_INFINITY,
                     f32::INFINITY,
                     f32::INFINITY,
                 ]);
+                let (pre_bound, zmin) = self.pre_bound(&grid, &info, clip);
+                let moving = grid.motion.is_some();
+                let grid = PackedGrid::pack(grid);
+                let bytes = grid.bytes();
                 let info = GridInfo {
                     key: w.key,
                     matte: info.matte,
@@ -837,21 +914,160 @@ impl Frame<'_> {
                     clip,
                     csg: info.csg,
                 };
-                if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
-                    self.diags.report(Diag::error(
-                        "render::grid",
-                        "shading changed the size of a grid; the grid is dropped",
-                    ));
-                    return (Outcome::Nothing, Vec::new());
-                }
-                let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
-                self.check_displacement_bound(prim, &sg, &clip);
-                if sg.is_empty() {
-                    return (Outcome::Nothing, Vec::new());
-                }
-                (Outcome::Grid(Box::new(sg)), Vec::new())
+                let lazy = LazyGrid {
+                    key: w.key,
+                    zmin,
+                    bound: pre_bound,
+                    moving,
+                    pending: Mutex::new(Some(Pending {
+                        grid,
+                        prim,
+                        trimmed,
+                        info,
+                        bytes,
+                    })),
+                    shaded: OnceLock::new(),
+                };
+                (Outcome::Grid(Box::new(lazy)), Vec::new())
             }
         }
+    }
+
+    /// What is known of a displaced grid's [`ShadedGrid`] before its surface is shaded: a
+    /// raster rectangle holding its bound (within `clip`, where sampling is cut off), and a
+    /// lower bound of its zmin (−∞ when the grid must be shaded wherever it overlaps).
+    fn pre_bound(
+        &self,
+        grid: &crate::shade::Grid,
+        info: &PrimInfo,
+        clip: [f32; 4],
+    ) -> ([f32; 4], f32) {
+        let keys = grid.motion.as_ref().map_or(&[][..], |m| &m.p[..]);
+        let points = std::iter::once(&grid.p).chain(keys);
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        // NaN propagates through the sum (and ±∞ leaves it non-finite), where the compares
+        // below would pass it over: one test for all the points.
+        let mut sum = 0f32;
+        for p in points.flatten() {
+            for (c, v) in [p.x, p.y, p.z].into_iter().enumerate() {
+                lo[c] = if v < lo[c] { v } else { lo[c] };
+                hi[c] = if v > hi[c] { v } else { hi[c] };
+                sum += v * 0.0;
+            }
+        }
+        let mut b = Bound {
+            min: Vec3::from(lo),
+            max: Vec3::from(hi),
+        };
+        if sum != 0.0 || b.is_empty() || !(b.min.is_finite() && b.max.is_finite()) {
+            return (clip, f32::NEG_INFINITY);
+        }
+        if info.moves_points {
+            b = b.grow(info.disp);
+        }
+        // The shaded grid's zmin is its points' nearest depth less 1e-5 of it (through 1/z
+        // in perspective): 1e-4 covers that and the rounding.
+        let z = b.min.z;
+        let zmin = if info.shade_hidden {
+            f32::NEG_INFINITY
+        } else {
+            z - z.abs() * 1e-4
+        };
+        // The grid's live micropolygons project inside the projected box (widened by the
+        // circle of confusion over its depths); the slack covers rounding.
+        let xy = match self.view.raster_bound(&b) {
+            Some(r) => {
+                let big = r.iter().fold(0f32, |m, v| m.max(v.abs()));
+                let slack = 1.0 + big * 1e-5;
+                [
+                    (r[0] - slack).max(clip[0]),
+                    (r[1] - slack).max(clip[1]),
+                    (r[2] + slack).min(clip[2]),
+                    (r[3] + slack).min(clip[3]),
+                ]
+            }
+            None => clip,
+        };
+        (xy, zmin)
+    }
+
+    /// Shades a grid's surface (`zmin` the lower bound its hiders were promised) and projects
+    /// it; None when nothing of it is left to hide.
+    fn shade(&self, p: Pending, zmin: f32) -> Option<Box<ShadedGrid>> {
+        let Pending {
+            grid,
+            prim,
+            trimmed,
+            info,
+            bytes,
+        } = p;
+        self.stats.free(bytes);
+        let mut grid = grid.unpack();
+        let t2 = Instant::now();
+        let n = grid.nu * grid.nv;
+        // The surface shader may move P too (see `surface_moves_points`).
+        let unshaded = grid.motion.as_ref().map(|_| grid.p.clone());
+        self.shader.shade(self.scene, self.camera, prim, &mut grid);
+        carry_to_motion_keys(unshaded, &mut grid);
+        if let Some(cut) = trimmed.filter(|c| c.len() == grid.ci.len()) {
+            for ((ci, oi), _) in grid
+                .ci
+                .iter_mut()
+                .zip(&mut grid.oi)
+                .zip(&cut)
+                .filter(|(_, c)| **c)
+            {
+                *ci = Vec3::ZERO;
+                *oi = Vec3::ZERO;
+            }
+        }
+        Stats::add(&self.stats.shaded_points, n as u64);
+        let done = |t: Instant| {
+            self.stats.time(Stage::Shade, t);
+            let ns = t.elapsed().as_nanos() as u64;
+            SHADING_NS.with(|c| c.set(c.get() + ns));
+        };
+        if grid.ci.len() != n || grid.oi.len() != n || grid.p.len() != n {
+            self.diags.report(Diag::error(
+                "render::grid",
+                "shading changed the size of a grid; the grid is dropped",
+            ));
+            done(t2);
+            return None;
+        }
+        let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+        done(t2);
+        self.check_displacement_bound(prim, &sg, &info.clip);
+        if !sg.is_empty() && sg.zmin < zmin {
+            self.report_moved_nearer(prim);
+        }
+        if sg.is_empty() {
+            return None;
+        }
+        self.stats.alloc(sg.bytes());
+        Some(Box::new(sg))
+    }
+
+    /// A surface shader moved points nearer the camera than the displacement bound allows:
+    /// buckets may have skipped the grid as hidden where it is not.
+    fn report_moved_nearer(&self, prim: usize) {
+        let p = &self.scene.primitives[prim];
+        let name = p
+            .attributes
+            .surface
+            .as_ref()
+            .map_or("?", |s| s.name.as_str());
+        self.diags.report(
+            Diag::warning(
+                "render::displacementbound",
+                format!(
+                    "surface shader `{name}` moves points nearer the camera than the displacement \
+                     bound allows; buckets may have skipped them as hidden"
+                ),
+            )
+            .label(p.span, "this primitive")
+            .help("declare the largest displacement: Attribute \"displacementbound\" \"sphere\" [d] (in object space)"),
+        );
     }
 }
 
@@ -1262,9 +1478,10 @@ fn render_inner(
         film.put_tiles(&tiles);
         stats.time(Stage::Filter, t);
     };
-    // Splits, dices and shades everything that starts in `row`: the surfaces of the
+    // Splits, dices and displaces everything that starts in `row`: the surfaces of the
     // primitives first reaching it are made again (diagnostics were reported the first
-    // time), then everything is split, diced and shaded. Returns the row's grids.
+    // time), then everything is split, diced and displaced. Returns the row's grids, to be
+    // shaded when a bucket asks.
     let process =
         |row: usize, pending: &mut [Vec<Work>], pending_prims: &mut [Vec<u32>]| -> Vec<Kept> {
             let mut kept = Vec::new();
@@ -1307,6 +1524,7 @@ fn render_inner(
                             let (Some(rows), Some(cols)) =
                                 (buckets.span(b[1], b[3], 1), buckets.span(b[0], b[2], 0))
                             else {
+                                Stats::add(&stats.grids_unshaded, 1);
                                 continue;
                             };
                             stats.alloc(g.bytes());
@@ -1365,24 +1583,36 @@ fn render_inner(
         let hide_row = || {
             (0..buckets.cols).into_par_iter().for_each(|col| {
                 let t = Instant::now();
-                let grids: Vec<&ShadedGrid> = kept
+                let sources: Vec<Source> = kept
                     .iter()
                     .filter(|k| {
                         k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
                     })
-                    .map(|k| k.grid.as_ref())
+                    .map(|k| Source {
+                        frame: &frame,
+                        grid: &k.grid,
+                    })
                     .collect();
+                let grids: Vec<&dyn GridSource> =
+                    sources.iter().map(|s| s as &dyn GridSource).collect();
+                // Shading asked for by the hider counts as shading, not hiding.
+                let shading_before = SHADING_NS.with(Cell::get);
+                let hide_time = |t: Instant| {
+                    let shading = SHADING_NS.with(Cell::get) - shading_before;
+                    let ns = (t.elapsed().as_nanos() as u64).saturating_sub(shading);
+                    stats.add_time(Stage::Hide, ns);
+                };
                 let rect = buckets.sample_rect(col, row);
                 let h = match &gather {
                     Some(ctx) => {
                         let mut p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
                             Some(p) => {
-                                stats.time(Stage::Hide, t);
+                                hide_time(t);
                                 p
                             }
                             None => {
                                 let buf = frame.hider.hide(rect, &grids, stats);
-                                stats.time(Stage::Hide, t);
+                                hide_time(t);
                                 let t = Instant::now();
                                 let p = crate::film::gather::prepare(&buf, ctx);
                                 stats.time(Stage::Filter, t);
@@ -1406,7 +1636,7 @@ fn render_inner(
                     }
                     None => {
                         let buf = frame.hider.hide(rect, &grids, stats);
-                        stats.time(Stage::Hide, t);
+                        hide_time(t);
                         Hidden::Samples(buf)
                     }
                 };
@@ -1486,6 +1716,9 @@ fn render_inner(
         kept = live;
         for k in &gone {
             stats.free(k.grid.bytes());
+            if k.grid.shaded.get().is_none() {
+                Stats::add(&stats.grids_unshaded, 1);
+            }
         }
         dead = gone;
         clock = stats.phase(Phase::Other, clock);
@@ -1758,6 +1991,98 @@ mod tests {
             assert!(
                 bits(&a) == bits(&b),
                 "threads {threads}, bucket {size:?} differ"
+            );
+        }
+    }
+
+    /// An opaque wall at depth 2 over the whole frame, and `n` rows of quads behind it (some
+    /// transparent), each primitive with `Attribute "cull" "hidden" [!cull]`.
+    fn walled_scene(cull: bool) -> (Scene, Vec<Quad>) {
+        let flag = |mut a: Attributes| {
+            if !cull {
+                let mut p = string_param("cull:hidden", "");
+                p.decl.ty = crate::scene::ParamType::Integer;
+                p.data = crate::scene::ParamData::Floats(vec![0.0]);
+                a.user.insert("cull:hidden".into(), p);
+            }
+            a
+        };
+        let wall = flag(attrs(Vec3::new(0.8, 0.7, 0.6), Vec3::ONE));
+        let behind = flag(attrs(Vec3::new(0.1, 0.9, 0.2), Vec3::ONE));
+        let mut glass = flag(attrs(Vec3::new(0.9, 0.1, 0.2), Vec3::splat(0.5)));
+        glass.shading_rate = 0.5;
+        let mut s = scene(
+            40,
+            30,
+            Projection::Perspective { fov: 60.0 },
+            vec![wall, behind, glass],
+        );
+        s.options.pixel_samples = [2.0, 2.0];
+        s.options.pixel_filter = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 2.0,
+            ywidth: 2.0,
+        };
+        let mut quads = vec![Quad::rect(-4.0, -4.0, 4.0, 4.0, 2.0, 0)];
+        for k in 0..8 {
+            let z = 4.0 + k as f32;
+            quads.push(Quad::rect(-3.0, -3.0, 0.5, 3.0, z, 1));
+            quads.push(Quad::rect(-0.5, -3.0, 3.0, 3.0, z + 0.5, 2));
+        }
+        (s, quads)
+    }
+
+    #[test]
+    fn grids_behind_an_opaque_wall_are_not_shaded_and_the_picture_is_the_same() {
+        // `wall_only`: the wall without what lies behind it.
+        let run = |cull: bool, wall_only: bool, threads: usize, size: [u32; 2]| {
+            let (s, mut quads) = walled_scene(cull);
+            if wall_only {
+                quads.truncate(1);
+            }
+            let stats = Stats::new();
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                stats: Some(&stats),
+                ..Default::default()
+            };
+            let (film, diags) = render(&s, &quads, &Constant, &opts);
+            assert!(!diags.has_errors());
+            assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
+            let bits: Vec<u32> = film.data.iter().map(|v| v.to_bits()).collect();
+            (bits, film, stats)
+        };
+        let (all_bits, all_film, all) = run(false, false, 1, [16, 16]);
+        // The wall alone shows: every pixel is its colour at depth 2.
+        let p = all_film.pixel(20, 15);
+        assert!((p[0] - 0.8).abs() < 1e-6 && (p[3] - 1.0).abs() < 1e-6 && p[4] == 2.0);
+        // Without culling every grid is shaded.
+        assert_eq!(Stats::get(&all.grids_unshaded), 0);
+        let grids = Stats::get(&all.grids);
+        let points = Stats::get(&all.shaded_points);
+        let (wall_bits, _, wall) = run(true, true, 1, [16, 16]);
+        assert!(wall_bits == all_bits, "nothing behind the wall shows");
+        let wall_points = Stats::get(&wall.shaded_points);
+        assert!(wall_points * 3 < points, "{wall_points} of {points}");
+        for (threads, size) in [(1, [16, 16]), (2, [16, 16]), (2, [7, 5]), (2, [64, 64])] {
+            let (bits, _, st) = run(true, false, threads, size);
+            assert!(
+                bits == all_bits,
+                "threads {threads}, bucket {size:?}: picture differs"
+            );
+            assert_eq!(Stats::get(&st.grids), grids, "the same grids are diced");
+            // Only the wall's grids are shaded: the 16 quads behind it are not, in any bucket.
+            assert_eq!(
+                Stats::get(&st.shaded_points),
+                wall_points,
+                "threads {threads}, bucket {size:?}"
+            );
+            let behind = grids - Stats::get(&wall.grids);
+            assert!(behind >= 16);
+            assert_eq!(
+                Stats::get(&st.grids_unshaded),
+                behind + Stats::get(&wall.grids_unshaded)
             );
         }
     }

@@ -17,6 +17,7 @@ pub mod hider;
 pub mod limits;
 pub mod lod;
 pub mod motion;
+pub mod packed;
 pub mod sampler;
 pub mod stats;
 

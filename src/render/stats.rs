@@ -28,9 +28,14 @@ pub struct Stats {
     pub surfaces: AtomicU64,
     pub culled: AtomicU64,
     pub splits: AtomicU64,
+    /// Grids diced, and their micropolygons.
     pub grids: AtomicU64,
     pub micropolygons: AtomicU64,
+    /// Points surface-shaded (grids are shaded only when a bucket may see them).
     pub shaded_points: AtomicU64,
+    /// Grids diced but never surface-shaded: every bucket they overlap culled them before
+    /// shading (behind every opaque sample).
+    pub grids_unshaded: AtomicU64,
     pub samples_tested: AtomicU64,
     pub samples_hit: AtomicU64,
     /// Grids a bucket skipped whole: behind every sample's opaque front.
@@ -188,6 +193,9 @@ impl Stats {
     pub fn time(&self, stage: Stage, since: Instant) {
         self.stage_ns[stage as usize].fetch_add(since.elapsed().as_nanos() as u64, Relaxed);
     }
+    pub fn add_time(&self, stage: Stage, ns: u64) {
+        self.stage_ns[stage as usize].fetch_add(ns, Relaxed);
+    }
     pub fn stage_time(&self, stage: Stage) -> Duration {
         Duration::from_nanos(self.stage_ns[stage as usize].load(Relaxed))
     }
@@ -229,6 +237,7 @@ impl fmt::Display for Stats {
         writeln!(f, "  samples tested   {:>12}", g(&self.samples_tested))?;
         writeln!(f, "  samples hit      {:>12}", g(&self.samples_hit))?;
         writeln!(f, "  grids occluded   {:>12}", g(&self.grids_occluded))?;
+        writeln!(f, "  grids unshaded   {:>12}", g(&self.grids_unshaded))?;
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,

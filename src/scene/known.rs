@@ -180,7 +180,7 @@ pub const KNOWN: &[(&str, &str, Use)] = &[
     ("photon:causticmap", "uniform string", Ignored),
     ("photon:globalmap", "uniform string", Ignored),
     ("photon:estimator", "uniform integer", Ignored),
-    ("cull:hidden", "uniform integer", Ignored),
+    ("cull:hidden", "uniform integer", Used),
     ("cull:backfacing", "uniform integer", Ignored),
     ("culling:hidden", "uniform integer", Ignored),
     ("culling:backfacing", "uniform integer", Ignored),

@@ -45,7 +45,7 @@ use super::super::camera::PixelRect;
 use super::super::sampler::time_and_lens;
 use super::super::stats::Stats;
 use super::zbuffer::{edge as zedge, inside as zinside};
-use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
+use super::{shade_all, DepthFilter, GridSource, Hider, HiderConfig, ShadedGrid};
 
 const NONE: u32 = u32::MAX;
 
@@ -684,7 +684,10 @@ impl Hider for ABuffer {
         self.w * self.w
     }
 
-    fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
+    fn hide(&self, rect: PixelRect, grids: &[&dyn GridSource], stats: &Stats) -> SampleBuffer {
+        // Fragments behind an opaque front are trimmed, not skipped before shading: every
+        // grid meeting the bucket is shaded.
+        let grids = shade_all(grids, &rect);
         let cfg = &self.config;
         let w = self.w;
         let mut buf = SampleBuffer::new(

@@ -1,10 +1,13 @@
 //! Hiders: visibility from shaded micropolygons to per-sample colour, opacity and depth.
 //!
-//! Input: the [`ShadedGrid`]s that overlap a bucket (plus its filter margin). Output: a
-//! [`SampleBuffer`] for that region, channels r g b a z then the arbitrary output variables.
+//! Input: the grids that may overlap a bucket (plus its filter margin), each a
+//! [`GridSource`]: a conservative bound known before shading and the [`ShadedGrid`] on
+//! demand. Output: a [`SampleBuffer`] for that region, channels r g b a z then the arbitrary
+//! output variables.
 //! Invariants: everything before hiding (bound, split, dice, shade, projection to a
 //! `ShadedGrid`) is shared by all hiders; a hider's output for a sample depends only on the
-//! grids covering it and on (pixel, sample, seed), never on the bucket or thread.
+//! grids covering it and on (pixel, sample, seed), never on the bucket or thread; a hider
+//! leaves a grid unshaded only where shading it could not change a sample.
 
 pub mod abuffer;
 pub mod csg;
@@ -760,17 +763,76 @@ impl HiderConfig {
     }
 }
 
-/// A visibility algorithm: from the shaded grids overlapping `rect` to its samples.
+/// A grid as hiders receive it: what is known before its surface is shaded, and the shaded
+/// grid on demand (shaded once, by the first bucket that asks; later askers wait for it). A
+/// hider that can tell from the bound alone that a grid changes no sample of its bucket
+/// (outside it, or behind every opaque sample) need not ask, and the grid may never be
+/// shaded at all.
+pub trait GridSource: Sync {
+    /// The grid's identity ([`ShadedGrid::key`]).
+    fn key(&self) -> u64;
+    /// A lower bound of the shaded grid's [`ShadedGrid::zmin`].
+    fn zmin(&self) -> f32;
+    /// A raster rectangle (x0, y0, x1, y1) containing the shaded grid's
+    /// [`ShadedGrid::bound`].
+    fn bound(&self) -> [f32; 4];
+    /// Whether the shaded grid may have motion keys.
+    fn moving(&self) -> bool;
+    /// The shaded grid, shading it on the first call; None when nothing of it is left to hide.
+    fn shaded(&self) -> Option<&ShadedGrid>;
+}
+
+/// An already shaded grid is its own source.
+impl GridSource for ShadedGrid {
+    fn key(&self) -> u64 {
+        self.key
+    }
+    fn zmin(&self) -> f32 {
+        self.zmin
+    }
+    fn bound(&self) -> [f32; 4] {
+        self.bound
+    }
+    fn moving(&self) -> bool {
+        self.motion.is_some()
+    }
+    fn shaded(&self) -> Option<&ShadedGrid> {
+        (!self.is_empty()).then_some(self)
+    }
+}
+
+/// Whether a source's bound can meet the samples of `rect` (see [`ShadedGrid::window`]).
+pub fn may_meet(g: &dyn GridSource, rect: &PixelRect) -> bool {
+    let b = g.bound();
+    overlaps(
+        &b,
+        rect.x0 as f32,
+        rect.y0 as f32,
+        rect.x1 as f32,
+        rect.y1 as f32,
+    )
+}
+
+/// Shades every source meeting `rect` (hiders that cannot cull by the bound).
+pub fn shade_all<'g>(grids: &[&'g dyn GridSource], rect: &PixelRect) -> Vec<&'g ShadedGrid> {
+    grids
+        .iter()
+        .filter(|g| may_meet(**g, rect))
+        .filter_map(|g| g.shaded())
+        .collect()
+}
+
+/// A visibility algorithm: from the grids overlapping `rect` to its samples.
 pub trait Hider: Sync {
     /// Samples `grids` in the pixels of `rect` (a bucket plus its filter margin).
-    fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer;
+    fn hide(&self, rect: PixelRect, grids: &[&dyn GridSource], stats: &Stats) -> SampleBuffer;
     /// [`Hider::hide`] straight into the gather filter's form, when the hider can: the same
     /// as `gather::prepare(&self.hide(…), ctx)`. None when it cannot (the caller then hides
     /// and prepares).
     fn hide_prepared(
         &self,
         _rect: PixelRect,
-        _grids: &[&ShadedGrid],
+        _grids: &[&dyn GridSource],
         _stats: &Stats,
         _ctx: &crate::film::gather::PrepareCtx,
     ) -> Option<crate::film::gather::Prepared> {
@@ -790,7 +852,9 @@ pub trait Hider: Sync {
 pub struct NullHider(pub HiderConfig);
 
 impl Hider for NullHider {
-    fn hide(&self, rect: PixelRect, _grids: &[&ShadedGrid], _stats: &Stats) -> SampleBuffer {
+    fn hide(&self, rect: PixelRect, grids: &[&dyn GridSource], _stats: &Stats) -> SampleBuffer {
+        // Shaded all the same: shaders may have effects beyond the picture (bake3d, printf).
+        shade_all(grids, &rect);
         zbuffer::empty_buffer(&self.0, rect)
     }
     fn config(&self) -> &HiderConfig {

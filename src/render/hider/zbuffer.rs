@@ -1,6 +1,7 @@
 //! The stochastic Z-buffer hider (`Hider "hidden"`), after Cook, Carpenter & Catmull (1987).
 //!
-//! Input: shaded micropolygon grids overlapping a bucket's sample region. Output: a
+//! Input: micropolygon grids overlapping a bucket's sample region, shaded on demand (a grid
+//! behind every opaque sample of the bucket is skipped before it is shaded). Output: a
 //! [`SampleBuffer`] with premultiplied r g b, alpha, camera depth z and output variables.
 //! Invariants: `PixelSamples` stratified jittered samples per pixel, their positions a hash of
 //! (pixel, stratum, seed); each micropolygon (two triangles) is tested only against the samples
@@ -32,7 +33,7 @@ use super::super::camera::PixelRect;
 use super::super::sampler::{pixel_positions, pixel_positions_xy, time_and_lens};
 use super::super::stats::Stats;
 use super::csg::{self, CsgHit};
-use super::{DepthFilter, Hider, HiderConfig, ShadedGrid};
+use super::{may_meet, DepthFilter, GridSource, Hider, HiderConfig, ShadedGrid};
 
 const NONE: u32 = u32::MAX;
 
@@ -463,7 +464,7 @@ impl Hider for ZBuffer {
         &self.config
     }
 
-    fn hide(&self, rect: PixelRect, grids: &[&ShadedGrid], stats: &Stats) -> SampleBuffer {
+    fn hide(&self, rect: PixelRect, grids: &[&dyn GridSource], stats: &Stats) -> SampleBuffer {
         SCRATCH.with(|cell| {
             let mut scratch = cell.borrow_mut();
             match self.hide_with(&mut scratch, rect, grids, stats, None) {
@@ -476,7 +477,7 @@ impl Hider for ZBuffer {
     fn hide_prepared(
         &self,
         rect: PixelRect,
-        grids: &[&ShadedGrid],
+        grids: &[&dyn GridSource],
         stats: &Stats,
         ctx: &PrepareCtx,
     ) -> Option<Prepared> {
@@ -493,6 +494,96 @@ impl Hider for ZBuffer {
     }
 }
 
+/// A bucket's grids in the order they are hidden: front to back by [`ShadedGrid::zmin`], ties
+/// by key — the order of sorting the shaded grids, so that hiding goes exactly as if every
+/// grid had been shaded first — shading each only when it may be next.
+///
+/// The unshaded grids wait sorted by their lower bound of zmin; shaded ones wait in a heap
+/// by their zmin. A shaded grid is next when its zmin is below the bound of every unshaded
+/// grid (which lies at or behind its own bound); otherwise the first unshaded grid is
+/// shaded, unless its bound lies behind `far`, the farthest opaque front of the bucket: then
+/// the grid, wholly behind every opaque sample, changes no sample and is not shaded here.
+/// Fronts only come nearer, so in the shaded order the grid would also have lain behind
+/// them: the picture is the same.
+struct Order<'g> {
+    unshaded: Vec<&'g dyn GridSource>,
+    next_unshaded: usize,
+    shaded: std::collections::BinaryHeap<std::cmp::Reverse<ByDepth<'g>>>,
+}
+
+/// What [`Order::next`] gives.
+enum Next<'g> {
+    Hide(&'g ShadedGrid),
+    /// An unshaded grid behind every opaque front.
+    Culled,
+    Done,
+}
+
+/// A shaded grid ordered by (zmin, key).
+struct ByDepth<'g>(&'g ShadedGrid);
+
+impl ByDepth<'_> {
+    fn cmp_key(&self, o: &Self) -> std::cmp::Ordering {
+        self.0
+            .zmin
+            .total_cmp(&o.0.zmin)
+            .then(self.0.key.cmp(&o.0.key))
+    }
+}
+
+impl PartialEq for ByDepth<'_> {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp_key(o).is_eq()
+    }
+}
+impl Eq for ByDepth<'_> {}
+impl PartialOrd for ByDepth<'_> {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp_key(o))
+    }
+}
+impl Ord for ByDepth<'_> {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.cmp_key(o)
+    }
+}
+
+impl<'g> Order<'g> {
+    /// `unshaded` sorted by (lower bound of zmin, key).
+    fn new(unshaded: Vec<&'g dyn GridSource>) -> Order<'g> {
+        Order {
+            unshaded,
+            next_unshaded: 0,
+            shaded: std::collections::BinaryHeap::new(),
+        }
+    }
+
+    fn next(&mut self, far: f32) -> Next<'g> {
+        loop {
+            let bound = self.unshaded.get(self.next_unshaded).map(|g| g.zmin());
+            if let Some(std::cmp::Reverse(top)) = self.shaded.peek() {
+                // Strictly nearer: an unshaded grid at the same depth may have a smaller key.
+                if bound.is_none_or(|z| top.0.zmin.total_cmp(&z).is_lt()) {
+                    let g = top.0;
+                    self.shaded.pop();
+                    return Next::Hide(g);
+                }
+            }
+            let Some(z) = bound else {
+                return Next::Done;
+            };
+            let g = self.unshaded[self.next_unshaded];
+            self.next_unshaded += 1;
+            if z > far {
+                return Next::Culled;
+            }
+            if let Some(sg) = g.shaded() {
+                self.shaded.push(std::cmp::Reverse(ByDepth(sg)));
+            }
+        }
+    }
+}
+
 /// What [`ZBuffer::hide_with`] makes.
 enum Output {
     Samples(SampleBuffer),
@@ -504,7 +595,7 @@ impl ZBuffer {
         &self,
         scratch: &mut Scratch,
         rect: PixelRect,
-        grids: &[&ShadedGrid],
+        grids: &[&dyn GridSource],
         stats: &Stats,
         prepare: Option<&PrepareCtx>,
     ) -> Output {
@@ -569,10 +660,14 @@ impl ZBuffer {
                 }
             }
         }
-        // Front to back (ties by key), so opaque surfaces cull the grids behind them. The
-        // order never changes the picture: visible points composite in a total order.
-        let mut order: Vec<&ShadedGrid> = grids.to_vec();
-        order.sort_by(|a, c| a.zmin.total_cmp(&c.zmin).then(a.key.cmp(&c.key)));
+        // Front to back by the bound known before shading (ties by key), so opaque surfaces
+        // cull the grids behind them before they are shaded (see `Order`).
+        let mut unshaded: Vec<&dyn GridSource> = grids
+            .iter()
+            .copied()
+            .filter(|g| may_meet(*g, &rect))
+            .collect();
+        unshaded.sort_by(|a, c| a.zmin().total_cmp(&c.zmin()).then(a.key().cmp(&c.key())));
         // The farthest opaque front over the bucket (∞ while a sample sees none): a grid
         // entirely behind it hides nowhere. Refreshed as samples are hit; stale is safe
         // (fronts only come nearer).
@@ -585,7 +680,7 @@ impl ZBuffer {
         );
         times.clear();
         lens.clear();
-        if cfg.dof.is_some() || order.iter().any(|g| g.motion.is_some()) {
+        if cfg.dof.is_some() || unshaded.iter().any(|g| g.moving()) {
             times.resize(n, 0.0);
             lens.resize(n, [0.0; 2]);
             let (mut perm, mut t, mut l) = (Vec::new(), Vec::new(), Vec::new());
@@ -607,7 +702,8 @@ impl ZBuffer {
         }
         let mut visible = std::mem::take(&mut scratch.visible);
         let kernel = QuadKernel::pick();
-        for g in order {
+        let mut order = Order::new(unshaded);
+        loop {
             if !b.keep_second
                 && b.uncovered == 0
                 && (far == f32::INFINITY || b.hits - hits_at_refresh >= (n as u64 / 8).max(1))
@@ -615,6 +711,14 @@ impl ZBuffer {
                 far = b.fz[..n].iter().fold(0f32, |m, &f| m.max(f));
                 hits_at_refresh = b.hits;
             }
+            let g = match order.next(far) {
+                Next::Hide(g) => g,
+                Next::Culled => {
+                    Stats::add(&stats.grids_occluded, 1);
+                    continue;
+                }
+                Next::Done => break,
+            };
             if g.zmin > far {
                 Stats::add(&stats.grids_occluded, 1);
                 continue;

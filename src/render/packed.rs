@@ -1,0 +1,247 @@
+//! Diced grids packed while they wait for their surface shader.
+//!
+//! Input: a diced, displaced [`Grid`]. Output: a [`PackedGrid`] holding the same values in
+//! less memory, and back the identical grid (bit for bit, whatever was in it).
+//! Invariants: a per-point column is kept as is, or as one value repeated when every point
+//! has the same bits, or as a reference to an earlier column with the same bits (N and Ng,
+//! I and P, s and u, t and v often coincide); unpacking rebuilds each column exactly.
+//!
+//! Why: grids are shaded only when a bucket first sees them (hidden ones never are), so a
+//! diced grid may wait a whole bucket row or more; packed it holds about half the memory
+//! (colour, opacity and the copies are the columns most often constant or repeated).
+
+use glam::Vec3;
+
+use crate::shade::Grid;
+
+/// One per-point column of a waiting grid.
+#[derive(Debug)]
+enum Col<T> {
+    Each(Vec<T>),
+    /// Every point the same value (`usize` points).
+    Same(T, usize),
+    /// The same bits as the column it was packed against.
+    Like,
+}
+
+/// Plain values made of `WORDS` f32s and nothing else, compared by their bits (so −0 and
+/// NaNs survive the round trip).
+///
+/// # Safety
+/// Implementors must be `repr(C)` (or primitive) with exactly `WORDS` f32 fields and no
+/// padding: their slices are read as `u32` words.
+unsafe trait Bits: Copy {
+    const WORDS: usize;
+}
+
+unsafe impl Bits for f32 {
+    const WORDS: usize = 1;
+}
+
+// glam's Vec3 is `#[repr(C)] { x, y, z: f32 }` (Vec3A is the padded one).
+unsafe impl Bits for Vec3 {
+    const WORDS: usize = 3;
+}
+const _: () = assert!(std::mem::size_of::<Vec3>() == 12 && std::mem::align_of::<Vec3>() == 4);
+
+/// The bits of `v`, as words.
+fn words<T: Bits>(v: &[T]) -> &[u32] {
+    // SAFETY: `Bits` types are `WORDS` f32s without padding (so every byte is initialised
+    // and u32-aligned), and the slice covers exactly `v`'s memory.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u32>(), v.len() * T::WORDS) }
+}
+
+/// Whether `a` and `b` hold the same bits (a memcmp: the packing runs on every diced grid).
+fn same_bits<T: Bits>(a: &[T], b: &[T]) -> bool {
+    words(a) == words(b)
+}
+
+impl<T: Bits> Col<T> {
+    /// `v`, as a reference when it has the bits of `like`.
+    fn pack_like(v: Vec<T>, like: &[T]) -> Col<T> {
+        if !v.is_empty() && same_bits(&v, like) {
+            Col::Like
+        } else {
+            Col::Each(v)
+        }
+    }
+
+    /// `v`, as one value when every point has the same bits.
+    fn pack_same(v: Vec<T>) -> Col<T> {
+        match v.first() {
+            Some(f) if same_bits(&v[1..], &v[..v.len() - 1]) => Col::Same(*f, v.len()),
+            _ => Col::Each(v),
+        }
+    }
+
+    /// The column again; `like` is the unpacked column it was packed against.
+    fn unpack(self, like: &[T]) -> Vec<T> {
+        match self {
+            Col::Each(v) => v,
+            Col::Same(x, n) => vec![x; n],
+            Col::Like => like.to_vec(),
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        match self {
+            Col::Each(v) => v.len() * std::mem::size_of::<T>(),
+            Col::Same(..) | Col::Like => 0,
+        }
+    }
+}
+
+/// A diced grid, packed (see the module invariants).
+#[derive(Debug)]
+pub struct PackedGrid {
+    /// The grid with its packed columns taken out (left empty).
+    rest: Grid,
+    p: Col<Vec3>,
+    ng: Col<Vec3>,
+    n: Col<Vec3>,
+    dpdu: Col<Vec3>,
+    dpdv: Col<Vec3>,
+    u: Col<f32>,
+    v: Col<f32>,
+    s: Col<f32>,
+    t: Col<f32>,
+    cs: Col<Vec3>,
+    os: Col<Vec3>,
+    i: Col<Vec3>,
+    ci: Col<Vec3>,
+    oi: Col<Vec3>,
+}
+
+impl PackedGrid {
+    pub fn pack(mut g: Grid) -> PackedGrid {
+        let take3 = |v: &mut Vec<Vec3>| std::mem::take(v);
+        let take1 = |v: &mut Vec<f32>| std::mem::take(v);
+        let p = take3(&mut g.p);
+        let ng = take3(&mut g.ng);
+        let u = take1(&mut g.u);
+        let v = take1(&mut g.v);
+        // Position, normal, derivatives and parameters vary over any grid worth shading.
+        let n = Col::pack_like(take3(&mut g.n), &ng);
+        let i = Col::pack_like(take3(&mut g.i), &p);
+        let s = Col::pack_like(take1(&mut g.s), &u);
+        let t = Col::pack_like(take1(&mut g.t), &v);
+        let cs = Col::pack_same(take3(&mut g.cs));
+        let os = Col::pack_same(take3(&mut g.os));
+        let ci = Col::pack_same(take3(&mut g.ci));
+        let oi = Col::pack_same(take3(&mut g.oi));
+        let dpdu = Col::Each(take3(&mut g.dpdu));
+        let dpdv = Col::Each(take3(&mut g.dpdv));
+        PackedGrid {
+            rest: g,
+            p: Col::Each(p),
+            ng: Col::Each(ng),
+            n,
+            dpdu,
+            dpdv,
+            u: Col::Each(u),
+            v: Col::Each(v),
+            s,
+            t,
+            cs,
+            os,
+            i,
+            ci,
+            oi,
+        }
+    }
+
+    /// The grid as it was packed.
+    pub fn unpack(self) -> Grid {
+        let mut g = self.rest;
+        g.p = self.p.unpack(&[]);
+        g.ng = self.ng.unpack(&[]);
+        g.u = self.u.unpack(&[]);
+        g.v = self.v.unpack(&[]);
+        g.n = self.n.unpack(&g.ng);
+        g.i = self.i.unpack(&g.p);
+        g.s = self.s.unpack(&g.u);
+        g.t = self.t.unpack(&g.v);
+        g.cs = self.cs.unpack(&[]);
+        g.os = self.os.unpack(&[]);
+        g.ci = self.ci.unpack(&[]);
+        g.oi = self.oi.unpack(&[]);
+        g.dpdu = self.dpdu.unpack(&[]);
+        g.dpdv = self.dpdv.unpack(&[]);
+        g
+    }
+
+    /// Approximate heap size, for the memory statistic.
+    pub fn bytes(&self) -> usize {
+        let cols3 = [
+            &self.p, &self.ng, &self.n, &self.dpdu, &self.dpdv, &self.cs, &self.os, &self.i,
+            &self.ci, &self.oi,
+        ];
+        let cols1 = [&self.u, &self.v, &self.s, &self.t];
+        let motion = self
+            .rest
+            .motion
+            .as_ref()
+            .map_or(0, |m| m.p.iter().map(|k| k.len() * 12).sum::<usize>());
+        let vars: usize = self.rest.primvars.iter().map(|v| v.floats.len() * 4).sum();
+        cols3.iter().map(|c| c.bytes()).sum::<usize>()
+            + cols1.iter().map(|c| c.bytes()).sum::<usize>()
+            + motion
+            + vars
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bits(g: &Grid) -> Vec<u32> {
+        let mut out = vec![g.nu as u32, g.nv as u32, g.du.to_bits(), g.dv.to_bits()];
+        for c in [
+            &g.p, &g.n, &g.ng, &g.dpdu, &g.dpdv, &g.cs, &g.os, &g.i, &g.ci, &g.oi,
+        ] {
+            out.push(c.len() as u32);
+            out.extend(c.iter().flat_map(|v| v.to_array()).map(f32::to_bits));
+        }
+        for c in [&g.u, &g.v, &g.s, &g.t] {
+            out.push(c.len() as u32);
+            out.extend(c.iter().map(|x| x.to_bits()));
+        }
+        out
+    }
+
+    #[test]
+    fn packing_gives_back_the_same_bits_and_saves_the_repeated_columns() {
+        let (nu, nv) = (5, 4);
+        let mut g = Grid::with_size(nu, nv);
+        for k in 0..nu * nv {
+            let x = k as f32 * 0.37 - 2.0;
+            g.p[k] = Vec3::new(x, -x * 0.5, 3.0 + x * x);
+            g.ng[k] = Vec3::new(0.0, -0.0, 1.0 + k as f32);
+            g.dpdu[k] = Vec3::new(1.0, k as f32, 0.0);
+            g.dpdv[k] = Vec3::Y;
+            g.u[k] = (k % nu) as f32 / 4.0;
+            g.v[k] = (k / nu) as f32 / 3.0;
+        }
+        g.n = g.ng.clone();
+        g.i = g.p.clone();
+        g.s = g.u.clone();
+        g.t = g.v.iter().map(|v| 1.0 - v).collect();
+        // −0 against +0 and a NaN: compared by bits, not by value.
+        g.cs[3] = Vec3::new(-0.0, 1.0, 1.0);
+        g.os[0] = Vec3::new(f32::NAN, 1.0, 1.0);
+        g.du = 0.25;
+        let want = bits(&g);
+        let packed = PackedGrid::pack(g.clone());
+        // p, ng, dpdu, dpdv, u, v, t, cs and os are kept; n, i, s, ci and oi are not.
+        let n = nu * nv;
+        assert_eq!(packed.bytes(), n * (12 * 6 + 4 * 3));
+        assert!(matches!(packed.n, Col::Like) && matches!(packed.i, Col::Like));
+        assert!(matches!(packed.s, Col::Like) && matches!(packed.t, Col::Each(_)));
+        assert!(matches!(packed.ci, Col::Same(..)) && matches!(packed.oi, Col::Same(..)));
+        assert!(matches!(packed.cs, Col::Each(_)) && matches!(packed.os, Col::Each(_)));
+        assert_eq!(bits(&packed.unpack()), want);
+        // An empty grid round-trips too.
+        let e = Grid::default();
+        assert_eq!(bits(&PackedGrid::pack(e.clone()).unpack()), bits(&e));
+    }
+}
