@@ -2,9 +2,9 @@
 //! ½ in its matrix's space, two blobs merge with a filled neck, a subtract operator carves,
 //! and bad code arrays are diagnosed.
 
-use arbor::diag::{Diagnostics, SourceMap};
+mod common;
+
 use arbor::film::Film;
-use arbor::pipeline::{render_text, Settings};
 
 const N: usize = 60;
 const PIX: f32 = 3.0 / N as f32;
@@ -14,18 +14,7 @@ fn render_report(world: &str) -> (Vec<Film>, String, bool) {
         "Format {N} {N} 1\nPixelSamples 4 4\nPixelFilter \"box\" 1 1\nProjection \"orthographic\"\n\
          ScreenWindow -1.5 1.5 -1.5 1.5\nTranslate 0 0 5\nWorldBegin\nSurface \"constant\"\n{world}WorldEnd\n"
     );
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let films = render_text(
-        &text,
-        &Settings {
-            threads: 1,
-            ..Default::default()
-        },
-        &sources,
-        &diags,
-    );
-    (films, diags.render_plain(&sources), diags.has_errors())
+    common::render_text_report(&text)
 }
 
 fn render(world: &str) -> Film {

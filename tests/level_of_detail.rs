@@ -2,9 +2,9 @@
 //! `DetailRange` holds the raster area of its `Detail` box is drawn, and only that one
 //! (Aqsis's `levelofdetail/detail.rib` drew all three spheres on top of each other).
 
-use arbor::diag::{Diagnostics, SourceMap};
+mod common;
+
 use arbor::film::Film;
-use arbor::pipeline::{render_text, Settings};
 
 /// A unit-radius model at distance `z` in front of a 90° camera on a 100×100 picture, drawn
 /// red, green or blue depending on its detail, as Aqsis's example writes the ranges.
@@ -18,19 +18,8 @@ fn render(z: f32, relative: f32) -> (Film, String) {
          DetailRange [500 600 1e+38 1e+38]\nColor [1 0 0]\nSphere 1 -1 1 360\n\
          AttributeEnd\nWorldEnd\n"
     );
-    let sources = SourceMap::new();
-    let diags = Diagnostics::new();
-    let films = render_text(
-        &text,
-        &Settings {
-            threads: 1,
-            ..Default::default()
-        },
-        &sources,
-        &diags,
-    );
-    let report = diags.render_plain(&sources);
-    assert!(!diags.has_errors(), "{report}");
+    let (films, report, errors) = common::render_text_report(&text);
+    assert!(!errors, "{report}");
     (films.into_iter().next().expect("a film"), report)
 }
 

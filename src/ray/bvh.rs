@@ -969,6 +969,32 @@ mod tests {
     use super::*;
 
     /// A quad of its own four corners `v00 v10 v01 v11`, appended to `verts`.
+    /// Repeatable numbers in [-1, 1) from `seed`.
+    fn signed_rng(seed: u32) -> impl FnMut() -> f32 {
+        let mut h = seed;
+        move || {
+            h = crate::pattern::hash::hash_u32(h);
+            (h as f32 / u32::MAX as f32) * 2.0 - 1.0
+        }
+    }
+
+    /// `n` random quads (parallelograms) centred within ±`spread`, edges up to `size` long.
+    fn random_soup(
+        rnd: &mut impl FnMut() -> f32,
+        n: u32,
+        spread: f32,
+        size: f32,
+    ) -> (Vec<Quad>, Vec<Vec3>) {
+        let (mut quads, mut verts) = (Vec::new(), Vec::new());
+        for k in 0..n {
+            let c = Vec3::new(rnd(), rnd(), rnd()) * spread;
+            let u = Vec3::new(rnd(), rnd(), rnd()) * size;
+            let v = Vec3::new(rnd(), rnd(), rnd()) * size;
+            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
+        }
+        (quads, verts)
+    }
+
     fn quad(verts: &mut Vec<Vec3>, p: [Vec3; 4], grid: u32) -> Quad {
         let k = verts.len() as u32;
         verts.extend(p);
@@ -1026,11 +1052,7 @@ mod tests {
     /// `each_hit` reports every quad the brute force hits.
     #[test]
     fn closest_and_all_hits_match_brute_force_on_grids() {
-        let mut h = 4242u32;
-        let mut rnd = || {
-            h = crate::pattern::hash::hash_u32(h);
-            (h as f32 / u32::MAX as f32) * 2.0 - 1.0
-        };
+        let mut rnd = signed_rng(4242u32);
         let mut quads = Vec::new();
         let mut verts = Vec::new();
         for g in 0..12u32 {
@@ -1222,19 +1244,8 @@ mod tests {
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
-        let mut h = 31u32;
-        let mut rnd = || {
-            h = crate::pattern::hash::hash_u32(h);
-            (h as f32 / u32::MAX as f32) * 2.0 - 1.0
-        };
-        let mut quads = Vec::new();
-        let mut verts = Vec::new();
-        for k in 0..2000 {
-            let c = Vec3::new(rnd(), rnd(), rnd()) * 20.0;
-            let u = Vec3::new(rnd(), rnd(), rnd()) * 0.5;
-            let v = Vec3::new(rnd(), rnd(), rnd()) * 0.5;
-            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
-        }
+        let mut rnd = signed_rng(31u32);
+        let (quads, verts) = random_soup(&mut rnd, 2000, 20.0, 0.5);
         let bvh = Bvh::build(quads, verts);
         assert!(bvh.nodes.len() > 30);
         let mut hits = 0;
@@ -1264,19 +1275,8 @@ mod tests {
 
     #[test]
     fn brute_force_agrees_on_a_random_soup() {
-        let mut h = 12345u32;
-        let mut rnd = || {
-            h = crate::pattern::hash::hash_u32(h);
-            (h as f32 / u32::MAX as f32) * 2.0 - 1.0
-        };
-        let mut quads = Vec::new();
-        let mut verts = Vec::new();
-        for k in 0..500 {
-            let c = Vec3::new(rnd() * 5.0, rnd() * 5.0, rnd() * 5.0);
-            let u = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
-            let v = Vec3::new(rnd(), rnd(), rnd()) * 0.4;
-            quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
-        }
+        let mut rnd = signed_rng(12345u32);
+        let (quads, verts) = random_soup(&mut rnd, 500, 5.0, 0.4);
         let bvh = Bvh::build(quads.clone(), verts.clone());
         for _ in 0..300 {
             let o = Vec3::new(rnd(), rnd(), rnd()) * 6.0;

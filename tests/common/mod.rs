@@ -260,3 +260,20 @@ impl AsRef<Path> for Scratch {
         &self.path
     }
 }
+
+/// Renders RIB text through the whole pipeline on one thread, in memory: every frame's film,
+/// the plain-text diagnostics, and whether any is an error.
+pub fn render_text_report(text: &str) -> (Vec<Film>, String, bool) {
+    let sources = SourceMap::new();
+    let diags = Diagnostics::new();
+    let films = arbor::pipeline::render_text(
+        text,
+        &Settings {
+            threads: 1,
+            ..Default::default()
+        },
+        &sources,
+        &diags,
+    );
+    (films, diags.render_plain(&sources), diags.has_errors())
+}
