@@ -165,7 +165,7 @@ fn a_missing_sky_dome_shader_shows_the_dome_colour() {
 fn displacement_past_its_bound_is_reported() {
     let dir = common::scratch_dir("fallbacks_dispbound");
     let out = dir.join("out.png").display().to_string();
-    let shader = "displacement bumpy(float amp = 0.3) { \
+    let shader = "displacement bumpy(float amp = 0.5) { \
                   P += amp * (noise(s * 40, t * 40) - 0.5) * normalize(N); \
                   N = calculatenormal(P); }";
     let scene = |bound: &str| {
