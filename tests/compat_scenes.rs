@@ -779,7 +779,7 @@ fn the_surface_reads_the_displacement_shaders_outputs_by_message_passing() {
     let dir = common::scratch_dir("message-displacement");
     std::fs::write(
         dir.join("hump.sl"),
-        "displacement hump(output varying float height = 0; output color tint = 0) \
+        "displacement hump(output varying float height = 0; output varying color tint = 0) \
          { height = s; tint = color(0, 1 - s, 0); }\n",
     )
     .unwrap();
