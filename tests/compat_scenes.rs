@@ -769,3 +769,98 @@ fn dented_is_in_the_standard_library_and_dents_inward() {
     let dented = coverage("Displacement \"dented\" \"Km\" [0.5]");
     assert!(dented < plain, "{dented} vs {plain}");
 }
+
+#[test]
+fn the_surface_reads_the_displacement_shaders_outputs_by_message_passing() {
+    // NCCA's MessagePassing example: the displacement shader leaves its bump height in an
+    // output parameter and the surface colours by it (`displacement("hump", height)`).
+    // Here the height is s, so the picture is a ramp across the frame; a name the
+    // displacement lacks reports 0 and leaves the variable alone.
+    let dir = common::scratch_dir("message-displacement");
+    std::fs::write(
+        dir.join("hump.sl"),
+        "displacement hump(output varying float height = 0; output varying color tint = 0) \
+         { height = s; tint = color(0, 1 - s, 0); }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("snow.sl"),
+        "surface snow() { float h = -1; color c = 0; float none = 7; \
+         float found = displacement(\"height\", h); float gone = displacement(\"nosuch\", none); \
+         float col = displacement(\"tint\", c); \
+         Oi = 1; Ci = color(found * h, comp(c, 1), (gone == 0 && none == 7 && col == 1) ? 1 : 0); }\n",
+    )
+    .unwrap();
+    let out = dir.join("m.png");
+    let rib = format!(
+        "Format 16 4 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
+         ScreenWindow -1 1 -0.25 0.25\nWorldBegin\nDisplacement \"hump\"\nSurface \"snow\"\n\
+         Translate 0 0 5\nPatch \"bilinear\" \"P\" [-1 0.25 0  1 0.25 0  -1 -0.25 0  1 -0.25 0]\nWorldEnd\n",
+        out.display()
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err && !text.contains("not supported"), "{text}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let row: Vec<[u8; 3]> = (0..16).map(|x| img.get_pixel(x, 2).0).collect();
+    // s runs 0 → 1 left to right: red rises, green (1 − s) falls, blue says the misses and
+    // the colour read behaved.
+    for (x, p) in row.iter().enumerate() {
+        let s = (x as f32 + 0.5) / 16.0;
+        assert!((p[0] as f32 - 255.0 * s).abs() <= 12.0, "x {x}: {p:?}");
+        assert!(
+            (p[1] as f32 - 255.0 * (1.0 - s)).abs() <= 12.0,
+            "x {x}: {p:?}"
+        );
+        assert_eq!(p[2], 255, "x {x}: {p:?}");
+    }
+}
+
+#[test]
+fn shadow_takes_prmans_area_source_and_a_list_of_maps() {
+    // NCCA's `arealight`: `shadow("a.shad,b.shad", Ps, "source", P1, P2, P3, P4, "gapbias",
+    // g)` is PRMan's soft shadow from maps rendered across an area light.
+    let (n, text, err) = compile(
+        "arealight.sl",
+        "light arealight(string maplist = \"\"; point Pl1 = 0, Pl2 = 1, Pl3 = 2, Pl4 = 3; \
+         float numsamples = 1, shadowBias = 0.01, gapBias = 0.01) { \
+         illuminate((Pl1 + Pl2 + Pl3 + Pl4) * 0.25) { \
+         float a = shadow(maplist, Ps, \"source\", Pl1, Pl2, Pl3, Pl4, \"samples\", numsamples, \
+         \"bias\", shadowBias, \"gapbias\", gapBias); Cl = 1 - a; } }",
+    );
+    assert!(!err && n == 1, "{text}");
+}
+
+/// The fraction of the film `rib` covers (mean alpha).
+fn coverage(rib: &str) -> f64 {
+    let film = common::render_rib(rib, &[]);
+    let a = film.channel("a").expect("alpha");
+    let mut sum = 0.0;
+    for y in 0..film.height {
+        for x in 0..film.width {
+            sum += film.pixel(x, y)[a] as f64;
+        }
+    }
+    sum / (film.width * film.height) as f64
+}
+
+#[test]
+fn points_that_carry_n_are_disks_across_it() {
+    // PRMan draws a point given "N" as a disk facing along N (NCCA's Points.rib), not the
+    // camera: tilted 60° it covers half the film a camera-facing one does, edge-on nothing.
+    let scene = |n: &str| {
+        format!(
+            "Format 64 64 1\nPixelSamples 4 4\nDisplay \"p\" \"framebuffer\" \"rgba\"\n\
+             Projection \"orthographic\"\nScreenWindow -1 1 -1 1\nWorldBegin\nTranslate 0 0 5\n\
+             Surface \"constant\"\nPoints \"P\" [0 0 0] \"constantwidth\" [1.6] {n}\nWorldEnd\n"
+        )
+    };
+    let facing = coverage(&scene(""));
+    // π 0.8² / 4 of the film.
+    assert!((facing - 0.5027).abs() < 0.01, "{facing}");
+    let toward = coverage(&scene("\"N\" [0 0 -1]"));
+    assert!((toward - facing).abs() < 0.005, "{toward} vs {facing}");
+    let tilted = coverage(&scene("\"N\" [0 0.8660254 -0.5]"));
+    assert!((tilted / facing - 0.5).abs() < 0.02, "{tilted} vs {facing}");
+    let edge_on = coverage(&scene("\"N\" [1 0 0]"));
+    assert!(edge_on < 0.01, "{edge_on}");
+}

@@ -110,6 +110,40 @@ fn a_missing_surface_shader_keeps_the_scene_lit_by_its_lights() {
     assert_eq!(px[w * w - 1], 0);
 }
 
+/// MayaMan, Liquid and RfM name a surface after the Maya material it was exported from
+/// (`mms_blinn1`, `lambert2`, `phong1SG`) and ship it compiled for one renderer only: a
+/// missing one stands in as the material it was, lit by the scene's lights.
+#[test]
+fn a_missing_maya_material_stands_in_as_the_material_it_names() {
+    let dir = common::scratch_dir("fallbacks_maya_material");
+    let out = dir.join("out.png").display().to_string();
+    // Lit at 45° from the left: N·L = 0.707, the highlight (exponent 80) falls far from the
+    // eye. `defaultsurface` would show the plane face-on at full brightness (255).
+    for (name, stand_in, level) in [
+        ("sheep1/shaders/mms_blinn1", "plastic", 90),
+        ("mms_sheep1_phong2", "plastic", 90),
+        ("mms_lambert1", "matte", 180),
+    ] {
+        let rib = format!(
+            "Display \"{out}\" \"png\" \"rgb\"\n{CAMERA}WorldBegin\n\
+             LightSource \"distantlight\" 1 \"intensity\" 1 \"from\" [-1 0 -1] \"to\" [0 0 0]\n\
+             Surface \"{name}\"\n\
+             Polygon \"P\" [-2 -2 0  2 -2 0  2 2 0  -2 2 0]\nWorldEnd\n"
+        );
+        let (log, px, w) = render(&dir, &rib, None);
+        assert!(
+            log.contains(&format!("`{stand_in}` stands in")),
+            "{name}: {log}"
+        );
+        // Kd·0.707: plastic's Kd is 0.5, matte's 1.
+        let centre = px[(w / 2) * w + w / 2] as i32;
+        assert!(
+            (centre - level).abs() <= 3,
+            "{name}: centre {centre}, want {level}"
+        );
+    }
+}
+
 /// A missing shader that nothing marks as a lit material (no diffuse or specular parameters,
 /// a name like `saturn3`) is a custom look: `defaultsurface` stands in (as in Aqsis and
 /// Pixie), so the object shows its colour seen face-on, not lit by a light the real shader may

@@ -59,6 +59,7 @@ fn run_reporting(prog: &Program, n: usize, diags: &Diagnostics) -> (Vec<Vec3>, V
         seed: 7,
         rays: None,
         cones: None,
+        displacement_outputs: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

@@ -129,6 +129,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         seed: 11,
         rays: None,
         cones: None,
+        displacement_outputs: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

@@ -59,6 +59,7 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64, u64) {
         seed: 7,
         rays: None,
         cones: None,
+        displacement_outputs: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.sparse = sparse;

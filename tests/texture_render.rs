@@ -236,3 +236,49 @@ fn blurred_cube_environment_has_no_seams() {
         "{v:?}"
     );
 }
+
+#[test]
+fn a_comma_separated_list_of_shadow_maps_averages_them() {
+    // PRMan's soft shadows: maps rendered from across an area light, named in one string
+    // (NCCA's `arealight`: "Spot1.shad,Spot2.shad,…"). One map sees the occluder and one
+    // does not: under the occluder the light is half there.
+    let dir = tmp("shadowlist");
+    let (zo, zc) = (dir.join("occ.z"), dir.join("clear.z"));
+    let (to, tc) = (dir.join("occ.tex"), dir.join("clear.tex"));
+    let png = dir.join("beauty.png");
+    let occluder = "Polygon \"P\" [-0.5 1 -0.5  0.5 1 -0.5  0.5 1 0.5  -0.5 1 0.5]";
+    let floor = "Polygon \"P\" [-2 0 -2  2 0 -2  2 0 2  -2 0 2]";
+    let depth = |z: &Path, world: &str| {
+        format!(
+            "FrameBegin 1\nDisplay \"{}\" \"zfile\" \"z\"\nFormat 64 64 1\nPixelSamples 1 1\n\
+             PixelFilter \"box\" 1 1\n{}WorldBegin\n{world}\nWorldEnd\nFrameEnd\n",
+            z.display(),
+            down_camera(10.0)
+        )
+    };
+    let rib = format!(
+        "{}{}MakeShadow \"{}\" \"{}\"\nMakeShadow \"{}\" \"{}\"\n\
+         FrameBegin 3\nDisplay \"{}\" \"png\" \"rgb\"\nFormat 32 32 1\nPixelSamples 2 2\n{}\
+         WorldBegin\n\
+         LightSource \"shadowdistant\" 1 \"from\" [0 1 0] \"to\" [0 0 0] \"shadowname\" [\"{},{}\"] \"bias\" [0.02]\n\
+         Surface \"matte\"\n{floor}\nWorldEnd\nFrameEnd\n",
+        depth(&zo, &format!("{occluder}\n{floor}")),
+        depth(&zc, floor),
+        zo.display(),
+        to.display(),
+        zc.display(),
+        tc.display(),
+        png.display(),
+        down_camera(10.0),
+        to.display(),
+        tc.display(),
+    );
+    let diags = render(&dir, &rib);
+    assert!(!diags.has_errors(), "{:?}", diags.snapshot());
+    let img = image::open(&png).unwrap().to_rgb8();
+    // Pixel (16, 16) lies under the occluder's middle, (2, 2) far outside it.
+    let under = img.get_pixel(16, 16)[0] as i32;
+    let open = img.get_pixel(2, 2)[0] as i32;
+    assert!(open > 225, "open {open}");
+    assert!((under - open / 2).abs() <= 8, "under {under}, open {open}");
+}

@@ -1,4 +1,5 @@
-//! Points (RISpec 3.2 §5.7): camera-facing disks of diameter "width" / "constantwidth".
+//! Points (RISpec 3.2 §5.7): camera-facing disks of diameter "width" / "constantwidth"; a
+//! point that carries "N" is a disk across that normal instead (as PRMan draws them).
 //!
 //! Input: `Geometry::Points`, "P", "width" (varying) or "constantwidth" (constant, default 1
 //! object unit), the other primitive variables, `camera_from_object`.
@@ -9,7 +10,7 @@
 //! width R sin(πj/(m−1)), so the first and last rows collapse to a single point and the
 //! micropolygons joining two points have zero area (never sampled). The outline is a regular
 //! 2(m−1)-gon whose radius is enlarged to keep the disk's area π r².
-//! Invariants: N = Ng = −z (towards the camera); every grid point of a point carries that
+//! Invariants: N = Ng = −z (towards the camera), or the point's unit N; every grid point of a point carries that
 //! point's values (points have no parametric variation: s, t, Cs, Os, user variables are
 //! constant over the disk); width is scaled to camera space by the transform's mean scale.
 
@@ -155,6 +156,16 @@ fn kd_order(p: &[Vec3], idx: &mut [u32]) {
     kd_order(p, r);
 }
 
+/// The axes of a disk lying across the camera-space normal `n` (PRMan draws points that
+/// carry "N" as disks facing along it, not the camera): `(e1, e2, n̂)` with `e1 × e2 = n̂`,
+/// `e1` level with the image's x axis where it can be. None for a zero or non-finite `n`.
+fn disk_axes(n: Vec3) -> Option<(Vec3, Vec3, Vec3)> {
+    let n = n.try_normalize()?;
+    let e1 = Vec3::Y.cross(n).try_normalize().unwrap_or(Vec3::X);
+    let e2 = n.cross(e1);
+    Some((e1, e2, n))
+}
+
 impl PointBatch {
     /// Area-preserving radius for an outline of `rows` rows (a regular 2(rows−1)-gon).
     fn outline_scale(rows: usize) -> f32 {
@@ -228,6 +239,7 @@ impl Surface for PointBatch {
             find("Cs").filter(|v| v.width() >= 3),
             find("Os").filter(|v| v.width() >= 3),
         );
+        let n_v = find("N").filter(|v| v.width() >= 3);
         for (q, k) in self.range.clone().enumerate() {
             let orig = d.order[k] as usize;
             let c = d.p[k];
@@ -251,17 +263,22 @@ impl Surface for PointBatch {
             };
             let cs = cs_v.map_or(d.color, at3);
             let os = os_v.map_or(d.opacity, at3);
+            // The disk's plane: facing the camera, or across the point's N when it has one.
+            let (e1, e2, normal) = match n_v.map(at3).and_then(disk_axes) {
+                Some(axes) => axes,
+                None => (Vec3::X, Vec3::Y, Vec3::NEG_Z),
+            };
             for j in 0..m {
                 let a = PI * j as f32 / (m - 1) as f32;
                 let (y, h) = (-r * a.cos(), r * a.sin());
                 for i in 0..nu {
                     let x = h * (2.0 * i as f32 / (nu - 1) as f32 - 1.0);
                     let idx = (q * m + j) * nu + i;
-                    g.p[idx] = c + Vec3::new(x, y, 0.0);
-                    g.n[idx] = Vec3::NEG_Z;
-                    g.ng[idx] = Vec3::NEG_Z;
-                    g.dpdu[idx] = Vec3::new(2.0 * r, 0.0, 0.0);
-                    g.dpdv[idx] = Vec3::new(0.0, 2.0 * r, 0.0);
+                    g.p[idx] = c + x * e1 + y * e2;
+                    g.n[idx] = normal;
+                    g.ng[idx] = normal;
+                    g.dpdu[idx] = 2.0 * r * e1;
+                    g.dpdv[idx] = 2.0 * r * e2;
                     g.u[idx] = i as f32 * g.du;
                     g.v[idx] = j as f32 * g.dv;
                     g.s[idx] = s;

@@ -237,9 +237,13 @@ impl Builder<'_> {
     pub(super) fn illuminate(&mut self, call: &Call<'_>) {
         let handle = call.pos[0].str().to_string();
         let Some(&idx) = self.light_handles.get(&handle) else {
-            let mut d = Diag::error(
+            // A warning, not an error: there is no light to switch, and scenes leave these
+            // behind when they comment a light out (NCCA's shadow-map pass keeps
+            // `Illuminate "Spot1" 1` under its commented `LightSource`). Aqsis ignores an
+            // unknown handle silently; the frame renders the same either way.
+            let mut d = Diag::warning(
                 "scene::handle",
-                format!("`Illuminate`: no light has handle {handle}"),
+                format!("`Illuminate`: no light has handle {handle}; ignored"),
             )
             .label(call.pos_spans[0], "unknown light handle");
             let known: Vec<&str> = self.light_handles.keys().map(String::as_str).collect();

@@ -210,6 +210,9 @@ pub struct Env<'a> {
     /// On a grid of ray hits: each point's incoming ray cone, its width taken at the hit
     /// (rays cast from the point start with this footprint). None elsewhere.
     pub cones: Option<&'a [crate::ray::Cone]>,
+    /// The displacement shader's output parameters on this grid (message passing:
+    /// `displacement("name", var)` in the surface shader).
+    pub displacement_outputs: &'a [crate::shade::GridVar],
 }
 
 /// Ray queries from shaders, answered by the shading system over the frame's ray geometry.

@@ -57,6 +57,9 @@ pub struct Grid {
     pub primvars: Vec<GridVar>,
     /// Shader output variables after shading (for arbitrary output variables in Display).
     pub outputs: Vec<GridVar>,
+    /// The displacement shader's output parameters after it ran, for the surface shader's
+    /// message passing (`displacement("name", var)`, RISpec §15.8).
+    pub displacement_outputs: Vec<GridVar>,
     /// Motion blur: the grid's positions at each key over the shutter (None when still).
     pub motion: Option<Box<GridMotion>>,
 }
@@ -101,6 +104,7 @@ impl Grid {
             oi: vec![Vec3::ONE; n],
             primvars: Vec::new(),
             outputs: Vec::new(),
+            displacement_outputs: Vec::new(),
             motion: None,
         }
     }
@@ -154,6 +158,7 @@ impl Grid {
             oi: pick(&self.oi, idx),
             primvars: self.primvars.iter().map(pick_var).collect(),
             outputs: Vec::new(),
+            displacement_outputs: self.displacement_outputs.iter().map(pick_var).collect(),
             motion: None,
         }
     }

@@ -1975,6 +1975,9 @@ fn texture_call(
             "filter" => params.filter = v.s().to_string(),
             "samples" => params.samples = v.f().first(),
             "bias" => params.bias = v.f().first(),
+            // PRMan's area-shadow corners and its gap bias shape the penumbra it computes
+            // from several maps; arbor filters each map by itself (see the README).
+            "source" | "gapbias" if f == Shadow => {}
             other => {
                 let msg = format!("texture parameter \"{other}\" is not supported; ignored");
                 ex.warn(span, msg);
@@ -2088,7 +2091,7 @@ fn texture_call(
                         *p = world_from_camera.transform_point3(*p);
                     }
                 }
-                tex.shadow(&name, &q, &params, &mut buf)
+                shadow_maps(tex, &name, &q, &params, &mut buf)
             } else {
                 tex.environment(&name, chan, nchan, &q, &params, &mut buf)
             }
@@ -2119,6 +2122,37 @@ fn texture_call(
         format!("texture \"{name}\" is not available; using {missing} for every lookup"),
     );
     default_texture(f, n, missing, dst, ex)
+}
+
+/// `shadow()` over `names`: one map, or PRMan's comma-separated list of maps rendered from
+/// points across an area light, whose results are averaged (the fraction of the maps that
+/// see the point in shadow). False when no map of the list opens.
+fn shadow_maps(
+    tex: &dyn crate::shade::exec::TextureLookup,
+    names: &str,
+    q: &[[Vec3; 5]],
+    params: &crate::shade::exec::TextureParams,
+    out: &mut [f32],
+) -> bool {
+    if !names.contains(',') {
+        return tex.shadow(names, q, params, out);
+    }
+    let mut one = vec![0f32; out.len()];
+    let mut opened = 0usize;
+    out.fill(0.0);
+    for name in names.split(',').map(str::trim).filter(|m| !m.is_empty()) {
+        if tex.shadow(name, q, params, &mut one) {
+            opened += 1;
+            for (o, v) in out.iter_mut().zip(&one) {
+                *o += v;
+            }
+        }
+    }
+    if opened > 1 {
+        let w = 1.0 / opened as f32;
+        out.iter_mut().for_each(|o| *o *= w);
+    }
+    opened > 0
 }
 
 fn default_texture(f: Builtin, n: usize, fill: f32, dst: Reg, ex: &Exec) -> Slot {
@@ -2179,6 +2213,26 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             None => (ex.env.info)(&which, &name),
         },
         "attribute" | "option" | "rendererinfo" | "rayinfo" => (ex.env.info)(&which, &name),
+        "displacement" => {
+            let Some(gv) = ex.env.displacement_outputs.iter().find(|v| v.name == name) else {
+                return false;
+            };
+            let Some((slot, &r)) = displacement_message(gv, &ty, ex.n).zip(outs.first()) else {
+                return false;
+            };
+            // A uniform destination takes the first point's value.
+            let slot = if ex.prog.regs[r as usize].varying || !slot.is_varying() {
+                slot
+            } else {
+                match slot {
+                    Slot::VF(v) => Slot::F(v.first().copied().unwrap_or(0.0)),
+                    Slot::VT(v) => Slot::T(v.first().copied().unwrap_or(Vec3::ZERO)),
+                    other => other,
+                }
+            };
+            set_out(ex, r, slot);
+            return true;
+        }
         other => {
             ex.warn(
                 ex.prog.span,
@@ -2234,6 +2288,26 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             }
             true
         }
+    }
+}
+
+/// The value of the displacement shader's output `gv` for a destination of type `ty`
+/// (`"float"`, or a colour/point/vector/normal taking any triple): None when the two do not
+/// fit, as RISpec's message passing reports a variable of another type as not found.
+fn displacement_message(gv: &crate::shade::GridVar, ty: &str, n: usize) -> Option<Slot> {
+    let w = gv.width();
+    let at = |i: usize, k: usize| {
+        let i = if gv.uniform { 0 } else { i };
+        gv.floats.get(i * w + k).copied().unwrap_or(0.0)
+    };
+    match (ty, w) {
+        ("float", 1) => Some(Slot::VF((0..n).map(|i| at(i, 0)).collect())),
+        ("color" | "point" | "vector" | "normal", 3) => Some(Slot::VT(
+            (0..n)
+                .map(|i| Vec3::new(at(i, 0), at(i, 1), at(i, 2)))
+                .collect(),
+        )),
+        _ => None,
     }
 }
 

@@ -300,8 +300,9 @@ impl<'a> ShadeSystem<'a> {
     /// A surface shader that could not be had (not found, or broken) is stood in for by a
     /// standard shader with the parameters the two share (`Ka`, `Kd`, …), chosen by what the
     /// scene says of it: `plastic` when its instance gives plastic's specular parameters or its
-    /// name says plastic, `metal` when its name says metal, `matte` when its name says matte or
-    /// its instance gives diffuse weights (`Ka`, `Kd`). Those keep the scene's lighting design
+    /// name says plastic (or Maya's `blinn`/`phong`, which MayaMan, Liquid and RfM exports name
+    /// their shaders after: `mms_blinn1`), `metal` when its name says metal, `matte` when its
+    /// name says matte or Maya's `lambert`, or its instance gives diffuse weights (`Ka`, `Kd`). Those keep the scene's lighting design
     /// (a missing `RCMatte` under a spotlight still shows the spot). Any other shader — a
     /// custom look nothing hints at (`saturn3`, a star field) — and any sphere around the camera
     /// (a sky dome, whose shaders emit rather than reflect) get `defaultsurface`, its colour
@@ -317,11 +318,15 @@ impl<'a> ShadeSystem<'a> {
         let lower = s.name.to_ascii_lowercase();
         let name = if encloses_eye(prim, camera) {
             "defaultsurface"
-        } else if given(&["Ks", "roughness", "specularcolor"]) || lower.contains("plastic") {
+        } else if given(&["Ks", "roughness", "specularcolor"])
+            || ["plastic", "blinn", "phong"]
+                .iter()
+                .any(|w| lower.contains(w))
+        {
             "plastic"
         } else if lower.contains("metal") {
             "metal"
-        } else if lower.contains("matte") || given(&["Ka", "Kd"]) {
+        } else if lower.contains("matte") || lower.contains("lambert") || given(&["Ka", "Kd"]) {
             "matte"
         } else {
             "defaultsurface"
@@ -463,6 +468,24 @@ impl<'a> ShadeSystem<'a> {
         if let Some(g) = prog.global("N") {
             grid.n = own_vt(&mut regs[g.reg as usize], grid.len());
         }
+        // Output parameters stay with the grid: the surface shader may ask for them by
+        // message passing (`displacement("hump", h)`).
+        grid.displacement_outputs = prog
+            .params
+            .iter()
+            .filter(|par| par.output && par.array.is_none())
+            .filter(|par| {
+                matches!(
+                    par.ty,
+                    BaseType::Float
+                        | BaseType::Color
+                        | BaseType::Point
+                        | BaseType::Vector
+                        | BaseType::Normal
+                )
+            })
+            .map(|par| slot_to_gridvar(&par.name, par.ty, &regs[par.reg as usize], grid.len()))
+            .collect();
         for (name, slot) in ["s", "t"]
             .iter()
             .filter_map(|n| prog.global(n).map(|g| (*n, &regs[g.reg as usize])))
@@ -1316,6 +1339,7 @@ impl<'a> ShadeSystem<'a> {
             seed: ctx.seed,
             rays: Some(&tracer),
             cones: ctx.cones,
+            displacement_outputs: &grid.displacement_outputs,
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);

@@ -3257,6 +3257,27 @@ impl<'a> Lowerer<'a> {
                 );
                 break;
             }
+            // PRMan's area shadows: `"source"` is followed by the four corners of the light
+            // (`shadow(maps, Ps, "source", P1, P2, P3, P4, …)`); each becomes a pair.
+            let source =
+                name == "shadow" && matches!(&args[k].kind, ExprKind::Str(s) if s == "source");
+            if source {
+                let mut corners = 0;
+                while corners < 4
+                    && args
+                        .get(k + 1 + corners)
+                        .is_some_and(|a| !self.is_string_expr(a))
+                {
+                    let pv = self.expr(&args[k + 1 + corners], Some(BaseType::Point));
+                    regs.push(pn.reg);
+                    regs.push(pv.reg);
+                    corners += 1;
+                }
+                if corners > 0 {
+                    k += 1 + corners;
+                    continue;
+                }
+            }
             let Some(val) = args.get(k + 1) else {
                 self.diags.push(
                     Diag::error("sl::call", format!("`{name}` parameter without a value"))
@@ -3401,7 +3422,13 @@ impl<'a> Lowerer<'a> {
             }
         };
         let n = var.array.unwrap_or(1);
-        let varying = name == "lightsource" || var.varying;
+        // Values passed from another shader vary over the grid: the variable receiving one
+        // becomes varying (a `float h = 0` read by `displacement("hump", h)` would otherwise
+        // keep one value per grid).
+        let varying = matches!(
+            name,
+            "lightsource" | "displacement" | "surface" | "atmosphere" | "incident" | "opposite"
+        ) || var.varying;
         let tys = self.const_val(Const::S(Arc::from(var.ty.name())), BaseType::String);
         regs.push(tys.reg);
         let mut temps = Vec::new();
