@@ -2165,6 +2165,53 @@ mod tests {
         }
     }
 
+    /// The peak of the memory statistic (one thread, so the order is fixed) for a 32×32
+    /// orthographic frame in 16-pixel buckets with `layers` opaque quads stacked over the
+    /// middle of each bucket row in `rows`, finely diced.
+    fn stacked_peak(rows: &[usize], layers: usize) -> u64 {
+        let mut a = attrs(Vec3::new(0.5, 0.6, 0.7), Vec3::ONE);
+        a.shading_rate = 0.25;
+        let s = scene(32, 32, Projection::Orthographic, vec![a]);
+        let mut quads = Vec::new();
+        for &row in rows {
+            // Screen y in [0.2, 0.8] or [−0.8, −0.2]: raster rows 3–13 or 19–29, one bucket
+            // row each (with the box filter's 1-pixel margin).
+            let (y0, y1) = if row == 0 { (0.2, 0.8) } else { (-0.8, -0.2) };
+            for k in 0..layers {
+                quads.push(Quad::rect(-0.9, y0, 0.9, y1, 2.0 + k as f32, 0));
+            }
+        }
+        let stats = Stats::new();
+        let opts = RenderOptions {
+            threads: 1,
+            bucket_size: Some([16, 16]),
+            stats: Some(&stats),
+            ..Default::default()
+        };
+        let (_, diags) = render(&s, &quads, &Constant, &opts);
+        assert!(!diags.has_errors());
+        assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
+        Stats::get(&stats.peak_bytes)
+    }
+
+    #[test]
+    fn a_bucket_rows_grids_are_gone_before_the_next_rows_are_diced() {
+        let empty = stacked_peak(&[], 0);
+        let one = stacked_peak(&[0], 8);
+        let other = stacked_peak(&[1], 8);
+        let both = stacked_peak(&[0, 1], 8);
+        // What one row's grids hold at most (the film and sample buffers are in `empty`).
+        let row = one.max(other) - empty;
+        assert!(row > 100_000, "{row} bytes: the stack is finely diced");
+        // Each grid's points are dropped by the last bucket hiding it, before the next row
+        // is diced: two rows hold what the larger one does, plus the first row's hidden
+        // samples (waiting for the filter), never both rows' grids.
+        assert!(
+            both - one.max(other) < row / 4,
+            "two rows {both}, one {one} / {other}, none {empty}"
+        );
+    }
+
     #[test]
     fn finished_scanlines_are_handed_out_in_order_while_rendering() {
         /// Keeps a copy of every band as it was when handed out.
