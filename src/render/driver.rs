@@ -532,18 +532,20 @@ impl GridSource for Source<'_, '_> {
         self.got
             .get_or_init(|| {
                 let mut st = self.grid.state();
-                match &*st {
-                    GridState::Shaded(g) => g.clone(),
-                    // Not reached: a grid is released only after its last bucket.
-                    GridState::Released { .. } => None,
-                    GridState::Pending(_) => {
-                        let GridState::Pending(p) =
-                            std::mem::replace(&mut *st, GridState::Shaded(None))
-                        else {
-                            unreachable!("matched above")
-                        };
+                match std::mem::replace(&mut *st, GridState::Shaded(None)) {
+                    GridState::Pending(p) => {
                         let g = self.frame.shade(p, self.grid.zmin).map(Arc::from);
                         *st = GridState::Shaded(g.clone());
+                        g
+                    }
+                    other => {
+                        // Released gives None, but a grid is released only after its last
+                        // bucket, so no bucket asks then.
+                        let g = match &other {
+                            GridState::Shaded(g) => g.clone(),
+                            _ => None,
+                        };
+                        *st = other;
                         g
                     }
                 }

@@ -106,7 +106,7 @@ impl<T: Bits> Col<T> {
             Col::PerRow(rows) => {
                 let mut out = Vec::with_capacity(n);
                 for x in rows {
-                    out.extend(std::iter::repeat_n(x, nu));
+                    out.resize(out.len() + nu, x);
                 }
                 out
             }
