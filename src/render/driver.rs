@@ -10,7 +10,9 @@
 //!   (in parallel over buckets) from the grids overlapping them, then grids no later row
 //!   needs are freed — memory holds only the grids overlapping the open rows. A grid's
 //!   surface is shaded when the first bucket hiding it asks for it (a [`LazyGrid`]): a grid
-//!   behind every opaque sample of each bucket it overlaps is never shaded. The surfaces
+//!   behind every opaque sample of each bucket it overlaps is never shaded, and a grid's
+//!   points (diced or shaded) are dropped as soon as the last bucket it overlaps is hidden
+//!   (only its small record waits for the end of its last row). The surfaces
 //!   of row r + 1 are split, diced and displaced alongside the hiding of row r; the tile of a
 //!   bucket of row r − 1 is filtered during the hiding of row r, by the thread that hides the
 //!   last bucket of row r within its reach, and the row's tiles go into the film (one
@@ -25,7 +27,7 @@
 use std::cell::Cell;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::Instant;
 
 use glam::Vec3;
@@ -422,11 +424,22 @@ struct LazyGrid {
     /// Holds the shaded grid's [`ShadedGrid::bound`].
     bound: [f32; 4],
     moving: bool,
-    /// The grid and what shading needs, until it is shaded.
-    pending: Mutex<Option<Pending>>,
-    /// The shaded grid (None when nothing of it is left to hide), set by the first bucket
-    /// that asks; buckets asking meanwhile wait for it.
-    shaded: OnceLock<Option<Box<ShadedGrid>>>,
+    /// Buckets overlapping the grid not yet hidden: the one that brings it to 0 releases
+    /// the grid's points (no other bucket will ask for them).
+    left: AtomicUsize,
+    /// The grid: waiting for its shader, shaded, or released. The first bucket asking
+    /// shades it holding the lock; buckets asking meanwhile wait for it.
+    state: Mutex<GridState>,
+}
+
+enum GridState {
+    Pending(Pending),
+    /// None when nothing of it is left to hide.
+    Shaded(Option<Arc<ShadedGrid>>),
+    /// Every bucket overlapping it is hidden; whether it was ever shaded.
+    Released {
+        shaded: bool,
+    },
 }
 
 /// A grid waiting for its surface shader.
@@ -440,15 +453,50 @@ struct Pending {
     bytes: usize,
 }
 
-impl LazyGrid {
+impl GridState {
     /// Bytes held: the diced grid until it is shaded, then the shaded grid.
     fn bytes(&self) -> usize {
-        match self.shaded.get() {
-            Some(g) => g.as_ref().map_or(0, |g| g.bytes()),
-            None => self
-                .pending
-                .lock()
-                .map_or(0, |p| p.as_ref().map_or(0, |p| p.bytes)),
+        match self {
+            GridState::Pending(p) => p.bytes,
+            GridState::Shaded(g) => g.as_ref().map_or(0, |g| g.bytes()),
+            GridState::Released { .. } => 0,
+        }
+    }
+    fn shaded(&self) -> bool {
+        match self {
+            GridState::Pending(_) => false,
+            GridState::Shaded(_) => true,
+            GridState::Released { shaded } => *shaded,
+        }
+    }
+}
+
+impl LazyGrid {
+    /// The state, even after a panic elsewhere while it was held (it is never left half
+    /// updated: each change is one assignment).
+    fn state(&self) -> MutexGuard<'_, GridState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    /// Bytes held (see [`GridState::bytes`]).
+    fn bytes(&self) -> usize {
+        self.state().bytes()
+    }
+    /// Whether the surface shader ran on the grid.
+    fn was_shaded(&self) -> bool {
+        self.state().shaded()
+    }
+    /// One more bucket overlapping the grid is hidden; after the last, its points are
+    /// dropped (a bucket still holding the shaded grid keeps it until it lets go).
+    fn bucket_done(&self, stats: &Stats) {
+        if self.left.fetch_sub(1, Ordering::AcqRel) == 1 {
+            let gone = {
+                let mut st = self.state();
+                stats.free(st.bytes());
+                let shaded = st.shaded();
+                std::mem::replace(&mut *st, GridState::Released { shaded })
+            };
+            // Freed outside the lock.
+            drop(gone);
         }
     }
 }
@@ -463,6 +511,8 @@ thread_local! {
 struct Source<'k, 'f> {
     frame: &'k Frame<'f>,
     grid: &'k LazyGrid,
+    /// The shaded grid once this bucket has asked for it.
+    got: OnceLock<Option<Arc<ShadedGrid>>>,
 }
 
 impl GridSource for Source<'_, '_> {
@@ -479,11 +529,26 @@ impl GridSource for Source<'_, '_> {
         self.grid.moving
     }
     fn shaded(&self) -> Option<&ShadedGrid> {
-        self.grid
-            .shaded
+        self.got
             .get_or_init(|| {
-                let p = self.grid.pending.lock().ok().and_then(|mut p| p.take())?;
-                self.frame.shade(p, self.grid.zmin)
+                let mut st = self.grid.state();
+                match std::mem::replace(&mut *st, GridState::Shaded(None)) {
+                    GridState::Pending(p) => {
+                        let g = self.frame.shade(p, self.grid.zmin).map(Arc::from);
+                        *st = GridState::Shaded(g.clone());
+                        g
+                    }
+                    other => {
+                        // Released gives None, but a grid is released only after its last
+                        // bucket, so no bucket asks then.
+                        let g = match &other {
+                            GridState::Shaded(g) => g.clone(),
+                            _ => None,
+                        };
+                        *st = other;
+                        g
+                    }
+                }
             })
             .as_deref()
     }
@@ -919,14 +984,15 @@ impl Frame<'_> {
                     zmin,
                     bound: pre_bound,
                     moving,
-                    pending: Mutex::new(Some(Pending {
+                    // Set when the grid is placed in its buckets.
+                    left: AtomicUsize::new(0),
+                    state: Mutex::new(GridState::Pending(Pending {
                         grid,
                         prim,
                         trimmed,
                         info,
                         bytes,
                     })),
-                    shaded: OnceLock::new(),
                 };
                 (Outcome::Grid(Box::new(lazy)), Vec::new())
             }
@@ -993,7 +1059,7 @@ impl Frame<'_> {
 
     /// Shades a grid's surface (`zmin` the lower bound its hiders were promised) and projects
     /// it; None when nothing of it is left to hide.
-    fn shade(&self, p: Pending, zmin: f32) -> Option<Box<ShadedGrid>> {
+    fn shade(&self, p: Pending, zmin: f32) -> Option<ShadedGrid> {
         let Pending {
             grid,
             prim,
@@ -1045,7 +1111,7 @@ impl Frame<'_> {
             return None;
         }
         self.stats.alloc(sg.bytes());
-        Some(Box::new(sg))
+        Some(sg)
     }
 
     /// A surface shader moved points nearer the camera than the displacement bound allows:
@@ -1528,9 +1594,13 @@ fn render_inner(
                                 continue;
                             };
                             stats.alloc(g.bytes());
+                            let rows = (rows.0.max(row), rows.1.max(row));
+                            // Every bucket of these rows and columns is given the grid.
+                            let buckets = (rows.1 - rows.0 + 1) * (cols.1 - cols.0 + 1);
+                            g.left.store(buckets, Ordering::Relaxed);
                             kept.push(Kept {
                                 grid: g,
-                                rows: (rows.0.max(row), rows.1.max(row)),
+                                rows,
                                 cols,
                             });
                         }
@@ -1591,6 +1661,7 @@ fn render_inner(
                     .map(|k| Source {
                         frame: &frame,
                         grid: &k.grid,
+                        got: OnceLock::new(),
                     })
                     .collect();
                 let grids: Vec<&dyn GridSource> =
@@ -1640,6 +1711,13 @@ fn render_inner(
                         Hidden::Samples(buf)
                     }
                 };
+                // This bucket is done with its grids: the last bucket of each drops it.
+                drop(grids);
+                for src in sources {
+                    let grid = src.grid;
+                    drop(src);
+                    grid.bucket_done(stats);
+                }
                 stats.alloc(h.bytes());
                 let _ = slots[col].set(h);
                 let Some(f) = frow else {
@@ -1715,8 +1793,10 @@ fn render_inner(
         let (live, gone): (Vec<Kept>, Vec<Kept>) = kept.into_iter().partition(|k| k.rows.1 > row);
         kept = live;
         for k in &gone {
+            // Released by their last bucket already, unless a bucket never came (none
+            // should): 0 bytes then.
             stats.free(k.grid.bytes());
-            if k.grid.shaded.get().is_none() {
+            if !k.grid.was_shaded() {
                 Stats::add(&stats.grids_unshaded, 1);
             }
         }
@@ -2085,6 +2165,53 @@ mod tests {
                 behind + Stats::get(&wall.grids_unshaded)
             );
         }
+    }
+
+    /// The peak of the memory statistic (one thread, so the order is fixed) for a 32×32
+    /// orthographic frame in 16-pixel buckets with `layers` opaque quads stacked over the
+    /// middle of each bucket row in `rows`, finely diced.
+    fn stacked_peak(rows: &[usize], layers: usize) -> u64 {
+        let mut a = attrs(Vec3::new(0.5, 0.6, 0.7), Vec3::ONE);
+        a.shading_rate = 0.25;
+        let s = scene(32, 32, Projection::Orthographic, vec![a]);
+        let mut quads = Vec::new();
+        for &row in rows {
+            // Screen y in [0.2, 0.8] or [−0.8, −0.2]: raster rows 3–13 or 19–29, one bucket
+            // row each (with the box filter's 1-pixel margin).
+            let (y0, y1) = if row == 0 { (0.2, 0.8) } else { (-0.8, -0.2) };
+            for k in 0..layers {
+                quads.push(Quad::rect(-0.9, y0, 0.9, y1, 2.0 + k as f32, 0));
+            }
+        }
+        let stats = Stats::new();
+        let opts = RenderOptions {
+            threads: 1,
+            bucket_size: Some([16, 16]),
+            stats: Some(&stats),
+            ..Default::default()
+        };
+        let (_, diags) = render(&s, &quads, &Constant, &opts);
+        assert!(!diags.has_errors());
+        assert_eq!(Stats::get(&stats.live_bytes), 0, "every grid was freed");
+        Stats::get(&stats.peak_bytes)
+    }
+
+    #[test]
+    fn a_bucket_rows_grids_are_gone_before_the_next_rows_are_diced() {
+        let empty = stacked_peak(&[], 0);
+        let one = stacked_peak(&[0], 8);
+        let other = stacked_peak(&[1], 8);
+        let both = stacked_peak(&[0, 1], 8);
+        // What one row's grids hold at most (the film and sample buffers are in `empty`).
+        let row = one.max(other) - empty;
+        assert!(row > 100_000, "{row} bytes: the stack is finely diced");
+        // Each grid's points are dropped by the last bucket hiding it, before the next row
+        // is diced: two rows hold what the larger one does, plus the first row's hidden
+        // samples (waiting for the filter), never both rows' grids.
+        assert!(
+            both - one.max(other) < row / 4,
+            "two rows {both}, one {one} / {other}, none {empty}"
+        );
     }
 
     #[test]

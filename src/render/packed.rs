@@ -14,12 +14,18 @@ use glam::Vec3;
 
 use crate::shade::Grid;
 
-/// One per-point column of a waiting grid.
+/// One per-point column of a waiting grid (`nu` points a row).
 #[derive(Debug)]
 enum Col<T> {
     Each(Vec<T>),
     /// Every point the same value (`usize` points).
     Same(T, usize),
+    /// One value per grid row: every point of row `j` has the bits of `rows[j]` (u-only
+    /// variation is absent: v, dPdu of a bilinear patch).
+    PerRow(Vec<T>),
+    /// One value per grid column: every row has the bits of the first (u, dPdv of a bilinear
+    /// patch).
+    PerColumn(Vec<T>),
     /// The same bits as the column it was packed against.
     Like,
 }
@@ -57,35 +63,67 @@ fn same_bits<T: Bits>(a: &[T], b: &[T]) -> bool {
 }
 
 impl<T: Bits> Col<T> {
-    /// `v`, as a reference when it has the bits of `like`.
-    fn pack_like(v: Vec<T>, like: &[T]) -> Col<T> {
+    /// `v`, as a reference when it has the bits of `like`, else as [`Col::pack`] does.
+    fn pack_like(v: Vec<T>, like: &[T], nu: usize, nv: usize) -> Col<T> {
         if !v.is_empty() && same_bits(&v, like) {
             Col::Like
         } else {
-            Col::Each(v)
+            Col::pack(v, nu, nv)
         }
     }
 
-    /// `v`, as one value when every point has the same bits.
-    fn pack_same(v: Vec<T>) -> Col<T> {
-        match v.first() {
-            Some(f) if same_bits(&v[1..], &v[..v.len() - 1]) => Col::Same(*f, v.len()),
-            _ => Col::Each(v),
+    /// `v` (`nv` rows of `nu` points) in the smallest of the forms that keep its bits: one value,
+    /// one per row, one per column, or every point. Each test stops at the first point that
+    /// breaks it, so a column that varies both ways costs little more than a look.
+    fn pack(v: Vec<T>, nu: usize, nv: usize) -> Col<T> {
+        let n = v.len();
+        if n == 0 {
+            return Col::Each(v);
         }
+        if same_bits(&v[1..], &v[..n - 1]) {
+            return Col::Same(v[0], n);
+        }
+        // The row and column forms rebuild `nu × nv` points: only for columns of that size.
+        if nu == 0 || n != nu * nv {
+            return Col::Each(v);
+        }
+        // Every row equal to the one before it: the first row, repeated.
+        if n > nu && same_bits(&v[nu..], &v[..n - nu]) {
+            return Col::PerColumn(v[..nu].to_vec());
+        }
+        if nu > 1 && v.chunks_exact(nu).all(|r| same_bits(&r[1..], &r[..nu - 1])) {
+            return Col::PerRow(v.iter().step_by(nu).copied().collect());
+        }
+        Col::Each(v)
     }
 
-    /// The column again; `like` is the unpacked column it was packed against.
-    fn unpack(self, like: &[T]) -> Vec<T> {
+    /// The column again (`n` = `nu × nv` points in the row and column forms); `like` is the
+    /// unpacked column it was packed against.
+    fn unpack(self, like: &[T], nu: usize, n: usize) -> Vec<T> {
         match self {
             Col::Each(v) => v,
             Col::Same(x, n) => vec![x; n],
+            Col::PerRow(rows) => {
+                let mut out = Vec::with_capacity(n);
+                for x in rows {
+                    out.resize(out.len() + nu, x);
+                }
+                out
+            }
+            Col::PerColumn(row) => {
+                let mut out = Vec::with_capacity(n);
+                while out.len() < n {
+                    out.extend_from_slice(&row);
+                }
+                out
+            }
             Col::Like => like.to_vec(),
         }
     }
 
     fn bytes(&self) -> usize {
         match self {
-            Col::Each(v) => v.len() * std::mem::size_of::<T>(),
+            Col::Each(v) | Col::PerRow(v) | Col::PerColumn(v) => v.len() * std::mem::size_of::<T>(),
             Col::Same(..) | Col::Like => 0,
         }
     }
@@ -114,59 +152,54 @@ pub struct PackedGrid {
 
 impl PackedGrid {
     pub fn pack(mut g: Grid) -> PackedGrid {
+        let (nu, nv) = (g.nu, g.nv);
         let take3 = |v: &mut Vec<Vec3>| std::mem::take(v);
         let take1 = |v: &mut Vec<f32>| std::mem::take(v);
         let p = take3(&mut g.p);
         let ng = take3(&mut g.ng);
         let u = take1(&mut g.u);
         let v = take1(&mut g.v);
-        // Position, normal, derivatives and parameters vary over any grid worth shading.
-        let n = Col::pack_like(take3(&mut g.n), &ng);
-        let i = Col::pack_like(take3(&mut g.i), &p);
-        let s = Col::pack_like(take1(&mut g.s), &u);
-        let t = Col::pack_like(take1(&mut g.t), &v);
-        let cs = Col::pack_same(take3(&mut g.cs));
-        let os = Col::pack_same(take3(&mut g.os));
-        let ci = Col::pack_same(take3(&mut g.ci));
-        let oi = Col::pack_same(take3(&mut g.oi));
-        let dpdu = Col::Each(take3(&mut g.dpdu));
-        let dpdv = Col::Each(take3(&mut g.dpdv));
+        let n = Col::pack_like(take3(&mut g.n), &ng, nu, nv);
+        let i = Col::pack_like(take3(&mut g.i), &p, nu, nv);
+        let s = Col::pack_like(take1(&mut g.s), &u, nu, nv);
+        let t = Col::pack_like(take1(&mut g.t), &v, nu, nv);
         PackedGrid {
-            rest: g,
-            p: Col::Each(p),
-            ng: Col::Each(ng),
+            p: Col::pack(p, nu, nv),
+            ng: Col::pack(ng, nu, nv),
             n,
-            dpdu,
-            dpdv,
-            u: Col::Each(u),
-            v: Col::Each(v),
+            dpdu: Col::pack(take3(&mut g.dpdu), nu, nv),
+            dpdv: Col::pack(take3(&mut g.dpdv), nu, nv),
+            u: Col::pack(u, nu, nv),
+            v: Col::pack(v, nu, nv),
             s,
             t,
-            cs,
-            os,
+            cs: Col::pack(take3(&mut g.cs), nu, nv),
+            os: Col::pack(take3(&mut g.os), nu, nv),
             i,
-            ci,
-            oi,
+            ci: Col::pack(take3(&mut g.ci), nu, nv),
+            oi: Col::pack(take3(&mut g.oi), nu, nv),
+            rest: g,
         }
     }
 
     /// The grid as it was packed.
     pub fn unpack(self) -> Grid {
         let mut g = self.rest;
-        g.p = self.p.unpack(&[]);
-        g.ng = self.ng.unpack(&[]);
-        g.u = self.u.unpack(&[]);
-        g.v = self.v.unpack(&[]);
-        g.n = self.n.unpack(&g.ng);
-        g.i = self.i.unpack(&g.p);
-        g.s = self.s.unpack(&g.u);
-        g.t = self.t.unpack(&g.v);
-        g.cs = self.cs.unpack(&[]);
-        g.os = self.os.unpack(&[]);
-        g.ci = self.ci.unpack(&[]);
-        g.oi = self.oi.unpack(&[]);
-        g.dpdu = self.dpdu.unpack(&[]);
-        g.dpdv = self.dpdv.unpack(&[]);
+        let (nu, n) = (g.nu, g.nu * g.nv);
+        g.p = self.p.unpack(&[], nu, n);
+        g.ng = self.ng.unpack(&[], nu, n);
+        g.u = self.u.unpack(&[], nu, n);
+        g.v = self.v.unpack(&[], nu, n);
+        g.n = self.n.unpack(&g.ng, nu, n);
+        g.i = self.i.unpack(&g.p, nu, n);
+        g.s = self.s.unpack(&g.u, nu, n);
+        g.t = self.t.unpack(&g.v, nu, n);
+        g.cs = self.cs.unpack(&[], nu, n);
+        g.os = self.os.unpack(&[], nu, n);
+        g.ci = self.ci.unpack(&[], nu, n);
+        g.oi = self.oi.unpack(&[], nu, n);
+        g.dpdu = self.dpdu.unpack(&[], nu, n);
+        g.dpdv = self.dpdv.unpack(&[], nu, n);
         g
     }
 
@@ -232,16 +265,46 @@ mod tests {
         g.du = 0.25;
         let want = bits(&g);
         let packed = PackedGrid::pack(g.clone());
-        // p, ng, dpdu, dpdv, u, v, t, cs and os are kept; n, i, s, ci and oi are not.
+        // p, ng, dpdu, cs and os are kept whole; u one value per column, v and t one per
+        // row; dpdv one value; n, i, s, ci and oi none.
         let n = nu * nv;
-        assert_eq!(packed.bytes(), n * (12 * 6 + 4 * 3));
+        assert_eq!(packed.bytes(), n * 12 * 5 + 4 * nu + 4 * nv * 2);
         assert!(matches!(packed.n, Col::Like) && matches!(packed.i, Col::Like));
-        assert!(matches!(packed.s, Col::Like) && matches!(packed.t, Col::Each(_)));
+        assert!(
+            matches!(packed.s, Col::Like) && matches!(&packed.t, Col::PerRow(r) if r.len() == nv)
+        );
+        assert!(matches!(&packed.u, Col::PerColumn(r) if r.len() == nu));
+        assert!(matches!(packed.dpdv, Col::Same(..)) && matches!(packed.dpdu, Col::Each(_)));
         assert!(matches!(packed.ci, Col::Same(..)) && matches!(packed.oi, Col::Same(..)));
         assert!(matches!(packed.cs, Col::Each(_)) && matches!(packed.os, Col::Each(_)));
         assert_eq!(bits(&packed.unpack()), want);
         // An empty grid round-trips too.
         let e = Grid::default();
         assert_eq!(bits(&PackedGrid::pack(e.clone()).unpack()), bits(&e));
+    }
+
+    #[test]
+    fn rows_and_columns_pack_only_when_every_point_agrees() {
+        let (nu, nv) = (4, 3);
+        let per_row: Vec<f32> = (0..nu * nv).map(|k| (k / nu) as f32).collect();
+        let per_col: Vec<f32> = (0..nu * nv).map(|k| (k % nu) as f32).collect();
+        let mut one_off = per_row.clone();
+        one_off[nu * 2 + 3] = -0.0;
+        let mut one_off_col = per_col.clone();
+        // +0 against −0 in the last row: the same value, not the same bits.
+        one_off_col[nu * 2] = -0.0;
+        for (v, want_bytes) in [
+            (per_row.clone(), 4 * nv),
+            (per_col.clone(), 4 * nu),
+            (one_off, 4 * nu * nv),
+            (one_off_col, 4 * nu * nv),
+            // A column not of the grid's size is kept whole.
+            (per_row[..nu * 2].to_vec(), 4 * nu * 2),
+        ] {
+            let c = Col::pack(v.clone(), nu, nv);
+            assert_eq!(c.bytes(), want_bytes);
+            let back = c.unpack(&[], nu, nu * nv);
+            assert_eq!(words(&back), words(&v));
+        }
     }
 }

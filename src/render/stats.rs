@@ -22,32 +22,47 @@ pub enum Stage {
 
 const STAGE_NAMES: [&str; 5] = ["dice", "displace", "shade", "hide", "filter"];
 
+/// A counter written by every render thread, alone in its cache lines: counters next to
+/// each other would make each thread's increments evict the line the other thread is
+/// writing (false sharing), a cost paid per grid and per bucket. 128 bytes, since x86
+/// fetches lines in adjacent pairs. Used as an `AtomicU64` (it dereferences to one).
+#[derive(Debug, Default)]
+#[repr(align(128))]
+pub struct Counter(AtomicU64);
+
+impl std::ops::Deref for Counter {
+    type Target = AtomicU64;
+    fn deref(&self) -> &AtomicU64 {
+        &self.0
+    }
+}
+
 #[derive(Debug, Default)]
 pub struct Stats {
     pub primitives: AtomicU64,
     pub surfaces: AtomicU64,
-    pub culled: AtomicU64,
-    pub splits: AtomicU64,
+    pub culled: Counter,
+    pub splits: Counter,
     /// Grids diced, and their micropolygons.
-    pub grids: AtomicU64,
-    pub micropolygons: AtomicU64,
+    pub grids: Counter,
+    pub micropolygons: Counter,
     /// Points surface-shaded (grids are shaded only when a bucket may see them).
-    pub shaded_points: AtomicU64,
+    pub shaded_points: Counter,
     /// Grids diced but never surface-shaded: every bucket they overlap culled them before
     /// shading (behind every opaque sample).
-    pub grids_unshaded: AtomicU64,
-    pub samples_tested: AtomicU64,
-    pub samples_hit: AtomicU64,
+    pub grids_unshaded: Counter,
+    pub samples_tested: Counter,
+    pub samples_hit: Counter,
     /// Grids a bucket skipped whole: behind every sample's opaque front.
-    pub grids_occluded: AtomicU64,
-    pub buckets: AtomicU64,
+    pub grids_occluded: Counter,
+    pub buckets: Counter,
     /// Nanoseconds per [`Stage`].
-    pub stage_ns: [AtomicU64; 5],
+    pub stage_ns: [Counter; 5],
     /// Wall-clock time of the whole frame.
     pub wall_ns: AtomicU64,
     /// Bytes held now / at most by the film, shaded grids and sample buffers.
-    pub live_bytes: AtomicU64,
-    pub peak_bytes: AtomicU64,
+    pub live_bytes: Counter,
+    pub peak_bytes: Counter,
     /// Render threads, for the idle time of the [`Phase`]s (the output phase has one).
     pub threads: AtomicU64,
     /// Per [`Phase`]: wall-clock nanoseconds, and the nanoseconds the process's threads

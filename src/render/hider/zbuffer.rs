@@ -703,6 +703,8 @@ impl ZBuffer {
         let mut visible = std::mem::take(&mut scratch.visible);
         let kernel = QuadKernel::pick();
         let mut order = Order::new(unshaded);
+        // Counted here, added to the shared statistics once per bucket.
+        let mut occluded = 0u64;
         loop {
             if !b.keep_second
                 && b.uncovered == 0
@@ -714,13 +716,13 @@ impl ZBuffer {
             let g = match order.next(far) {
                 Next::Hide(g) => g,
                 Next::Culled => {
-                    Stats::add(&stats.grids_occluded, 1);
+                    occluded += 1;
                     continue;
                 }
                 Next::Done => break,
             };
             if g.zmin > far {
-                Stats::add(&stats.grids_occluded, 1);
+                occluded += 1;
                 continue;
             }
             if g.motion.is_some() || cfg.dof.is_some() {
@@ -771,6 +773,7 @@ impl ZBuffer {
             };
         stats.alloc(bytes);
         stats.free(bytes);
+        Stats::add(&stats.grids_occluded, occluded);
         Stats::add(&stats.samples_tested, b.tested);
         Stats::add(&stats.samples_hit, b.hits);
         scratch.x = b.x;
