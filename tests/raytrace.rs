@@ -656,3 +656,53 @@ WorldEnd
         "footprints {near} and {far}: ratio {ratio}, want 25/15"
     );
 }
+
+/// A hit record's sixteen numbers are its fields in order (N, Ng, dPdu, dPdv, u v s t), and
+/// weighting and summing them lane by lane, as hit shading does, gives each field's
+/// `c0·w0 + c1·w1 + c2·w2 + c3·w3` bit for bit (the same operations in the same order).
+#[test]
+fn hit_records_interpolate_lane_by_lane_as_field_by_field() {
+    use arbor::ray::geometry::HitVertex;
+    use glam::Vec3;
+    let mut h = 5u32;
+    let mut rnd = || {
+        h = arbor::pattern::hash::hash_u32(h);
+        (h as f32 / u32::MAX as f32) * 2.0 - 1.0
+    };
+    for _ in 0..200 {
+        let mut v3 = || Vec3::new(rnd(), rnd(), rnd()) * 7.0;
+        let c: [HitVertex; 4] = std::array::from_fn(|_| HitVertex {
+            n: v3(),
+            ng: v3(),
+            dpdu: v3(),
+            dpdv: v3(),
+            uvst: [v3().x, v3().y, v3().z, v3().x],
+        });
+        let w = [rnd(), rnd(), rnd(), rnd()].map(f32::abs);
+        let f = c.map(|v| v.floats());
+        let lanes: [f32; 16] = std::array::from_fn(|e| {
+            f[0][e] * w[0] + f[1][e] * w[1] + f[2][e] * w[2] + f[3][e] * w[3]
+        });
+        let m3 = |g: fn(&HitVertex) -> Vec3| {
+            g(&c[0]) * w[0] + g(&c[1]) * w[1] + g(&c[2]) * w[2] + g(&c[3]) * w[3]
+        };
+        let mut want = Vec::new();
+        for v in [m3(|v| v.n), m3(|v| v.ng), m3(|v| v.dpdu), m3(|v| v.dpdv)] {
+            want.extend(v.to_array());
+        }
+        for e in 0..4 {
+            want.push(
+                c[0].uvst[e] * w[0]
+                    + c[1].uvst[e] * w[1]
+                    + c[2].uvst[e] * w[2]
+                    + c[3].uvst[e] * w[3],
+            );
+        }
+        assert_eq!(
+            lanes.map(f32::to_bits).to_vec(),
+            want.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(f[0][0].to_bits(), c[0].n.x.to_bits());
+        assert_eq!(f[0][12].to_bits(), c[0].uvst[0].to_bits());
+    }
+}

@@ -54,6 +54,19 @@ pub struct HitVertex {
 
 const _: () = assert!(std::mem::size_of::<HitVertex>() == 64);
 
+impl HitVertex {
+    /// The record's sixteen numbers in field order: N, Ng, dPdu, dPdv, then u v s t (what
+    /// hit shading interpolates, all at once, lane by lane).
+    #[inline(always)]
+    pub fn floats(&self) -> [f32; 16] {
+        let [n, ng, du, dv] = [self.n, self.ng, self.dpdu, self.dpdv];
+        let [u, v, s, t] = self.uvst;
+        [
+            n.x, n.y, n.z, ng.x, ng.y, ng.z, du.x, du.y, du.z, dv.x, dv.y, dv.z, u, v, s, t,
+        ]
+    }
+}
+
 /// A ray grid's `Cs` or `Os`: one value when every vertex holds the same bits (the common
 /// case: a primitive's colour and opacity attributes), else per vertex in a scene-wide array
 /// ([`RayScene::cs`], [`RayScene::os`]) from the grid's first vertex on. A hit interpolates

@@ -312,6 +312,19 @@ fn prefetch_grid(rs: &RayScene, grid: u32) {
     }
 }
 
+/// A point of a grid of hits: where on which ray grid, with its interpolation weights (and
+/// the grid's first shading record, so the fill can prefetch records without reading the
+/// grid).
+#[derive(Clone, Copy, Default)]
+struct HitPoint {
+    grid: u32,
+    first: usize,
+    k: [usize; 4],
+    w: [f32; 4],
+    p: Vec3,
+    i: Vec3,
+}
+
 /// Builds the grid of hits on one primitive, or on primitives that shade as one (all `hits`
 /// come from grids with the same primitive-variable layout, see [`shading_classes`]). With
 /// `triples`, each hit is followed by the surface one ray footprint away along u and along v
@@ -342,74 +355,123 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
             strings: v.strings.clone(),
         })
         .collect();
-    // The points to shade with their interpolation weights, gathered first (a list, not an
-    // iterator of fixed arrays: those were copied whole per hit).
-    // Each with its grid's first shading record (so the loop below can prefetch the
-    // records ahead without reading the grid).
-    let mut pts: Vec<(PendingHit, ([usize; 4], [f32; 4]), usize)> = Vec::with_capacity(n);
+    let at_hit = |hit: &PendingHit| {
+        let rg = &rs.grids[hit.grid as usize];
+        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
+        HitPoint {
+            grid: hit.grid,
+            first: rg.first,
+            k,
+            w,
+            p: hit.p,
+            i: hit.i,
+        }
+    };
+    if !triples {
+        // One point a hit, made as the fill reaches it (no list of copies).
+        fill_points(
+            rs,
+            &mut g,
+            &mut pv,
+            hits.len(),
+            |h| hits[h].grid,
+            |h| at_hit(&hits[h]),
+        );
+        g.primvars = pv;
+        return g;
+    }
+    // The points to shade, gathered first (a hit and its two footprint neighbours).
+    let mut pts: Vec<HitPoint> = Vec::with_capacity(n);
     for (h, hit) in hits.iter().enumerate() {
         if let Some(ahead) = hits.get(h + AHEAD) {
             prefetch_grid(rs, ahead.grid);
         }
         let rg = &rs.grids[hit.grid as usize];
-        let (k, w) = lerp_weights(rg, hit.index, hit.a, hit.b);
-        pts.push((*hit, (k, w), rg.first));
-        if triples {
-            let src = &rg.grid;
-            let qu = src.nu - 1;
-            let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
-            let (x, y) = (
-                i as f32 + hit.a.clamp(0.0, 1.0),
-                j as f32 + hit.b.clamp(0.0, 1.0),
-            );
-            let len = hit.i.length();
-            let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
-            let width = hit.cone.width;
-            let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
-            for (x, y) in [(x + sa, y), (x, y + sb)] {
-                let (k2, w2) = grid_weights(src, x, y);
-                let p = mix3(&src.p, &k2, &w2);
-                // The neighbouring ray of the cone through p: turned by the spread per
-                // width of sideways offset.
-                let off = p - hit.p;
-                let side = off - d * off.dot(d);
-                let turn = if width > 0.0 {
-                    side * (hit.cone.spread / width)
-                } else {
-                    Vec3::ZERO
-                };
-                let mut aux = *hit;
-                aux.p = p;
-                aux.i = (d + turn) * len;
-                pts.push((aux, (k2, w2), rg.first));
-            }
+        let pt = at_hit(hit);
+        let k = pt.k;
+        pts.push(pt);
+        let src = &rg.grid;
+        let qu = src.nu - 1;
+        let (i, j) = (hit.index as usize % qu, hit.index as usize / qu);
+        let (x, y) = (
+            i as f32 + hit.a.clamp(0.0, 1.0),
+            j as f32 + hit.b.clamp(0.0, 1.0),
+        );
+        let len = hit.i.length();
+        let d = if len > 0.0 { hit.i / len } else { Vec3::Z };
+        let width = hit.cone.width;
+        let (sa, sb) = footprint_steps(src, &k, hit.a, hit.b, d, width);
+        for (x, y) in [(x + sa, y), (x, y + sb)] {
+            let (k2, w2) = grid_weights(src, x, y);
+            let p = mix3(&src.p, &k2, &w2);
+            // The neighbouring ray of the cone through p: turned by the spread per width of
+            // sideways offset.
+            let off = p - hit.p;
+            let side = off - d * off.dot(d);
+            let turn = if width > 0.0 {
+                side * (hit.cone.spread / width)
+            } else {
+                Vec3::ZERO
+            };
+            pts.push(HitPoint {
+                k: k2,
+                w: w2,
+                p,
+                i: (d + turn) * len,
+                ..pt
+            });
         }
     }
-    for (h, &(hit, (k, w), _)) in pts.iter().enumerate() {
-        if let Some(&(ahead, (k, _), first)) = pts.get(h + AHEAD) {
+    fill_points(rs, &mut g, &mut pv, pts.len(), |h| pts[h].grid, |h| pts[h]);
+    g.primvars = pv;
+    g
+}
+
+/// Fills points `0..n` of the grid of hits `g` (and its varying primitive variables `pv`)
+/// from the ray grids' shading records, point `h` being `point(h)` (called once each, in
+/// order, `AHEAD` points before it is filled, so its corners' records are prefetched while
+/// the points before it fill) on ray grid `grid_of(h)` (asked for `AHEAD` points earlier
+/// still: `point` reads the grid's size).
+fn fill_points(
+    rs: &RayScene,
+    g: &mut Grid,
+    pv: &mut [GridVar],
+    n: usize,
+    grid_of: impl Fn(usize) -> u32,
+    mut point: impl FnMut(usize) -> HitPoint,
+) {
+    for h in 0..(2 * AHEAD).min(n) {
+        prefetch_grid(rs, grid_of(h));
+    }
+    let mut ring = [HitPoint::default(); AHEAD];
+    for (h, slot) in ring.iter_mut().enumerate().take(n) {
+        *slot = point(h);
+    }
+    for h in 0..n {
+        if h + 2 * AHEAD < n {
+            prefetch_grid(rs, grid_of(h + 2 * AHEAD));
+        }
+        let pt = ring[h % AHEAD];
+        if h + AHEAD < n {
+            let ahead = point(h + AHEAD);
             // Its corners' records: two pairs of neighbours, a cache line each. (Colours
             // and opacities varying per vertex, rare, are not prefetched.)
-            let v = rs.verts.as_ptr().wrapping_add(first);
-            prefetch_span(v.wrapping_add(k[0]), 2);
-            prefetch_span(v.wrapping_add(k[2]), 2);
-            prefetch_grid(rs, ahead.grid);
+            let v = rs.verts.as_ptr().wrapping_add(ahead.first);
+            prefetch_span(v.wrapping_add(ahead.k[0]), 2);
+            prefetch_span(v.wrapping_add(ahead.k[2]), 2);
+            ring[h % AHEAD] = ahead;
         }
-        let rg = &rs.grids[hit.grid as usize];
+        let (k, w) = (pt.k, pt.w);
+        let rg = &rs.grids[pt.grid as usize];
         let src = &rg.grid;
-        g.p[h] = hit.p;
-        g.i[h] = hit.i;
-        let c = corners(rs, rg, &k);
-        let m3 = |f: fn(&HitVertex) -> Vec3| {
-            f(c[0]) * w[0] + f(c[1]) * w[1] + f(c[2]) * w[2] + f(c[3]) * w[3]
-        };
-        g.n[h] = m3(|v| v.n);
-        g.ng[h] = m3(|v| v.ng);
-        g.dpdu[h] = m3(|v| v.dpdu);
-        g.dpdv[h] = m3(|v| v.dpdv);
-        let uvst: [f32; 4] = std::array::from_fn(|e| {
-            c[0].uvst[e] * w[0] + c[1].uvst[e] * w[1] + c[2].uvst[e] * w[2] + c[3].uvst[e] * w[3]
-        });
-        [g.u[h], g.v[h], g.s[h], g.t[h]] = uvst;
+        g.p[h] = pt.p;
+        g.i[h] = pt.i;
+        let f = interpolate(&corners(rs, rg, &k), &w);
+        g.n[h] = Vec3::new(f[0], f[1], f[2]);
+        g.ng[h] = Vec3::new(f[3], f[4], f[5]);
+        g.dpdu[h] = Vec3::new(f[6], f[7], f[8]);
+        g.dpdv[h] = Vec3::new(f[9], f[10], f[11]);
+        [g.u[h], g.v[h], g.s[h], g.t[h]] = [f[12], f[13], f[14], f[15]];
         g.cs[h] = rg.cs.at(&rs.cs, &k, &w);
         g.os[h] = rg.os.at(&rs.os, &k, &w);
         for (dst, sv) in pv.iter_mut().zip(&src.primvars) {
@@ -426,8 +488,39 @@ fn hit_grid(rs: &RayScene, hits: &[PendingHit], triples: bool) -> Grid {
             }
         }
     }
-    g.primvars = pv;
-    g
+}
+
+/// The sixteen numbers of four records (see [`HitVertex::floats`]) weighted by `w` and summed
+/// as `c0·w0 + c1·w1 + c2·w2 + c3·w3`, number by number: the same operations in the same
+/// order as interpolating field by field, so the same bits (on x86-64 four numbers at a
+/// time, SSE being the baseline).
+#[inline(always)]
+fn interpolate(c: &[&HitVertex; 4], w: &[f32; 4]) -> [f32; 16] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        let mut out = [0f32; 16];
+        // SAFETY: a `HitVertex` is 16 `f32`s (repr(C), asserted 64 bytes, fields all f32), so
+        // each load reads 4 of them inside the record; the stores write inside `out`.
+        unsafe {
+            let wv = w.map(|x| _mm_set1_ps(x));
+            for q in 0..4 {
+                let ld =
+                    |v: &HitVertex| _mm_loadu_ps((v as *const HitVertex).cast::<f32>().add(4 * q));
+                let mut acc = _mm_mul_ps(ld(c[0]), wv[0]);
+                acc = _mm_add_ps(acc, _mm_mul_ps(ld(c[1]), wv[1]));
+                acc = _mm_add_ps(acc, _mm_mul_ps(ld(c[2]), wv[2]));
+                acc = _mm_add_ps(acc, _mm_mul_ps(ld(c[3]), wv[3]));
+                _mm_storeu_ps(out.as_mut_ptr().add(4 * q), acc);
+            }
+        }
+        out
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let f = [c[0].floats(), c[1].floats(), c[2].floats(), c[3].floats()];
+        std::array::from_fn(|e| f[0][e] * w[0] + f[1][e] * w[1] + f[2][e] * w[2] + f[3][e] * w[3])
+    }
 }
 
 impl RayTracer for Tracer<'_, '_> {
@@ -471,16 +564,30 @@ impl RayTracer for Tracer<'_, '_> {
         // At most one hit a ray a layer: sized once (growing it copied the hits ~10 times a
         // call).
         let mut pending: Vec<PendingHit> = Vec::with_capacity(n);
+        // A layer's live rays (index, origin, direction, tmin) and their hits, the lists
+        // sized once a call and refilled each layer in one pass.
+        let mut rays: Vec<usize> = Vec::with_capacity(n);
+        let (mut ro, mut rd) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut rt: Vec<f32> = Vec::with_capacity(n);
+        let mut found = Vec::with_capacity(n);
+        let mut hit_cones: Vec<Cone> = Vec::new();
         for _layer in 0..MAX_LAYERS {
             pending.clear();
             // The live rays' closest hits, traced together (their walks interleave, see
             // `Bvh::closest_many`); a hit on a grid rays do not see falls back to the
             // filtered search, as `closest_where` does.
-            let rays: Vec<usize> = (0..n).filter(|&k| live[k]).collect();
-            let ro: Vec<Vec3> = rays.iter().map(|&k| o[k]).collect();
-            let rd: Vec<Vec3> = rays.iter().map(|&k| dir[k]).collect();
-            let rt: Vec<f32> = rd.iter().map(|d| bias / d.length()).collect();
-            let mut found = vec![None; rays.len()];
+            rays.clear();
+            ro.clear();
+            rd.clear();
+            rt.clear();
+            for k in (0..n).filter(|&k| live[k]) {
+                rays.push(k);
+                ro.push(o[k]);
+                rd.push(dir[k]);
+                rt.push(bias / dir[k].length());
+            }
+            found.clear();
+            found.resize(rays.len(), None);
             rs.bvh
                 .closest_many(&ro, &rd, &rt, f32::INFINITY, &mut found);
             for (j, &k) in rays.iter().enumerate() {
@@ -542,10 +649,12 @@ impl RayTracer for Tracer<'_, '_> {
                 let triples = self.sys.hit_wants_differentials(self.scene, prim);
                 let mut g = hit_grid(&rs, group, triples);
                 let per = if triples { 3 } else { 1 };
-                let hit_cones: Vec<Cone> = group
-                    .iter()
-                    .flat_map(|h| std::iter::repeat_n(h.cone, per))
-                    .collect();
+                hit_cones.clear();
+                for h in group {
+                    for _ in 0..per {
+                        hit_cones.push(h.cone);
+                    }
+                }
                 self.sys.shade_ray_hits(
                     self.scene,
                     self.camera,
