@@ -1591,14 +1591,32 @@ fn slot_boxes(
 ) -> bool {
     out.clear();
     let slots = bins.slots();
-    for q in 0..groups {
+    // The groups holding samples with their time intervals. A later slot's times are never
+    // earlier (slots are monotonic in time), so each group's interval reaches at most to the
+    // next group's start: consecutive groups share the corners evaluated there.
+    let mut spans: [(usize, usize, f32, f32); timebins::MAX_SLOTS] =
+        [(0, 0, 0.0, 0.0); timebins::MAX_SLOTS];
+    let mut n = 0;
+    for q in 0..groups.min(timebins::MAX_SLOTS) {
         let (k0, k1) = (q * slots / groups, (q + 1) * slots / groups - 1);
-        let Some((t0, t1)) = bins.interval(k0, k1) else {
-            continue;
-        };
-        let Some(tb) = timebins::motion_bound(g, corner, t0, t1, dof) else {
+        if let Some((t0, t1)) = bins.interval(k0, k1) {
+            spans[n] = (k0, k1, t0, t1);
+            n += 1;
+        }
+    }
+    let Some(&(_, _, first, _)) = spans[..n].first() else {
+        return true;
+    };
+    let mut at_start = timebins::corners(g, corner, first);
+    for i in 0..n {
+        let (k0, k1, t0, t1) = spans[i];
+        let t_end = spans.get(i + 1).filter(|_| i + 1 < n).map_or(t1, |s| s.2);
+        let at_end = timebins::corners(g, corner, t_end);
+        let ends = [at_start, at_end];
+        let Some(tb) = timebins::bound_between(g, corner, &ends, t0, t_end, dof) else {
             return false;
         };
+        at_start = ends[1];
         let gb = [
             tb[0].max(bx[0]),
             tb[1].max(bx[1]),
