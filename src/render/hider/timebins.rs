@@ -326,4 +326,57 @@ mod tests {
         assert_eq!(groups(&g, &corner, &mb, 64), 50);
         assert_eq!(groups(&g, &corner, &[3.0, 2.0, 5.0, 3.0], 64), 1);
     }
+
+    #[test]
+    fn random_motions_stay_in_their_bounds_through_any_lens() {
+        // Many keys at uneven times, corners far from the origin (large rounding), depths
+        // on both sides of the focal plane: every corner at every sampled time and lens
+        // position lies in the bound of any interval holding that time.
+        let mut seed = 99u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let d = Dof {
+            inv_focus: 1.0 / 4.0,
+            raster_k: [37.0, -29.0],
+            screen_k: [0.0, 0.0],
+        };
+        for _ in 0..300 {
+            let nk = 2 + (rnd() * 4.0) as usize;
+            let mut times: Vec<f32> = (0..nk).map(|k| k as f32 / (nk - 1) as f32).collect();
+            for t in times[1..nk - 1].iter_mut() {
+                *t += (rnd() - 0.5) * 0.5 / nk as f32;
+            }
+            let base = [rnd() * 4000.0 - 2000.0, rnd() * 4000.0 - 2000.0];
+            let keys: Vec<[[f32; 2]; 4]> = (0..nk)
+                .map(|_| [0; 4].map(|_| [base[0] + rnd() * 300.0, base[1] + rnd() * 300.0]))
+                .collect();
+            let mut g = grid(&times, &keys);
+            if let Some(mo) = g.motion.as_deref_mut() {
+                for k in mo.depth.iter_mut() {
+                    k.iter_mut().for_each(|q| *q = 1.0 / (0.5 + rnd() * 10.0));
+                }
+            }
+            let corner = [0, 1, 3, 2];
+            let (a, b) = (rnd(), rnd());
+            let (t0, t1) = (a.min(b), a.max(b));
+            for dof in [None, Some(&d)] {
+                let bx = motion_bound(&g, &corner, t0, t1, dof).unwrap();
+                for i in 0..=40 {
+                    let t = t0 + (t1 - t0) * i as f32 / 40.0;
+                    let t = t.clamp(t0, t1);
+                    let lens = [rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0];
+                    let lens = if dof.is_some() { lens } else { [0.0; 2] };
+                    let (p, _) = corners_at(&g, &corner, t, lens, dof);
+                    for c in p {
+                        assert!(
+                            c[0] >= bx[0] && c[0] <= bx[2] && c[1] >= bx[1] && c[1] <= bx[3],
+                            "{c:?} outside {bx:?} at t = {t} in [{t0}, {t1}]"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }
