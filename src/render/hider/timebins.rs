@@ -206,12 +206,11 @@ pub fn bound_between(
     let (mut q_lo, mut q_hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut ok = true;
     let mut add = |p: &[[f32; 2]; 4], q: &[f32; 4]| {
-        for c in 0..4 {
-            let [x, y] = p[c];
-            ok &= x.is_finite() && y.is_finite() && q[c].is_finite();
+        for (&[x, y], &qc) in p.iter().zip(q) {
+            ok &= x.is_finite() && y.is_finite() && qc.is_finite();
             bx = [bx[0].min(x), bx[1].min(y), bx[2].max(x), bx[3].max(y)];
-            q_lo = q_lo.min(q[c]);
-            q_hi = q_hi.max(q[c]);
+            q_lo = q_lo.min(qc);
+            q_hi = q_hi.max(qc);
         }
     };
     add(&ends[0].0, &ends[0].1);
