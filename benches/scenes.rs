@@ -1,6 +1,7 @@
 //! One benchmark per scene shape (issue 14), each also a plain RIB under `examples/bench/`:
-//! the three-primitive hiding-bound scene, the full-frame fBm marble (shading-bound) and many
-//! small polygons (geometry-bound, generated here like `examples/bench/gen_polys.py`). Run at
+//! the three-primitive hiding-bound scene, the full-frame fBm marble (shading-bound), many
+//! small polygons (geometry-bound, generated here like `examples/bench/gen_polys.py`) and a
+//! camera pan (motion-blur hiding). Run at
 //! reduced resolutions so `cargo bench --bench scenes` takes about a minute; the full-size
 //! numbers come from `arbor render --stats --threads 2 examples/bench/<scene>.rib`.
 
@@ -55,6 +56,7 @@ fn bench(c: &mut Criterion) {
         ("hiding_320x240", read("hiding.rib"), Some((320, 240))),
         ("marble_160x120", read("marble.rib"), Some((160, 120))),
         ("polygons_20000", polygons(20_000), None),
+        ("motion_160x100", read("motion.rib"), Some((160, 100))),
     ];
     let mut group = c.benchmark_group("scenes");
     group.sample_size(10);

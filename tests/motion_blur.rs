@@ -310,6 +310,13 @@ fn the_abuffer_blurs_and_focuses_like_the_zbuffer() {
 
 /// Renders the first frame with statistics kept: (film, micropolygons).
 fn render_counting(text: &str) -> (Film, u64) {
+    let (film, counts) = render_stats(text);
+    (film, counts[0])
+}
+
+/// Renders the first frame with statistics kept: (film, [micropolygons, samples tested,
+/// samples hit]).
+fn render_stats(text: &str) -> (Film, [u64; 3]) {
     use arbor::render::driver::{render_frame, RenderOptions};
     use arbor::render::stats::Stats;
     let sources = SourceMap::new();
@@ -336,10 +343,15 @@ fn render_counting(text: &str) -> (Film, u64) {
     let report = diags.render_plain(&sources);
     assert!(!diags.has_errors(), "{report}");
     assert!(!report.contains("GeometricApproximation"), "{report}");
-    let micropolygons = stats
-        .micropolygons
-        .load(std::sync::atomic::Ordering::Relaxed);
-    (film, micropolygons)
+    let get = |c: &std::sync::atomic::AtomicU64| c.load(std::sync::atomic::Ordering::Relaxed);
+    (
+        film,
+        [
+            get(&stats.micropolygons),
+            get(&stats.samples_tested),
+            get(&stats.samples_hit),
+        ],
+    )
 }
 
 #[test]
@@ -384,4 +396,60 @@ fn motionfactor_shades_blurred_surfaces_coarser() {
     let (_, e0) = render_counting(&sharp);
     let (_, e1) = render_counting(&ff(&sharp));
     assert_eq!(e0, e1);
+}
+
+/// A bar 2 pixels wide and 12 tall sweeping 48 pixels right during the shutter.
+const SWEEP: &str = "Format 64 16 1\nPixelSamples 8 8\nPixelFilter \"box\" 1 1\n\
+    Projection \"orthographic\"\nScreenWindow -32 32 -8 8\nShutter 0 1\nWorldBegin\n\
+    Surface \"constant\"\nMotionBegin [0 1]\nTranslate -24 0 0\nTranslate 24 0 0\nMotionEnd\n\
+    Polygon \"P\" [-1 -6 5  1 -6 5  1 6 5  -1 6 5]\nWorldEnd\n";
+
+/// Time slots (the Z-buffer tests a fast micropolygon slot by slot, each against its bound
+/// over the slot's times) skip only samples that cannot be hit: the same hits and the same
+/// bits as testing every sample under the whole-shutter bound (`"timeslots" [1]`), with
+/// far fewer samples tested.
+#[test]
+fn time_slots_skip_only_samples_that_cannot_be_hit() {
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    let brute = |t: &str| {
+        t.replacen(
+            "WorldBegin",
+            "Hider \"hidden\" \"timeslots\" [1]\nWorldBegin",
+            1,
+        )
+    };
+    let spin = busy("16 16").replacen("PixelSamples 3 3", "PixelSamples 5 4", 1);
+    for (name, text, speedup) in [
+        ("sweep", SWEEP.to_string(), 8.0),
+        ("busy", busy("16 16"), 1.0),
+        ("busy 5x4", spin, 1.0),
+    ] {
+        let (a, [_, tested, hits]) = render_stats(&text);
+        let (b, [_, tested_all, hits_all]) = render_stats(&brute(&text));
+        assert!(bits(&a) == bits(&b), "{name}: the picture changed");
+        assert_eq!(hits, hits_all, "{name}");
+        assert!(
+            tested as f64 * speedup <= tested_all as f64,
+            "{name}: {tested} samples tested, {tested_all} without slots"
+        );
+    }
+    // The bar's energy (24 pixels of alpha) spreads evenly over the 50 columns it sweeps:
+    // where it passes whole, each column holds 12 rows × 2/48 of the shutter.
+    let (f, _) = render_stats(SWEEP);
+    let prof: Vec<f32> = column_profile(&f, 64, 16)
+        .iter()
+        .map(|a| a * 16.0)
+        .collect();
+    let energy: f32 = prof.iter().sum();
+    assert!((energy - 24.0).abs() < 0.24, "energy {energy}");
+    // About 32 of a column's 768 samples are hit: ±30 % per column, ±3 % over all.
+    for x in 9..55 {
+        assert!((prof[x] - 0.5).abs() < 0.15, "column {x}: {prof:?}");
+    }
+    let mean = prof[9..55].iter().sum::<f32>() / 46.0;
+    assert!((mean - 0.5).abs() < 0.015, "mean {mean}: {prof:?}");
+    assert!(
+        prof[..7].iter().chain(&prof[57..]).all(|&a| a == 0.0),
+        "{prof:?}"
+    );
 }

@@ -188,6 +188,7 @@ pub const STANDARD: &[(&str, &str)] = &[
     ("quality", "uniform float"),
     ("jitter", "uniform integer"),
     ("masksize", "uniform integer"),
+    ("timeslots", "uniform integer"),
     ("depthfilter", "uniform string"),
     // Option/Attribute "category:name" entries live in `known`.
 ];

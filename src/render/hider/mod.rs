@@ -11,6 +11,7 @@
 
 pub mod abuffer;
 pub mod csg;
+pub mod timebins;
 pub mod zbuffer;
 
 use glam::{Mat4, Vec3, Vec4};
@@ -663,6 +664,11 @@ pub struct HiderConfig {
     pub dof: Option<super::camera::Dof>,
     /// The scene's CSG trees (empty without boolean solids).
     pub csg: std::sync::Arc<csg::CsgTree>,
+    /// Time slots the Z-buffer bins a bucket's samples into when a grid moves
+    /// (`Hider "hidden" "timeslots" n`; by default the samples per pixel, at most 64). 1
+    /// tests every sample under a micropolygon's whole-shutter bound: the same picture,
+    /// slower.
+    pub time_slots: usize,
 }
 
 impl HiderConfig {
@@ -740,6 +746,10 @@ impl HiderConfig {
             camera_from_raster: camera.raster_from_camera().inverse(),
             dof: camera.dof,
             csg: Default::default(),
+            time_slots: params
+                .float("timeslots")
+                .map_or(spp[0] * spp[1], |n| n.max(1.0) as usize)
+                .clamp(1, timebins::MAX_SLOTS),
         }
     }
 

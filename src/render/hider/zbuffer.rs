@@ -33,6 +33,7 @@ use super::super::camera::PixelRect;
 use super::super::sampler::{pixel_positions, pixel_positions_xy, time_and_lens};
 use super::super::stats::Stats;
 use super::csg::{self, CsgHit};
+use super::timebins::{self, TimeBins};
 use super::{may_meet, DepthFilter, GridSource, Hider, HiderConfig, ShadedGrid};
 
 const NONE: u32 = u32::MAX;
@@ -189,6 +190,7 @@ struct Scratch {
     aovs: Vec<f32>,
     times: Vec<f32>,
     lens: Vec<[f32; 2]>,
+    bins: TimeBins,
     visible: Vec<(usize, usize, [f32; 4])>,
 }
 
@@ -680,7 +682,8 @@ impl ZBuffer {
         );
         times.clear();
         lens.clear();
-        if cfg.dof.is_some() || unshaded.iter().any(|g| g.moving()) {
+        let moving = unshaded.iter().any(|g| g.moving());
+        if cfg.dof.is_some() || moving {
             times.resize(n, 0.0);
             lens.resize(n, [0.0; 2]);
             let (mut perm, mut t, mut l) = (Vec::new(), Vec::new(), Vec::new());
@@ -700,6 +703,19 @@ impl ZBuffer {
                 }
             }
         }
+        // Moving grids test their samples time slot by time slot.
+        let bins = (moving && cfg.time_slots > 1).then(|| {
+            let (cols, w) = (lay.cols, lay.width);
+            scratch.bins.build(
+                cfg.time_slots,
+                lay.width * lay.height,
+                &times[..n],
+                &b.x,
+                &b.y,
+                |s| (s / cols / ys) * w + (s % cols) / xs,
+            );
+            &scratch.bins
+        });
         let mut visible = std::mem::take(&mut scratch.visible);
         let kernel = QuadKernel::pick();
         let mut order = Order::new(unshaded);
@@ -726,7 +742,7 @@ impl ZBuffer {
                 continue;
             }
             if g.motion.is_some() || cfg.dof.is_some() {
-                sample_grid_blurred(&mut b, g, &times, &lens, &mut visible);
+                sample_grid_blurred(&mut b, g, &times, &lens, bins, &mut visible);
             } else {
                 sample_grid(&mut b, g, kernel, &mut visible);
             }
@@ -1467,12 +1483,17 @@ fn sample_micro(
 /// Tests a moving or out-of-focus grid: each sample sees the micropolygon's corners where
 /// they are at its time (linear between keys), shifted by its lens position times their
 /// circle of confusion, then tests the two triangles as the still path does. Only the
-/// samples inside the micropolygon's bound over the whole shutter and lens are visited.
+/// samples inside the micropolygon's bound over the whole shutter and lens are visited; a
+/// fast-moving micropolygon is tested group of time slots by group (see [`timebins`]),
+/// each group's samples only inside its bound over the group's times. Which samples are
+/// visited never changes what a sample sees (a sample outside a bound cannot be inside the
+/// micropolygon at its time), nor the order in which it meets micropolygons.
 fn sample_grid_blurred(
     b: &mut Bucket,
     g: &ShadedGrid,
     times: &[f32],
     lens: &[[f32; 2]],
+    bins: Option<&TimeBins>,
     visible: &mut Vec<Visible>,
 ) {
     let cfg = b.cfg;
@@ -1486,6 +1507,9 @@ fn sample_grid_blurred(
     let mut interp_aov = vec![0f32; aw];
     g.micropolygons_in(win, visible);
     let dof = cfg.dof;
+    // Time slots only help a moving grid.
+    let bins = bins.filter(|t| g.motion.is_some() && t.trusted() && t.slots() > 1);
+    let mut group_boxes: Vec<([f32; 4], usize, usize)> = Vec::new();
     for &(m, k, mb) in visible.iter() {
         let corner = [k, k + 1, k + nu + 1, k + nu];
         let bx = [
@@ -1499,7 +1523,7 @@ fn sample_grid_blurred(
         }
         let (cc, co) = flat_shade(g, &corner, &mut mean_aov);
         let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
-        for_samples(b, bx, |b, s, pos| {
+        let mut test = |b: &mut Bucket, s: usize, pos: [f32; 2]| {
             if lens_bound
                 .as_ref()
                 .is_some_and(|lb| lb.misses(lens[s], pos))
@@ -1538,8 +1562,104 @@ fn sample_grid_blurred(
                     break;
                 }
             }
-        });
+        };
+        let Some(bins) = bins else {
+            for_samples(b, bx, &mut test);
+            continue;
+        };
+        let slots = bins.slots();
+        let groups = timebins::groups(g, &corner, &mb, slots);
+        if groups <= 1 || !slot_boxes(g, &corner, bins, groups, bx, dof.as_ref(), &mut group_boxes)
+        {
+            for_samples(b, bx, &mut test);
+            continue;
+        }
+        for &(gb, k0, k1) in &group_boxes {
+            for_samples_in_slots(b, bins, k0, k1, gb, &mut test);
+        }
     }
+}
+
+/// The boxes (each within `bx`) and slot ranges `k0..=k1` of the `groups` groups of time
+/// slots of a moving micropolygon, into `out`: groups whose bound misses `bx` or that hold
+/// no sample are left out. False when a bound cannot be trusted (test the whole `bx`).
+fn slot_boxes(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    bins: &TimeBins,
+    groups: usize,
+    bx: [f32; 4],
+    dof: Option<&crate::render::camera::Dof>,
+    out: &mut Vec<([f32; 4], usize, usize)>,
+) -> bool {
+    out.clear();
+    let slots = bins.slots();
+    // The groups holding samples with their time intervals. A later slot's times are never
+    // earlier (slots are monotonic in time), so each group's interval reaches at most to the
+    // next group's start: consecutive groups share the corners evaluated there.
+    let mut spans: [(usize, usize, f32, f32); timebins::MAX_SLOTS] =
+        [(0, 0, 0.0, 0.0); timebins::MAX_SLOTS];
+    let mut n = 0;
+    for q in 0..groups.min(timebins::MAX_SLOTS) {
+        let (k0, k1) = (q * slots / groups, (q + 1) * slots / groups - 1);
+        if let Some((t0, t1)) = bins.interval(k0, k1) {
+            spans[n] = (k0, k1, t0, t1);
+            n += 1;
+        }
+    }
+    let Some(&(_, _, first, _)) = spans[..n].first() else {
+        return true;
+    };
+    let mut at_start = timebins::corners(g, corner, first);
+    for i in 0..n {
+        let (k0, k1, t0, t1) = spans[i];
+        let t_end = spans.get(i + 1).filter(|_| i + 1 < n).map_or(t1, |s| s.2);
+        let at_end = timebins::corners(g, corner, t_end);
+        let ends = [at_start, at_end];
+        let Some(tb) = timebins::bound_between(g, corner, &ends, t0, t_end, dof) else {
+            return false;
+        };
+        at_start = ends[1];
+        let gb = [
+            tb[0].max(bx[0]),
+            tb[1].max(bx[1]),
+            tb[2].min(bx[2]),
+            tb[3].min(bx[3]),
+        ];
+        if gb[0] <= gb[2] && gb[1] <= gb[3] {
+            out.push((gb, k0, k1));
+        }
+    }
+    true
+}
+
+/// [`for_samples`] over the samples of time slots `k0..=k1` only.
+#[inline]
+fn for_samples_in_slots(
+    b: &mut Bucket,
+    bins: &TimeBins,
+    k0: usize,
+    k1: usize,
+    bx: [f32; 4],
+    mut f: impl FnMut(&mut Bucket, usize, [f32; 2]),
+) {
+    let Some(((i0, i1), (j0, j1))) = b.pixels_of(bx) else {
+        return;
+    };
+    let w = b.lay.width;
+    let mut tested = 0u64;
+    for j in j0..=j1 {
+        for i in i0..=i1 {
+            bins.each(j * w + i, k0, k1, |s, pos| {
+                if pos[0] < bx[0] || pos[0] > bx[2] || pos[1] < bx[1] || pos[1] > bx[3] {
+                    return;
+                }
+                tested += 1;
+                f(b, s, pos);
+            });
+        }
+    }
+    b.tested += tested;
 }
 
 /// Canonical edge function, for blurred micropolygons (whose corners move per sample, so
