@@ -806,3 +806,28 @@ fn a_division_by_zero_is_reported_at_the_division() {
     assert!(rendered.contains("divz.sl:6:11"), "{rendered}");
     assert!(!rendered.contains("surface divz"), "{rendered}");
 }
+
+#[test]
+fn a_for_header_may_declare_its_loop_variables() {
+    // C++-style `for (float i = 0; …)` (PRMan's and 3Delight's compilers accept it; a student
+    // stone shader redeclares an outer `i` this way). The declared names live in the loop:
+    // they shadow outer ones, which keep their values after it.
+    let (prog, rendered) = compile_ok(
+        "surface f() {\n  float i = 7, n = 0;\n  for (float i = 0, k = 2; i < 3; i += 1)\n    \
+         n += k * i;\n  Ci = color(n, i, 0);\n}\n",
+    );
+    assert!(!rendered.contains("warning"), "{rendered}");
+    let (ci, _) = run(&prog, 2);
+    // n = 2 * (0 + 1 + 2) = 6, the outer i untouched.
+    assert!(ci.iter().all(|c| *c == Vec3::new(6.0, 7.0, 0.0)), "{ci:?}");
+    // A uniform detail is accepted, and the names do not leak out of the loop.
+    compile_ok(
+        "surface g() { float n = 0; for (uniform float j = 0; j < 2; j += 1) n += j; Ci = n; }\n",
+    );
+    let (_, rendered, err) =
+        compile("surface h() { for (float j = 0; j < 2; j += 1) ; Ci = j; }\n");
+    assert!(
+        err && rendered.contains("unknown variable `j`"),
+        "{rendered}"
+    );
+}
