@@ -831,3 +831,32 @@ fn a_for_header_may_declare_its_loop_variables() {
         "{rendered}"
     );
 }
+
+#[test]
+fn an_rsl2_class_with_one_shading_method_compiles_as_that_shader() {
+    // PRMan 13+ light classes that are only `light()` (a published `aw_spotlight` among them)
+    // run that method with the class's parameters: the RSL 1 shader of the same body. Their
+    // AOV outputs carry no default (PRMan starts them at zero).
+    let (prog, rendered) = compile_ok(
+        "class tint(color tint = color(0.25, 0.5, 1); output varying float aov;)\n{\n  \
+         public void surface(output color Ci, Oi) {\n    Ci = tint + aov;\n    Oi = 1;\n  }\n}\n",
+    );
+    assert!(rendered.contains("single `surface` method"), "{rendered}");
+    let (ci, _) = run(&prog, 2);
+    assert!(ci.iter().all(|c| *c == Vec3::new(0.25, 0.5, 1.0)), "{ci:?}");
+    // A class with more than its shading method is still named as RSL 2.0, not compiled.
+    let (_, rendered, err) = compile(
+        "class c(float k = 1)\n{\n  public void begin() { }\n  \
+         public void surface(output color Ci, Oi) { Ci = k; }\n}\n",
+    );
+    assert!(
+        err && rendered.contains("Shading Language 2.0"),
+        "{rendered}"
+    );
+    // An input parameter still needs its default.
+    let (_, rendered, err) = compile("surface s(float k;) { Ci = k; }\n");
+    assert!(
+        err && rendered.contains("has no default value"),
+        "{rendered}"
+    );
+}

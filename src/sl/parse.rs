@@ -385,7 +385,9 @@ impl<'a> Builder<'a> {
                         let Some(ty) = ty.clone() else { continue };
                         let span = self.sp(&p);
                         let (name, name_span, array, default) = self.declarator(p);
-                        if shader && default.is_none() {
+                        // PRMan takes an output parameter without a default (it starts at
+                        // zero: RSL 2.0 era shaders declare AOVs so).
+                        if shader && default.is_none() && !output {
                             self.error(
                                 name_span,
                                 format!("shader parameter `{name}` has no default value"),
