@@ -388,11 +388,17 @@ fn prman3_bound_displacement_sets_the_displacement_bound_quietly() {
 fn rsl2_classes_and_slim_palettes_get_one_diagnostic_each() {
     let (n, text, err) = compile(
         "spot.sl",
-        "class myspot(float intensity = 1;)\n{\n  public void light(output vector L; output color Cl) { Cl = intensity; }\n}\n",
+        "class myspot(float intensity = 1;)\n{\n  public void begin() { }\n  public void light(output vector L; output color Cl) { Cl = intensity; }\n}\n",
     );
     assert!(err && n == 0);
     assert_eq!(text.matches('×').count(), 1, "{text}");
     assert!(text.contains("RenderMan Shading Language 2.0"), "{text}");
+    // A class that is only its `light` method is that light shader (sl_compat tests it).
+    let (n, text, err) = compile(
+        "lone.sl",
+        "class myspot(float intensity = 1;)\n{\n  public void light(output vector L; output color Cl) { illuminate(point(0, 0, 0)) { Cl = intensity; } }\n}\n",
+    );
+    assert!(!err && n == 1, "{text}");
     let (n, text, err) = compile(
         "pal.sl",
         "slim 1 appearance slim {\n instance surface \"x\" \"x.slo\" {\n  description {don't}\n }\n}\n",

@@ -806,3 +806,57 @@ fn a_division_by_zero_is_reported_at_the_division() {
     assert!(rendered.contains("divz.sl:6:11"), "{rendered}");
     assert!(!rendered.contains("surface divz"), "{rendered}");
 }
+
+#[test]
+fn a_for_header_may_declare_its_loop_variables() {
+    // C++-style `for (float i = 0; …)` (PRMan's and 3Delight's compilers accept it; a student
+    // stone shader redeclares an outer `i` this way). The declared names live in the loop:
+    // they shadow outer ones, which keep their values after it.
+    let (prog, rendered) = compile_ok(
+        "surface f() {\n  float i = 7, n = 0;\n  for (float i = 0, k = 2; i < 3; i += 1)\n    \
+         n += k * i;\n  Ci = color(n, i, 0);\n}\n",
+    );
+    assert!(!rendered.contains("warning"), "{rendered}");
+    let (ci, _) = run(&prog, 2);
+    // n = 2 * (0 + 1 + 2) = 6, the outer i untouched.
+    assert!(ci.iter().all(|c| *c == Vec3::new(6.0, 7.0, 0.0)), "{ci:?}");
+    // A uniform detail is accepted, and the names do not leak out of the loop.
+    compile_ok(
+        "surface g() { float n = 0; for (uniform float j = 0; j < 2; j += 1) n += j; Ci = n; }\n",
+    );
+    let (_, rendered, err) =
+        compile("surface h() { for (float j = 0; j < 2; j += 1) ; Ci = j; }\n");
+    assert!(
+        err && rendered.contains("unknown variable `j`"),
+        "{rendered}"
+    );
+}
+
+#[test]
+fn an_rsl2_class_with_one_shading_method_compiles_as_that_shader() {
+    // PRMan 13+ light classes that are only `light()` (a published `aw_spotlight` among them)
+    // run that method with the class's parameters: the RSL 1 shader of the same body. Their
+    // AOV outputs carry no default (PRMan starts them at zero).
+    let (prog, rendered) = compile_ok(
+        "class tint(color tint = color(0.25, 0.5, 1); output varying float aov;)\n{\n  \
+         public void surface(output color Ci, Oi) {\n    Ci = tint + aov;\n    Oi = 1;\n  }\n}\n",
+    );
+    assert!(rendered.contains("single `surface` method"), "{rendered}");
+    let (ci, _) = run(&prog, 2);
+    assert!(ci.iter().all(|c| *c == Vec3::new(0.25, 0.5, 1.0)), "{ci:?}");
+    // A class with more than its shading method is still named as RSL 2.0, not compiled.
+    let (_, rendered, err) = compile(
+        "class c(float k = 1)\n{\n  public void begin() { }\n  \
+         public void surface(output color Ci, Oi) { Ci = k; }\n}\n",
+    );
+    assert!(
+        err && rendered.contains("Shading Language 2.0"),
+        "{rendered}"
+    );
+    // An input parameter still needs its default.
+    let (_, rendered, err) = compile("surface s(float k;) { Ci = k; }\n");
+    assert!(
+        err && rendered.contains("has no default value"),
+        "{rendered}"
+    );
+}

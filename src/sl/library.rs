@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use crate::diag::{Diag, Diagnostics, SourceMap};
+use crate::diag::{Diag, Diagnostics, SourceMap, Span};
 use crate::sl::ast::{Item, ShaderKind, SourceFile};
 use crate::sl::ir::Program;
 use crate::sl::preprocess::{preprocess, IncludeResolver, Preprocessed};
@@ -123,7 +123,23 @@ pub fn compile_with(
     resolver: &dyn IncludeResolver,
     parser: &mut ParseFn<'_>,
 ) -> Compiled {
-    let file = sources.add(name, text);
+    // An RSL 2.0 class that is one shading method is compiled as that shader (PRMan runs
+    // the method with the class's parameters); the rewritten text keeps the file's lines.
+    let rewritten = crate::sl::rsl2::single_method_class(text);
+    let file = sources.add(name, rewritten.as_ref().map_or(text, |r| r.0.as_str()));
+    if let Some((_, kind, at)) = &rewritten {
+        diags.report(
+            Diag::warning(
+                "sl::rsl2",
+                format!(
+                    "RSL 2.0 class with a single `{kind}` method: compiled as a {kind} shader \
+                     with the class's parameters"
+                ),
+            )
+            .label(Span::new(file, *at, *at + kind.len()), "class"),
+        );
+    }
+    let text = rewritten.as_ref().map_or(text, |r| r.0.as_str());
     let mut done = Compiled {
         file,
         ast: None,

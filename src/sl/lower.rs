@@ -570,6 +570,9 @@ impl<'a> Lowerer<'a> {
                             default_text = format!("{s:?}");
                         }
                     }
+                    // An output parameter may go without a default (PRMan): it starts at
+                    // zero, as every fresh register does.
+                    None if p.output => default_text = String::from("0"),
                     None => lw.diags.push(
                         Diag::error(
                             "sl::param",

@@ -12,5 +12,6 @@ pub mod library;
 pub mod lower;
 pub mod parse;
 pub mod preprocess;
+pub mod rsl2;
 
 pub use library::{compile_source, CompileOptions, ShaderLibrary};

@@ -385,7 +385,9 @@ impl<'a> Builder<'a> {
                         let Some(ty) = ty.clone() else { continue };
                         let span = self.sp(&p);
                         let (name, name_span, array, default) = self.declarator(p);
-                        if shader && default.is_none() {
+                        // PRMan takes an output parameter without a default (it starts at
+                        // zero: RSL 2.0 era shaders declare AOVs so).
+                        if shader && default.is_none() && !output {
                             self.error(
                                 name_span,
                                 format!("shader parameter `{name}` has no default value"),
@@ -522,20 +524,38 @@ impl<'a> Builder<'a> {
             }
             Rule::for_stmt => {
                 let mut parts = Vec::with_capacity(3);
+                let mut decl = None;
                 let mut body = None;
                 for p in pair.into_inner() {
                     match p.as_rule() {
                         Rule::for_part => parts.push(p.into_inner().next().map(|e| self.expr(e))),
+                        Rule::for_decl => {
+                            let decl_span = self.sp(&p);
+                            parts.push(None);
+                            decl = Some(Stmt {
+                                kind: self.var_decl(p),
+                                span: decl_span,
+                            });
+                        }
                         Rule::kw_for => {}
                         _ => body = Some(Box::new(self.stmt(p))),
                     }
                 }
                 let mut parts = parts.into_iter();
-                StmtKind::For {
+                let kind = StmtKind::For {
                     init: parts.next().flatten(),
                     cond: parts.next().flatten(),
                     step: parts.next().flatten(),
                     body: body.unwrap_or_else(|| empty_stmt(span)),
+                };
+                match decl {
+                    None => kind,
+                    // `for (float i = 0; …) body` is `{ float i = 0; for (; …) body }`: the
+                    // block scopes the declared names to the loop, shadowing any outer ones.
+                    Some(decl) => StmtKind::Block(Block {
+                        stmts: vec![decl, Stmt { kind, span }],
+                        span,
+                    }),
                 }
             }
             Rule::break_stmt | Rule::continue_stmt => {
@@ -1308,6 +1328,7 @@ impl Expected {
         match r {
             number | strings | string_lit | call | paren | array_lit | neg | not | plus
             | pre_inc | pre_dec | cast | expr | for_part | args => self.operand = true,
+            for_decl => push(&mut self.words, "a type"),
             ident | call_name | var_init | formal_name => {
                 self.wants_name = true;
                 push(&mut self.words, "a name");
