@@ -28,36 +28,22 @@ pub fn foreign_language(file: u32, text: &str) -> Option<Diag> {
             ),
         );
     }
-    let mut offset = 0;
-    for line in code.split_inclusive('\n') {
-        let body = line.trim_start();
-        let at = offset + (line.len() - body.len());
-        offset += line.len();
-        let Some(rest) = body.strip_prefix("class") else {
-            continue;
-        };
-        let rest = rest.trim_start();
-        let name_len = rest
-            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-            .unwrap_or(rest.len());
-        if name_len > 0 && rest[name_len..].trim_start().starts_with('(') {
-            return Some(
-                Diag::error(
-                    "sl::rsl2",
-                    format!(
-                        "`class {}` is a RenderMan Shading Language 2.0 shader class (PRMan 13 \
-                         and later), which arbor does not compile",
-                        &rest[..name_len]
-                    ),
-                )
-                .label(Span::new(file, at, at + 5), "RSL 2.0 class")
-                .help(
-                    "arbor compiles the RISpec 3.2 language: write the class's `surface`, \
-                     `light` or `displacement` method as a shader of that type (its parameters \
-                     stay the same)",
+    if let Some((at, name)) = super::rsl2::class_keyword(&code) {
+        return Some(
+            Diag::error(
+                "sl::rsl2",
+                format!(
+                    "`class {name}` is a RenderMan Shading Language 2.0 shader class (PRMan 13 \
+                     and later), which arbor does not compile"
                 ),
-            );
-        }
+            )
+            .label(Span::new(file, at, at + 5), "RSL 2.0 class")
+            .help(
+                "arbor compiles the RISpec 3.2 language: write the class's `surface`, \
+                 `light` or `displacement` method as a shader of that type (its parameters \
+                 stay the same)",
+            ),
+        );
     }
     None
 }

@@ -20,7 +20,7 @@ const METHODS: [&str; 3] = ["surface", "displacement", "light"];
 pub fn single_method_class(text: &str) -> Option<(String, &'static str, usize)> {
     let code = strip_comments(text);
     let b = code.as_bytes();
-    let class_at = class_keyword(&code)?;
+    let (class_at, _) = class_keyword(&code)?;
     let open_paren = class_at + code[class_at..].find('(')?;
     let close_paren = matching(b, open_paren, b'(', b')')?;
     let body_open = close_paren + 1 + code[close_paren + 1..].find(|c: char| !c.is_whitespace())?;
@@ -71,8 +71,9 @@ pub fn single_method_class(text: &str) -> Option<(String, &'static str, usize)> 
     Some((out, kind, class_at))
 }
 
-/// Byte offset of a `class NAME (` at the start of a line.
-fn class_keyword(code: &str) -> Option<usize> {
+/// Byte offset of the first `class NAME (` at the start of a line, and NAME. The caller passes
+/// text with comments blanked, so a commented-out class is not seen.
+pub(crate) fn class_keyword(code: &str) -> Option<(usize, &str)> {
     let mut offset = 0;
     for line in code.split_inclusive('\n') {
         let body = line.trim_start();
@@ -89,7 +90,7 @@ fn class_keyword(code: &str) -> Option<usize> {
             .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
             .unwrap_or(rest.len());
         if n > 0 && rest[n..].trim_start().starts_with('(') {
-            return Some(at);
+            return Some((at, &rest[..n]));
         }
     }
     None
