@@ -55,7 +55,9 @@ pub fn single_method_class(text: &str) -> Option<(String, &'static str, usize)> 
         return None;
     }
     let block_close = matching(b, block_open, b'{', b'}')?;
-    if !code[block_close + 1..body_close].trim().is_empty() {
+    // Unbalanced brackets can end the class body inside the method's formals: then the
+    // method is not inside the body, and this is no one-method class (the parser reports).
+    if block_close >= body_close || !code[block_close + 1..body_close].trim().is_empty() {
         return None;
     }
     let blank =
@@ -154,5 +156,19 @@ mod tests {
             assert!(single_method_class(&src).is_none(), "{body}");
         }
         assert!(single_method_class("surface s() { Ci = 1; }\n").is_none());
+    }
+
+    #[test]
+    fn unbalanced_brackets_are_left_to_the_parser_not_a_panic() {
+        // Found by mutation: the class body's `}` closes inside the method's formals.
+        for src in [
+            "class aw(float Kd = 1) {\n  public void surface(output color} Ci, Oi) {\n    \
+             Ci = Kd;\n  }\n}\n",
+            "class aw(float Kd = 1) {\n  public void surface(outp}ut color Ci) {\n  }\n}\n",
+            "class aw(float Kd = 1) {\n  public void surface(output color Ci) {\n",
+            "class aw(float Kd = 1) { public void surface(",
+        ] {
+            assert!(single_method_class(src).is_none(), "{src}");
+        }
     }
 }
