@@ -159,6 +159,42 @@ pub fn corners_at(
     (p, q)
 }
 
+/// The raster box `[x0, y0, x1, y1]` and depth range of micropolygon corners gathered so far;
+/// `finite` turns false for good at the first coordinate that is not a finite number.
+#[derive(Clone, Copy)]
+pub(crate) struct CornerBox {
+    pub bx: [f32; 4],
+    pub q_lo: f32,
+    pub q_hi: f32,
+    pub finite: bool,
+}
+
+impl CornerBox {
+    pub const EMPTY: CornerBox = CornerBox {
+        bx: [
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+        ],
+        q_lo: f32::INFINITY,
+        q_hi: f32::NEG_INFINITY,
+        finite: true,
+    };
+
+    /// Takes in four corners at raster `xy` with depths `q`.
+    #[inline]
+    pub fn add(&mut self, xy: &[[f32; 2]; 4], q: &[f32; 4]) {
+        for (&[x, y], &qc) in xy.iter().zip(q) {
+            self.finite &= x.is_finite() && y.is_finite() && qc.is_finite();
+            let b = self.bx;
+            self.bx = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+            self.q_lo = self.q_lo.min(qc);
+            self.q_hi = self.q_hi.max(qc);
+        }
+    }
+}
+
 /// The bound of an out-of-focus (still) micropolygon as one lens position sees it: its
 /// pinhole corners' bound widened by the range of lens shift × circle of confusion over its
 /// corners. A sample outside it cannot be inside either triangle, so it is passed over before
@@ -195,26 +231,18 @@ impl LensBound {
         q: [f32; 4],
         d: &crate::render::camera::Dof,
     ) -> Option<Self> {
-        let mut pin = [
-            f32::INFINITY,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NEG_INFINITY,
-        ];
-        let (mut f_min, mut f_max) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (&[x, y], &qc) in xy.iter().zip(&q) {
-            // min/max would skip a NaN: refuse rather than bound the others only.
-            if !(x.is_finite() && y.is_finite() && qc.is_finite()) {
-                return None;
-            }
-            pin = [pin[0].min(x), pin[1].min(y), pin[2].max(x), pin[3].max(y)];
-            let f = d.inv_focus - qc;
-            f_min = f_min.min(f);
-            f_max = f_max.max(f);
+        let mut c = CornerBox::EMPTY;
+        c.add(&xy, &q);
+        // min/max would skip a NaN: refuse rather than bound the others only.
+        if !c.finite {
+            return None;
         }
+        // Rounding is monotone, so `1/F − max q` is the least of the corners' `1/F − q`.
+        let (f_min, f_max) = (d.inv_focus - c.q_hi, d.inv_focus - c.q_lo);
         if !(f_min.is_finite() && f_max.is_finite()) {
             return None;
         }
+        let pin = c.bx;
         Some(LensBound {
             pin,
             f_min,

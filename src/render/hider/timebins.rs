@@ -18,7 +18,7 @@
 
 use crate::render::camera::Dof;
 
-use super::{corners_at, ShadedGrid};
+use super::{corners_at, CornerBox, ShadedGrid};
 
 /// Slots per bucket: one per sample of a pixel up to this many, so a pixel usually holds one
 /// sample per slot (its times are stratified).
@@ -197,35 +197,21 @@ pub fn bound_between(
     dof: Option<&Dof>,
 ) -> Option<[f32; 4]> {
     let mo = g.motion.as_deref()?;
-    let mut bx = [
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-    ];
-    let (mut q_lo, mut q_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut ok = true;
-    let mut add = |p: &[[f32; 2]; 4], q: &[f32; 4]| {
-        for (&[x, y], &qc) in p.iter().zip(q) {
-            ok &= x.is_finite() && y.is_finite() && qc.is_finite();
-            bx = [bx[0].min(x), bx[1].min(y), bx[2].max(x), bx[3].max(y)];
-            q_lo = q_lo.min(qc);
-            q_hi = q_hi.max(qc);
-        }
-    };
-    add(&ends[0].0, &ends[0].1);
-    add(&ends[1].0, &ends[1].1);
+    let mut c = CornerBox::EMPTY;
+    c.add(&ends[0].0, &ends[0].1);
+    c.add(&ends[1].0, &ends[1].1);
     for (k, &tk) in mo.times.iter().enumerate() {
         if tk > t0 && tk < t1 {
-            add(
+            c.add(
                 &corner.map(|c| mo.xy[k][c]),
                 &corner.map(|c| mo.depth[k][c]),
             );
         }
     }
-    if !ok {
+    if !c.finite {
         return None;
     }
+    let (bx, q_lo, q_hi) = (c.bx, c.q_lo, c.q_hi);
     let size = bx.iter().fold(0f32, |m, v| m.max(v.abs()));
     let pad = 0.01 + size * 1e-5;
     let (mut rx, mut ry) = (pad, pad);
