@@ -308,6 +308,56 @@ fn the_abuffer_blurs_and_focuses_like_the_zbuffer() {
     assert!(bits(&a) == bits(&b), "A-buffer blur depends on the buckets");
 }
 
+/// Spheres at four depths before and behind the focal plane and a floor running away
+/// from the eye, far out of focus.
+fn focus_rows(bucket: &str) -> String {
+    format!(
+        "Format 64 48 1\nPixelSamples 5 5\nProjection \"perspective\" \"fov\" [40]\n\
+         Option \"limits\" \"bucketsize\" [{bucket}]\nDepthOfField 0.5 0.2 5\n\
+         WorldBegin\nLightSource \"distantlight\" 1\nSurface \"plastic\"\n\
+         Polygon \"P\" [-6 -0.6 1.5  6 -0.6 1.5  6 -0.6 30  -6 -0.6 30]\n\
+         AttributeBegin\nTranslate -0.8 0 2.2\nSphere 0.4 -0.4 0.4 360\nAttributeEnd\n\
+         AttributeBegin\nTranslate 0 0 5\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\n\
+         AttributeBegin\nTranslate 1.2 0.3 9\nSphere 0.6 -0.6 0.6 360\nAttributeEnd\n\
+         AttributeBegin\nOpacity [0.5 0.5 0.5]\nTranslate 0.4 -0.2 3\n\
+         Sphere 0.3 -0.3 0.3 360\nAttributeEnd\nWorldEnd\n"
+    )
+}
+
+/// Lens cells (under depth of field the Z-buffer tests a still micropolygon's samples lens
+/// cell group by group, each against its bound through that group's lens positions) skip
+/// only samples that cannot be hit: the same hits and bits as testing every sample under
+/// the whole-lens bound (`"lensslots" [1]`), whatever the buckets, with fewer tested.
+#[test]
+fn lens_cells_skip_only_samples_that_cannot_be_hit() {
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    let brute = |t: &str| {
+        t.replacen(
+            "WorldBegin",
+            "Hider \"hidden\" \"lensslots\" [1]\nWorldBegin",
+            1,
+        )
+    };
+    for (name, text, speedup) in [
+        ("focus rows", focus_rows("16 16"), 2.0),
+        ("focus rows 7x5", focus_rows("7 5"), 2.0),
+        ("busy", busy("16 16"), 1.0),
+    ] {
+        let (a, [_, tested, hits]) = render_stats(&text);
+        let (b, [_, tested_all, hits_all]) = render_stats(&brute(&text));
+        assert!(bits(&a) == bits(&b), "{name}: the picture changed");
+        assert_eq!(hits, hits_all, "{name}");
+        assert!(
+            tested as f64 * speedup <= tested_all as f64,
+            "{name}: {tested} samples tested, {tested_all} without cells"
+        );
+    }
+    // Out of focus, the picture does not depend on the buckets either.
+    let (a, _) = render_stats(&focus_rows("16 16"));
+    let (b, _) = render_stats(&focus_rows("7 5"));
+    assert!(bits(&a) == bits(&b));
+}
+
 /// Renders the first frame with statistics kept: (film, micropolygons).
 fn render_counting(text: &str) -> (Film, u64) {
     let (film, counts) = render_stats(text);

@@ -189,6 +189,7 @@ pub const STANDARD: &[(&str, &str)] = &[
     ("jitter", "uniform integer"),
     ("masksize", "uniform integer"),
     ("timeslots", "uniform integer"),
+    ("lensslots", "uniform integer"),
     ("depthfilter", "uniform string"),
     // Option/Attribute "category:name" entries live in `known`.
 ];

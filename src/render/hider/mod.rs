@@ -203,6 +203,9 @@ impl CornerBox {
 /// The products and sums round the way [`corners_at`]'s do and rounding is monotonic,
 /// so the bound holds every moved corner and the picture is unchanged. Shared by both
 /// hiders' blur paths.
+/// Lens cells per axis at most (64 cells, as many as time slots).
+pub const MAX_LENS_SLOTS: usize = 8;
+
 pub struct LensBound {
     pin: [f32; 4],
     f_min: f32,
@@ -261,6 +264,45 @@ impl LensBound {
             || pos[0] > self.pin[2] + ax.max(bx)
             || pos[1] < self.pin[1] + ay.min(by)
             || pos[1] > self.pin[3] + ay.max(by)
+    }
+
+    /// The box (x0, y0, x1, y1) holding every position that [`misses`](Self::misses) keeps
+    /// for a lens point in `[lx0, lx1] × [ly0, ly1]`. Exact, not padded: a product rounds
+    /// monotonically in each factor, so `lens·k·f` for lens and `f` in their ranges lies
+    /// between the products at the ranges' ends, and so does `pin + it`.
+    pub fn box_for(&self, lx: [f32; 2], ly: [f32; 2]) -> [f32; 4] {
+        let span = |l: [f32; 2], k: f32| {
+            let (a, b) = (l[0] * k, l[1] * k);
+            let p = [
+                a * self.f_min,
+                a * self.f_max,
+                b * self.f_min,
+                b * self.f_max,
+            ];
+            let lo = p.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+            let hi = p.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+            (lo, hi)
+        };
+        let (x0, x1) = span(lx, self.k[0]);
+        let (y0, y1) = span(ly, self.k[1]);
+        [
+            self.pin[0] + x0,
+            self.pin[1] + y0,
+            self.pin[2] + x1,
+            self.pin[3] + y1,
+        ]
+    }
+
+    /// How far (raster pixels, per axis) the micropolygon moves across the whole lens: the
+    /// blur its bound adds to its size.
+    pub fn travel(&self) -> [f32; 2] {
+        let f = self.f_min.abs().max(self.f_max.abs());
+        [2.0 * (self.k[0] * f).abs(), 2.0 * (self.k[1] * f).abs()]
+    }
+
+    /// The micropolygon's own size (raster pixels) through the lens centre.
+    pub fn size(&self) -> f32 {
+        (self.pin[2] - self.pin[0]).max(self.pin[3] - self.pin[1])
     }
 }
 
@@ -697,6 +739,10 @@ pub struct HiderConfig {
     /// tests every sample under a micropolygon's whole-shutter bound: the same picture,
     /// slower.
     pub time_slots: usize,
+    /// Lens cells per axis the Z-buffer bins a bucket's samples into under depth of field
+    /// (`Hider "hidden" "lensslots" n`; by default about the square root of the samples per
+    /// pixel, at most 8). 1 tests every sample under a micropolygon's whole-lens bound.
+    pub lens_slots: usize,
 }
 
 impl HiderConfig {
@@ -778,6 +824,12 @@ impl HiderConfig {
                 .float("timeslots")
                 .map_or(spp[0] * spp[1], |n| n.max(1.0) as usize)
                 .clamp(1, timebins::MAX_SLOTS),
+            lens_slots: params
+                .float("lensslots")
+                .map_or(((spp[0] * spp[1]) as f32).sqrt().round() as usize, |n| {
+                    n.max(1.0) as usize
+                })
+                .clamp(1, MAX_LENS_SLOTS),
         }
     }
 

@@ -34,10 +34,13 @@ pub struct TimeBins {
     sample: Vec<u32>,
     x: Vec<f32>,
     y: Vec<f32>,
-    /// Per slot: least and greatest time of its samples (∞, −∞ when empty).
-    tmin: Vec<f32>,
-    tmax: Vec<f32>,
+    /// Per slot: least and greatest of each value of its samples (∞, −∞ when empty): the
+    /// time twice for time slots, a lens position's x and y for lens cells.
+    lo: Vec<[f32; 2]>,
+    hi: Vec<[f32; 2]>,
     count: Vec<u32>,
+    /// Per sample: its cell (pixel · slots + slot), kept between the two passes.
+    cell: Vec<u32>,
     /// Some time is not a number: no interval is trusted.
     nan: bool,
 }
@@ -59,29 +62,58 @@ impl TimeBins {
         pixel_of: impl Fn(usize) -> usize,
     ) {
         let slots = slots.max(1);
-        let n = times.len();
+        // NaN and negative times go to slot 0, times ≥ 1 to the last: any slot is
+        // correct, as the slot's interval is measured from its samples.
+        let slot_of = |s: usize| ((times[s] * slots as f32) as usize).min(slots - 1);
+        self.build_keyed(
+            slots,
+            pixels,
+            times.len(),
+            slot_of,
+            |s| [times[s]; 2],
+            x,
+            y,
+            pixel_of,
+        );
+    }
+
+    /// Bins samples `0..n` into `slots` slots by `slot_of(s)`, keeping per slot the least and
+    /// greatest of each of the two numbers `value(s)` of its samples (a time twice, or a lens
+    /// position's x and y).
+    #[allow(clippy::too_many_arguments)]
+    pub fn build_keyed(
+        &mut self,
+        slots: usize,
+        pixels: usize,
+        n: usize,
+        slot_of: impl Fn(usize) -> usize,
+        value: impl Fn(usize) -> [f32; 2],
+        x: &[f32],
+        y: &[f32],
+        pixel_of: impl Fn(usize) -> usize,
+    ) {
         self.slots = slots;
         self.nan = false;
         let cells = pixels * slots;
-        let slot_of = |t: f32| {
-            // NaN and negative times go to slot 0, times ≥ 1 to the last: any slot is
-            // correct, as the slot's interval is measured from its samples.
-            ((t * slots as f32) as usize).min(slots - 1)
-        };
         self.count.clear();
         self.count.resize(cells + 1, 0);
-        self.tmin.clear();
-        self.tmin.resize(slots, f32::INFINITY);
-        self.tmax.clear();
-        self.tmax.resize(slots, f32::NEG_INFINITY);
-        for (s, &t) in times.iter().enumerate() {
-            let k = slot_of(t);
-            self.count[pixel_of(s) * slots + k + 1] += 1;
+        self.lo.clear();
+        self.lo.resize(slots, [f32::INFINITY; 2]);
+        self.hi.clear();
+        self.hi.resize(slots, [f32::NEG_INFINITY; 2]);
+        self.cell.clear();
+        for s in 0..n {
+            let k = slot_of(s);
+            let c = pixel_of(s) * slots + k;
+            self.cell.push(c as u32);
+            self.count[c + 1] += 1;
             // min/max would pass over a NaN: one poisons every interval, and the caller
-            // then falls back to the whole-shutter bound.
-            self.nan |= t.is_nan();
-            self.tmin[k] = self.tmin[k].min(t);
-            self.tmax[k] = self.tmax[k].max(t);
+            // then falls back to the whole bound.
+            for (a, v) in value(s).into_iter().enumerate() {
+                self.nan |= v.is_nan();
+                self.lo[k][a] = self.lo[k][a].min(v);
+                self.hi[k][a] = self.hi[k][a].max(v);
+            }
         }
         for c in 0..cells {
             self.count[c + 1] += self.count[c];
@@ -94,8 +126,8 @@ impl TimeBins {
         self.x.resize(n, 0.0);
         self.y.clear();
         self.y.resize(n, 0.0);
-        for (s, &t) in times.iter().enumerate() {
-            let c = pixel_of(s) * slots + slot_of(t);
+        for s in 0..n {
+            let c = self.cell[s] as usize;
             let at = self.count[c] as usize;
             self.count[c] += 1;
             self.sample[at] = s as u32;
@@ -116,10 +148,23 @@ impl TimeBins {
         let mut lo = f32::INFINITY;
         let mut hi = f32::NEG_INFINITY;
         for k in k0..=k1 {
-            lo = lo.min(self.tmin[k]);
-            hi = hi.max(self.tmax[k]);
+            lo = lo.min(self.lo[k][0]);
+            hi = hi.max(self.hi[k][0]);
         }
         (lo <= hi).then_some((lo, hi))
+    }
+
+    /// The range of both values over slots `k0..=k1`: `[lo, hi]` per value (None when they
+    /// hold no sample).
+    pub fn ranges(&self, k0: usize, k1: usize) -> Option<[[f32; 2]; 2]> {
+        let mut r = [[f32::INFINITY, f32::NEG_INFINITY]; 2];
+        for k in k0..=k1 {
+            for a in 0..2 {
+                r[a][0] = r[a][0].min(self.lo[k][a]);
+                r[a][1] = r[a][1].max(self.hi[k][a]);
+            }
+        }
+        (r[0][0] <= r[0][1]).then_some(r)
     }
 
     /// Calls `f(sample index, position)` for every sample of pixel `p` in slots `k0..=k1`.

@@ -191,6 +191,7 @@ struct Scratch {
     times: Vec<f32>,
     lens: Vec<[f32; 2]>,
     bins: TimeBins,
+    lens_bins: TimeBins,
     visible: Vec<(usize, usize, [f32; 4])>,
 }
 
@@ -716,6 +717,22 @@ impl ZBuffer {
             );
             &scratch.bins
         });
+        // Under depth of field, still grids test their samples lens cell by lens cell.
+        let lens_bins = (cfg.dof.is_some() && cfg.lens_slots > 1).then(|| {
+            let (cols, w, l) = (lay.cols, lay.width, cfg.lens_slots);
+            let cell = |v: f32| (((v + 1.0) * 0.5 * l as f32) as usize).min(l - 1);
+            scratch.lens_bins.build_keyed(
+                l * l,
+                lay.width * lay.height,
+                n,
+                |s| cell(lens[s][1]) * l + cell(lens[s][0]),
+                |s| lens[s],
+                &b.x,
+                &b.y,
+                |s| (s / cols / ys) * w + (s % cols) / xs,
+            );
+            &scratch.lens_bins
+        });
         let mut visible = std::mem::take(&mut scratch.visible);
         let kernel = QuadKernel::pick();
         let mut order = Order::new(unshaded);
@@ -742,7 +759,7 @@ impl ZBuffer {
                 continue;
             }
             if g.motion.is_some() || cfg.dof.is_some() {
-                sample_grid_blurred(&mut b, g, &times, &lens, bins, &mut visible);
+                sample_grid_blurred(&mut b, g, &times, &lens, bins, lens_bins, &mut visible);
             } else {
                 sample_grid(&mut b, g, kernel, &mut visible);
             }
@@ -1494,6 +1511,7 @@ fn sample_grid_blurred(
     times: &[f32],
     lens: &[[f32; 2]],
     bins: Option<&TimeBins>,
+    lens_bins: Option<&TimeBins>,
     visible: &mut Vec<Visible>,
 ) {
     let cfg = b.cfg;
@@ -1563,6 +1581,12 @@ fn sample_grid_blurred(
                 }
             }
         };
+        if let (Some(lb), Some(cells)) = (&lens_bound, lens_bins) {
+            if !cells.trusted() || !for_samples_in_lens_cells(b, cells, lb, bx, &mut test) {
+                for_samples(b, bx, &mut test);
+            }
+            continue;
+        }
         let Some(bins) = bins else {
             for_samples(b, bx, &mut test);
             continue;
@@ -1628,6 +1652,64 @@ fn slot_boxes(
         ];
         if gb[0] <= gb[2] && gb[1] <= gb[3] {
             out.push((gb, k0, k1));
+        }
+    }
+    true
+}
+
+/// [`for_samples`] for a still micropolygon under depth of field, lens cell group by group:
+/// the samples of a group of lens cells are visited only inside the micropolygon's bound
+/// through that group's lens positions (`lb.box_for` their measured range, within `bx`).
+/// False (nothing visited) when its blur is small beside its size: test `bx` at once.
+fn for_samples_in_lens_cells(
+    b: &mut Bucket,
+    cells: &TimeBins,
+    lb: &super::LensBound,
+    bx: [f32; 4],
+    f: &mut impl FnMut(&mut Bucket, usize, [f32; 2]),
+) -> bool {
+    let l = (cells.slots() as f32).sqrt() as usize;
+    let travel = lb.travel();
+    // About one group per half its own size (plus a pixel) of blur. Under callgrind on
+    // examples/dof.rib at 160×100 (36 samples a pixel, 8 × 8 cells), one group per size
+    // left half the visits to micropolygons blurred over one or two of their sizes (2.74 G
+    // instructions against 2.79 G without cells); per half size 2.31 G, per third 2.33 G,
+    // per quarter 2.42 G (the groups' set-up against the samples they spare).
+    let n = 2.0 * travel[0].max(travel[1]) / (lb.size() + 1.0);
+    if !(n >= 2.0) {
+        return false;
+    }
+    let groups = (n as usize).min(l);
+    for gy in 0..groups {
+        let (y0, y1) = (gy * l / groups, (gy + 1) * l / groups - 1);
+        for gx in 0..groups {
+            let (x0, x1) = (gx * l / groups, (gx + 1) * l / groups - 1);
+            // The lens range of the group's samples: the union over its rows of cells.
+            let mut r = [[f32::INFINITY, f32::NEG_INFINITY]; 2];
+            for cy in y0..=y1 {
+                if let Some(c) = cells.ranges(cy * l + x0, cy * l + x1) {
+                    for a in 0..2 {
+                        r[a][0] = r[a][0].min(c[a][0]);
+                        r[a][1] = r[a][1].max(c[a][1]);
+                    }
+                }
+            }
+            if !(r[0][0] <= r[0][1]) {
+                continue;
+            }
+            let gb = lb.box_for(r[0], r[1]);
+            let gb = [
+                gb[0].max(bx[0]),
+                gb[1].max(bx[1]),
+                gb[2].min(bx[2]),
+                gb[3].min(bx[3]),
+            ];
+            if !(gb[0] <= gb[2] && gb[1] <= gb[3]) {
+                continue;
+            }
+            for cy in y0..=y1 {
+                for_samples_in_slots(b, cells, cy * l + x0, cy * l + x1, gb, &mut *f);
+            }
         }
     }
     true
