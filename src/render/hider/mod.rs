@@ -1008,6 +1008,48 @@ mod lens_bound_tests {
                 assert!(lb.misses(lens, far));
             }
         }
+        // A lens cell group's box holds every position `misses` keeps for a lens point in
+        // the group's range: its ends and points between, corners and the keep region's edge.
+        for _ in 0..2000 {
+            let xy = [0; 4].map(|_| [rnd() * 64.0 - 8.0, rnd() * 64.0 - 8.0]);
+            let q = [0; 4].map(|_| 1.0 / (0.5 + rnd() * 20.0));
+            let lb = LensBound::from_corners(xy, q, &d).unwrap();
+            let (a, b, c, e) = (
+                rnd() * 2.0 - 1.0,
+                rnd() * 2.0 - 1.0,
+                rnd() * 2.0 - 1.0,
+                rnd() * 2.0 - 1.0,
+            );
+            let (lx, ly) = ([a.min(b), a.max(b)], [c.min(e), c.max(e)]);
+            let bx = lb.box_for(lx, ly);
+            for i in 0..=6 {
+                let lens = [
+                    lx[0] + (lx[1] - lx[0]) * i as f32 / 6.0,
+                    ly[1] - (ly[1] - ly[0]) * ((i * 5) % 7) as f32 / 6.0,
+                ];
+                let lens = [lens[0].clamp(lx[0], lx[1]), lens[1].clamp(ly[0], ly[1])];
+                let (kx, ky) = (lens[0] * d.raster_k[0], lens[1] * d.raster_k[1]);
+                let keep_x = [
+                    lb.pin[0] + (kx * lb.f_min).min(kx * lb.f_max),
+                    lb.pin[2] + (kx * lb.f_min).max(kx * lb.f_max),
+                ];
+                let keep_y = [
+                    lb.pin[1] + (ky * lb.f_min).min(ky * lb.f_max),
+                    lb.pin[3] + (ky * lb.f_min).max(ky * lb.f_max),
+                ];
+                for p in [
+                    [keep_x[0], keep_y[0]],
+                    [keep_x[1], keep_y[1]],
+                    [keep_x[0], keep_y[1]],
+                ] {
+                    assert!(!lb.misses(lens, p));
+                    assert!(
+                        p[0] >= bx[0] && p[0] <= bx[2] && p[1] >= bx[1] && p[1] <= bx[3],
+                        "{p:?} outside {bx:?} for lens {lens:?}"
+                    );
+                }
+            }
+        }
         let nan = [[0.0, 0.0], [1.0, 0.0], [f32::NAN, 1.0], [0.0, 1.0]];
         assert!(LensBound::from_corners(nan, [0.2; 4], &d).is_none());
     }
