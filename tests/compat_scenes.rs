@@ -870,3 +870,76 @@ fn points_that_carry_n_are_disks_across_it() {
     let edge_on = coverage(&scene("\"N\" [1 0 0]"));
     assert!(edge_on < 0.01, "{edge_on}");
 }
+
+#[test]
+fn lights_read_the_surface_parameters_by_message_passing() {
+    // A light that scales its colour by the lit surface's `Kr` (as the SIGGRAPH 2001
+    // course's softboxes light obeys its material's reflectivity: `surface("Kr", k)`),
+    // takes its tint from a string parameter, and shines 0.25 where the surface has none.
+    // Three squares: Kr given on the instance (0.5), Kr as a varying primitive variable
+    // (s, a ramp) and a surface without Kr.
+    let dir = common::scratch_dir("message-surface");
+    std::fs::write(
+        dir.join("obeylight.sl"),
+        "light obeylight() { float k = 7; string tint = \"\"; \
+         float found = surface(\"Kr\", k); float named = surface(\"tint\", tint); \
+         float other = surface(\"nosuch\", k); \
+         solar() { Cl = (found != 0 ? k : 0.25) * ((named != 0 && tint == \"blue\") ? color(0, 0, 1) : color(1, 1, 1)); } }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("shiny.sl"),
+        "surface shiny(varying float Kr = 1; string tint = \"white\") { Oi = 1; \
+         Ci = 0; illuminance(P) { Ci += Cl; } }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("dull.sl"),
+        "surface dull() { Oi = 1; Ci = 0; illuminance(P) { Ci += Cl; } }\n",
+    )
+    .unwrap();
+    let out = dir.join("m.png");
+    let square = |y: f32| {
+        format!(
+            "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
+            a = y + 0.25,
+            b = y - 0.25
+        )
+    };
+    let rib = format!(
+        "Format 16 12 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
+         ScreenWindow -1 1 -0.75 0.75\nWorldBegin\nLightSource \"obeylight\" 1\nTranslate 0 0 5\n\
+         AttributeBegin\nSurface \"shiny\" \"Kr\" [0.5] \"tint\" \"blue\"\n{}\nAttributeEnd\n\
+         AttributeBegin\nSurface \"shiny\"\nDeclare \"Kr\" \"varying float\"\n{} \"Kr\" [0 1 0 1]\nAttributeEnd\n\
+         AttributeBegin\nSurface \"dull\"\n{}\nAttributeEnd\nWorldEnd\n",
+        out.display(),
+        square(0.5),
+        square(0.0),
+        square(-0.5)
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err && !text.contains("not supported"), "{text}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let px = |x: u32, y: u32| img.get_pixel(x, y).0;
+    // Top: Kr 0.5 from the instance, tinted blue by the string parameter.
+    let top = px(8, 2);
+    assert!(
+        top[0] == 0 && top[1] == 0 && (top[2] as i32 - 128).abs() <= 2,
+        "{top:?}"
+    );
+    // Middle: Kr = s, a ramp left to right, white.
+    for x in 0..16 {
+        let p = px(x, 6);
+        let s = (x as f32 + 0.5) / 16.0;
+        assert!(
+            (p[0] as f32 - 255.0 * s).abs() <= 12.0 && p[0].abs_diff(p[2]) <= 2,
+            "x {x}: {p:?}"
+        );
+    }
+    // Bottom: no Kr, the light's own 0.25.
+    let bot = px(8, 10);
+    assert!(
+        (bot[0] as i32 - 64).abs() <= 2 && bot[0].abs_diff(bot[2]) <= 2,
+        "{bot:?}"
+    );
+}

@@ -60,6 +60,7 @@ fn run_reporting(prog: &Program, n: usize, diags: &Diagnostics) -> (Vec<Vec3>, V
         rays: None,
         cones: None,
         displacement_outputs: &[],
+        surface_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

@@ -130,6 +130,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         rays: None,
         cones: None,
         displacement_outputs: &[],
+        surface_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

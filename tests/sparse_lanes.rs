@@ -60,6 +60,7 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64, u64) {
         rays: None,
         cones: None,
         displacement_outputs: &[],
+        surface_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.sparse = sparse;

@@ -213,6 +213,9 @@ pub struct Env<'a> {
     /// The displacement shader's output parameters on this grid (message passing:
     /// `displacement("name", var)` in the surface shader).
     pub displacement_outputs: &'a [crate::shade::GridVar],
+    /// The surface shader's parameters as bound for this grid (message passing:
+    /// `surface("name", var)` in light and volume shaders).
+    pub surface_params: &'a [crate::shade::GridVar],
 }
 
 /// Ray queries from shaders, answered by the shading system over the frame's ray geometry.

@@ -2220,17 +2220,27 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             let Some((slot, &r)) = displacement_message(gv, &ty, ex.n).zip(outs.first()) else {
                 return false;
             };
-            // A uniform destination takes the first point's value.
-            let slot = if ex.prog.regs[r as usize].varying || !slot.is_varying() {
-                slot
-            } else {
-                match slot {
-                    Slot::VF(v) => Slot::F(v.first().copied().unwrap_or(0.0)),
-                    Slot::VT(v) => Slot::T(v.first().copied().unwrap_or(Vec3::ZERO)),
-                    other => other,
-                }
+            set_passed(ex, r, slot);
+            return true;
+        }
+        "surface" => {
+            let Some(gv) = ex.env.surface_params.iter().find(|v| v.name == name) else {
+                return false;
             };
-            set_out(ex, r, slot);
+            let Some(&r) = outs.first() else {
+                return false;
+            };
+            if &*ty == "string" {
+                let Some(s) = gv.strings.first() else {
+                    return false;
+                };
+                set_out(ex, r, Slot::S(Arc::from(s.as_str())));
+                return true;
+            }
+            let Some(slot) = displacement_message(gv, &ty, ex.n) else {
+                return false;
+            };
+            set_passed(ex, r, slot);
             return true;
         }
         other => {
@@ -2291,13 +2301,36 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
     }
 }
 
-/// The value of the displacement shader's output `gv` for a destination of type `ty`
+/// Stores a value passed from another shader into output temporary `r`: a uniform
+/// destination takes the first point's value.
+fn set_passed(ex: &mut Exec, r: Reg, slot: Slot) {
+    let slot = if ex.prog.regs[r as usize].varying || !slot.is_varying() {
+        slot
+    } else {
+        match slot {
+            Slot::VF(v) => Slot::F(v.first().copied().unwrap_or(0.0)),
+            Slot::VT(v) => Slot::T(v.first().copied().unwrap_or(Vec3::ZERO)),
+            other => other,
+        }
+    };
+    set_out(ex, r, slot);
+}
+
+/// The value of another shader's variable `gv` (a displacement output, a surface parameter)
+/// for a destination of type `ty`
 /// (`"float"`, or a colour/point/vector/normal taking any triple): None when the two do not
 /// fit, as RISpec's message passing reports a variable of another type as not found.
 fn displacement_message(gv: &crate::shade::GridVar, ty: &str, n: usize) -> Option<Slot> {
     let w = gv.width();
+    // An area light's run covers samples × points, sample-major: point i of a longer run
+    // reads the value of point i modulo the grid's.
+    let points = if w == 0 {
+        1
+    } else {
+        (gv.floats.len() / w).max(1)
+    };
     let at = |i: usize, k: usize| {
-        let i = if gv.uniform { 0 } else { i };
+        let i = if gv.uniform { 0 } else { i % points };
         gv.floats.get(i * w + k).copied().unwrap_or(0.0)
     };
     match (ty, w) {

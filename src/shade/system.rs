@@ -217,6 +217,12 @@ struct RunCtx<'s> {
     area_light: Option<usize>,
     /// The space the grid's incident rays crossed, which picks its volume shader.
     medium: Medium,
+    /// The surface shader's parameters as bound on the grid, for light and volume shaders
+    /// that ask for them (`surface("name", var)`); empty otherwise.
+    surface_params: &'s [GridVar],
+    /// Run only the program's parameter set-up (defaults, instance values, primitive
+    /// variables), not its body.
+    params_only: bool,
 }
 
 /// The space a grid's incident rays crossed to reach it (RISpec §4.2.6 volume shaders): the
@@ -529,6 +535,8 @@ impl<'a> ShadeSystem<'a> {
             cones: None,
             area_light: None,
             medium: Medium::Camera,
+            surface_params: &[],
+            params_only: false,
         }
     }
 
@@ -583,6 +591,8 @@ impl<'a> ShadeSystem<'a> {
                 cones: None,
                 area_light: None,
                 medium: Medium::Camera,
+                surface_params: &[],
+                params_only: false,
             };
             if let Some(mut regs) =
                 self.run(&prog, &iref, &grid, &ctx, &[], Some((&ci, &oi)), None, None)
@@ -718,6 +728,23 @@ impl<'a> ShadeSystem<'a> {
             self.grid_lights(&ctx)
         } else {
             Vec::new()
+        };
+        // Lights and volumes that read the surface's parameters (`surface("Kr", k)`) see
+        // them as bound on this grid, before the surface runs (its lights run first).
+        let asks_surface = grid_lights
+            .iter()
+            .any(|gl| asks_message(&gl.prog, "surface"))
+            || atmosphere
+                .as_ref()
+                .is_some_and(|(a, _)| asks_message(a, "surface"));
+        let surface_params = if asks_surface {
+            self.param_values(&prog, &sref, grid, &ctx)
+        } else {
+            Vec::new()
+        };
+        let ctx = RunCtx {
+            surface_params: &surface_params,
+            ..ctx
         };
         let lights: Vec<LightResult> = self
             .eval_lights(grid, &ctx, &grid_lights, None, None)
@@ -1042,6 +1069,27 @@ impl<'a> ShadeSystem<'a> {
 
     /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
     /// those grid points only, as a grid of just them.
+    /// The surface program's parameters as bound on `grid` (its defaults, then instance
+    /// values and primitive variables), without running its body.
+    fn param_values(
+        &self,
+        prog: &Program,
+        sref: &ShaderRef,
+        grid: &Grid,
+        ctx: &RunCtx,
+    ) -> Vec<GridVar> {
+        let pctx = RunCtx {
+            params_only: true,
+            ..*ctx
+        };
+        let Some(regs) = self.run(prog, sref, grid, &pctx, &[], None, None, None) else {
+            return Vec::new();
+        };
+        let vars = param_vars(prog, &regs, grid.len());
+        crate::shade::value::recycle(regs);
+        vars
+    }
+
     fn relight(
         &self,
         grid: &Grid,
@@ -1340,6 +1388,7 @@ impl<'a> ShadeSystem<'a> {
             rays: Some(&tracer),
             cones: ctx.cones,
             displacement_outputs: &grid.displacement_outputs,
+            surface_params: ctx.surface_params,
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);
@@ -1422,10 +1471,60 @@ impl<'a> ShadeSystem<'a> {
         } else {
             ex.run_init();
             bind_params(&mut ex, prog, sref, grid, camera_from_shader, self.diags);
-            ex.run_body();
+            if !ctx.params_only {
+                ex.run_body();
+            }
         }
         Some(ex.regs)
     }
+}
+
+/// Whether `prog` calls message-passing function `which` (`surface`, `atmosphere`, …).
+fn asks_message(prog: &Program, which: &str) -> bool {
+    let named = |r: &crate::sl::ir::Reg| {
+        prog.consts
+            .iter()
+            .any(|(c, v)| c == r && matches!(v, crate::sl::ir::Const::S(s) if &**s == which))
+    };
+    let found = |instrs: &[Instr]| {
+        any_instr(instrs, &|i| {
+            matches!(i, Instr::Call { f: crate::sl::builtins::Builtin::Message, args, .. }
+                if args.first().is_some_and(named))
+        })
+    };
+    found(&prog.init) || found(&prog.body)
+}
+
+/// A program's parameters after set-up, as message passing hands them out: one uniform
+/// value or one per point, strings as strings. Array parameters are left out.
+fn param_vars(prog: &Program, regs: &[Slot], n: usize) -> Vec<GridVar> {
+    let mut out = Vec::new();
+    for par in prog.params.iter().filter(|p| p.array.is_none()) {
+        let Some(slot) = regs.get(par.reg as usize) else {
+            continue;
+        };
+        let mut gv = match slot {
+            Slot::S(s) => GridVar {
+                name: par.name.clone(),
+                ty: ParamType::String,
+                array_len: 1,
+                uniform: true,
+                floats: Vec::new(),
+                strings: vec![s.to_string()],
+            },
+            _ => slot_to_gridvar(&par.name, par.ty, slot, n),
+        };
+        if matches!(slot, Slot::F(_) | Slot::T(_)) {
+            gv.uniform = true;
+            let w = gv.width();
+            gv.floats.truncate(w);
+        }
+        if par.ty != BaseType::String && matches!(slot, Slot::S(_)) {
+            continue;
+        }
+        out.push(gv);
+    }
+    out
 }
 
 /// Points `start..start + n` of an area light's run over `m` points (one sample for every lit
