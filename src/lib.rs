@@ -8,6 +8,7 @@ pub mod diag;
 pub mod encoding;
 pub mod farm;
 pub mod film;
+pub mod foreign_path;
 pub mod geom;
 pub mod lsp;
 pub mod num;

@@ -320,3 +320,54 @@ fn a_reader_that_stops_early_ends_the_output_quietly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.code(), Some(0), "{stderr}");
 }
+
+#[test]
+fn an_exported_package_with_the_authors_absolute_paths_renders_from_its_own_folder() {
+    // Exporters write every archive and the output as full paths on the author's machine;
+    // the package's copies lie beside the scene and the picture goes to the working folder.
+    let dir = tmpdir("foreign");
+    let pkg = dir.join("Sphere");
+    std::fs::create_dir_all(pkg.join("Worlds")).unwrap();
+    std::fs::create_dir_all(pkg.join("Objects")).unwrap();
+    let home = "/home/author-not-here/presets/Sphere";
+    std::fs::write(
+        pkg.join("preview.rib"),
+        format!(
+            "Display \"{home}/images/preview.png\" \"png\" \"rgb\"\nFormat 16 16 1\n\
+             Projection \"perspective\" \"fov\" 40\nTranslate 0 0 4\n\
+             ReadArchive \"{home}/Worlds/world.rib\"\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        pkg.join("Worlds/world.rib"),
+        format!(
+            "WorldBegin\nLightSource \"distantlight\" 1\n\
+             ReadArchive \"{home}/Objects/ball.rib\"\nWorldEnd\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        pkg.join("Objects/ball.rib"),
+        "Surface \"matte\"\nSphere 1 -1 1 360\n",
+    )
+    .unwrap();
+    let out = arbor()
+        .args(["render", "Sphere/preview.rib"])
+        .current_dir(&*dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    // The messages wrap: compare them with the line breaks and gutters taken out.
+    let flat = err
+        .replace('│', " ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(flat.contains("is not on this machine"), "{err}");
+    assert!(flat.contains("does not exist here"), "{err}");
+    let img = image::open(dir.join("preview.png")).unwrap().to_rgb8();
+    // The sphere (read through both archives) is lit in the middle.
+    assert!(img.get_pixel(8, 8)[0] > 40, "{:?}", img.get_pixel(8, 8));
+}

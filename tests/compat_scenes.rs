@@ -943,3 +943,28 @@ fn lights_read_the_surface_parameters_by_message_passing() {
         "{bot:?}"
     );
 }
+
+#[test]
+fn illuminance_light_parameter_reads_each_lights_output() {
+    // 3Delight's and PRMan's `illuminance(…, "light:__nondiffuse", nd)`: nd holds the
+    // current light's output parameter inside the loop. Two lights of intensity 1 and 0.5;
+    // the first marks itself non-diffuse, so only the second's 0.5 is added.
+    let dir = common::scratch_dir("lightmsg");
+    std::fs::write(
+        dir.join("flaggedlight.sl"),
+        "light flaggedlight(float intensity = 1; output float __nondiffuse = 0;) \
+         { solar(vector(0, 0, 1), 0) { Cl = intensity; } }",
+    )
+    .unwrap();
+    let c = centre_colour(
+        "lightmsg",
+        "surface lightmsg() { color c = 0; float nd = 0;\n\
+         illuminance(\"\", P, N, PI, \"light:__nondiffuse\", nd) { c += Cl * (1 - nd); }\n\
+         Oi = 1; Ci = c; }",
+        "LightSource \"flaggedlight\" 1 \"__nondiffuse\" 1\n\
+         LightSource \"flaggedlight\" 2 \"intensity\" 0.5",
+    );
+    for ch in c {
+        assert!((ch - 0.5).abs() < 1e-4, "{c:?}");
+    }
+}

@@ -861,3 +861,57 @@ fn an_rsl2_class_with_one_shading_method_compiles_as_that_shader() {
         "{rendered}"
     );
 }
+
+#[test]
+fn illuminance_trace_and_gather_take_prmans_optional_parameters() {
+    // PRMan 13 and 3Delight shaders pass "name", value pairs to illuminance (message
+    // passing with the lights, the light cache), trace and gather; these were errors that
+    // lost the whole shader.
+    let (_, log) = compile_ok(
+        r#"surface t(float Kd = 1) {
+    normal Nf = faceforward(normalize(N), I);
+    float nd = 0;
+    color C = 0;
+    illuminance("", P, Nf, PI/2, "light:__nondiffuse", nd) { C += Cl * (1 - nd); }
+    illuminance(P, "lightcache", "refresh", "send:light:__coneaxis", Nf) { C += Cl; }
+    illuminance("bakelight", P, "send:light:do_bake", 1) { }
+    C += trace(P, reflect(I, Nf), "bias", 0.01, "samples", 4, "label", "refl");
+    color hc = 0;
+    gather("illuminance", P, Nf, PI/4, 4, "maxdist", 10, "label", "g", "surface:Ci", hc) {
+        C += hc;
+    }
+    gather("illuminance", P, Nf, 0, 1, "subset", "", "volume:Ci", hc) { C += hc; }
+    Ci = Kd * C;
+}"#,
+    );
+    // What arbor does not use is named (sent values, the ray options); "light:" reads,
+    // "lightcache" and the "label"s are silent.
+    for said in [
+        "\"send:light:__coneaxis\"",
+        "\"send:light:do_bake\"",
+        "`trace` parameter \"bias\"",
+        "`trace` parameter \"samples\"",
+        "`gather` parameter \"maxdist\"",
+        "`gather` parameter \"subset\"",
+    ] {
+        assert!(log.contains(said), "no warning naming {said}:\n{log}");
+    }
+    // PRMan's "volume:Ci" is the hit's colour, as "surface:Ci".
+    // Only the messages (not the quoted source lines) count.
+    let messages: String = log
+        .lines()
+        .filter(|l| l.trim_start().starts_with('⚠') || l.trim_start().starts_with('│'))
+        .collect::<Vec<_>>()
+        .join("\n");
+    for quiet in ["__nondiffuse", "lightcache", "\"label\"", "volume:Ci"] {
+        assert!(
+            !messages.contains(quiet),
+            "{quiet} should be silent:\n{log}"
+        );
+    }
+    // A "light:" target must be a variable to store into.
+    let (_, log, err) = compile(
+        r#"surface t() { illuminance(P, N, PI/2, "light:__nondiffuse", 1) { Ci += Cl; } }"#,
+    );
+    assert!(err, "a constant cannot receive a light's value:\n{log}");
+}

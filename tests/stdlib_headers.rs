@@ -188,6 +188,31 @@ surface u() {
        + bary_triangle(point(0, 0, 0), point(1, 0, 0), point(0, 1, 0), 0.01, point(s, t, 0));
 }"#,
     ),
+    (
+        "maps.h",
+        r#"#include <maps.h>
+displacement u(point maporigin = point "shader" (0, 0, 0), xaxis = point "shader" (1, 0, 0),
+               yaxis = point "shader" (0, 1, 0), zaxis = point "shader" (0, 0, 1)) {
+    float uu, vv, ss, tt;
+    point PP = transform("shader", P);
+    cylinmap(PP, uu, vv, maporigin, xaxis, yaxis, zaxis);
+    sphermap(PP, uu, vv, maporigin, xaxis, yaxis, zaxis);
+    planemap(PP, uu, vv, maporigin, xaxis, yaxis);
+    automap(PP, uu, vv, maporigin, yaxis, ntransform("shader", N));
+    float r = decalmap(PP, s, t, ss, tt, 1, maporigin, xaxis, yaxis, zaxis,
+                       0, 0, 1, 0, 0, 1, 1, 1, N);
+    P += normalize(N) * 0.01 * bilerp(uu, vv, 0, 1, 0, 1) * (ss + tt + r);
+    N = calculatenormal(P);
+}"#,
+    ),
+    (
+        "normals.h",
+        r#"#include "normals.h"
+light u(float intensity = 1) {
+    normal Ns = shadingnormal(N);
+    illuminate(Ps + Ns) { Cl = intensity; }
+}"#,
+    ),
 ];
 
 #[test]
@@ -546,4 +571,74 @@ surface rtprobe() {
     Ci = color(hit + a, (d > 1e10) ? 0 : 1, 0) + hc + c + e + RayTrace(P, R, 0, 1, 1);
 }"#;
     assert_near(probe("rtprobe", body, SQUARE), [0.0; 3], 1e-6, "rays");
+}
+
+#[test]
+fn prman_maps_give_the_documented_coordinates_for_known_points() {
+    // PRMan's maps.h (its texmap, diaknurl, sinknurl and threads shaders include it):
+    // cylindrical turns of a fraction in [0, 1) from the x axis and height along z,
+    // spherical longitude the same and 0..1 from the south to the north pole, planar
+    // distances along the axes, automap across the normal. Errors summed into red.
+    let body = r#"#include <maps.h>
+float err2(float a, b, x, y) { return abs(a - x) + abs(b - y); }
+surface mapprobe() {
+    point O = point "world" (0, 0, 0), X = point "world" (1, 0, 0);
+    point Y = point "world" (0, 1, 0), Z = point "world" (0, 0, 1);
+    float uu = 0, vv = 0, ss = 0, tt = 0, e = 0;
+    cylinmap(point "world" (0, 2, 3), uu, vv, O, X, Y, Z);
+    e += err2(uu, vv, 0.25, 3);
+    cylinmap(point "world" (0, -2, -1), uu, vv, O, X, Y, Z);
+    e += err2(uu, vv, 0.75, -1);
+    cylinmap(point "world" (5, 0, 0.5), uu, vv, O, X, Y, Z);
+    e += err2(uu, vv, 0, 0.5);
+    sphermap(point "world" (-3, 0, 0), uu, vv, O, X, Y, Z);
+    e += err2(uu, vv, 0.5, 0.5);
+    sphermap(point "world" (0, 0, 2), uu, vv, O, X, Y, Z);
+    e += abs(vv - 1);
+    sphermap(point "world" (0, 0, -2), uu, vv, O, X, Y, Z);
+    e += abs(vv);
+    planemap(point "world" (0.3, 0.7, 9), uu, vv, O, X, Y);
+    e += err2(uu, vv, 0.3, 0.7);
+    /* a facet facing +z with +y up: uu along x, vv along y */
+    automap(point "world" (0.4, 0.6, 0), uu, vv, O, Y, normal (0, 0, 1));
+    e += err2(uu, vv, 0.4, 0.6);
+    /* decalmap: planar through the corners (s, t) = (u, v), and the surface's own (s, t) */
+    decalmap(point "world" (0.2, 0.9, 0), 0, 0, ss, tt, 0, O, X, Y, Z,
+             0, 0, 1, 0, 0, 1, 1, 1, normal (0, 0, 1));
+    e += err2(ss, tt, 0.2, 0.9);
+    decalmap(P, 0.125, 0.625, ss, tt, 3, O, X, Y, Z, 0, 0, 1, 0, 0, 1, 1, 1, N);
+    e += err2(ss, tt, 0.125, 0.625);
+    e += abs(bilerp(0.5, 0.25, 0, 1, 2, 3) - 1);
+    Ci = color(e, 1, 0);
+    Oi = 1;
+}"#;
+    let got = probe("mapprobe", body, SQUARE);
+    assert_near(got, [0.0, 1.0, 0.0], 1e-4, "maps.h coordinates");
+}
+
+#[test]
+fn prman_shadingnormal_turns_a_two_sided_back_face_to_the_viewer() {
+    // normals.h's shadingnormal: unit length, facing the viewer on a two-sided primitive.
+    // The square is drawn in both orientations: from one side its N already faces the
+    // camera (kept, green 1), from the other it is turned (green 0).
+    let body = r#"#include "normals.h"
+surface snprobe() {
+    normal Ns = shadingnormal(N);
+    Ci = color(Ns . normalize(-I) > 0 ? 1 : 0, Ns . normalize(N) > 0 ? 1 : 0, length(Ns));
+    Oi = 1;
+}"#;
+    let front = probe("snprobe", body, &format!("Sides 2 {SQUARE}"));
+    let back = probe(
+        "snprobe",
+        body,
+        &format!("Sides 2 ReverseOrientation {SQUARE}"),
+    );
+    for got in [front, back] {
+        assert!((got[0] - 1.0).abs() < 1e-4, "faces the viewer: {got:?}");
+        assert!((got[2] - 1.0).abs() < 1e-4, "unit length: {got:?}");
+    }
+    assert!(
+        (front[1] + back[1] - 1.0).abs() < 1e-4,
+        "one orientation kept, the other turned: {front:?} {back:?}"
+    );
 }

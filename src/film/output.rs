@@ -340,6 +340,28 @@ fn plan(
             );
         }
         let mut path = PathBuf::from(&d.name);
+        // An exporter's absolute path into a folder of the author's machine
+        // (`/home/frigge/…/images/preview.tiff`): the picture goes to the working folder
+        // under its own file name rather than being lost.
+        let foreign = crate::foreign_path::looks_absolute(&d.name)
+            && path.parent().is_some_and(|p| !p.is_dir());
+        if foreign {
+            if let Some(file) = d.name.rsplit(['/', '\\']).next().filter(|f| !f.is_empty()) {
+                path = PathBuf::from(file);
+                diags.report(
+                    Diag::warning(
+                        "film::display",
+                        format!(
+                            "the folder of `{}` does not exist here; writing `{}`",
+                            d.name,
+                            path.display()
+                        ),
+                    )
+                    .maybe_label(d.span, "this Display")
+                    .help("an absolute path from the machine the scene was written on"),
+                );
+            }
+        }
         let kind = d.kind.to_ascii_lowercase();
         let by_ext = Format::from_extension(&path);
         let format = match kind.as_str() {
@@ -1714,10 +1736,13 @@ mod tests {
         let _ = write_atomically(&target, |_| Err("no".into()));
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
-        // A display into a missing folder: an error and no file.
+        // A display into a missing folder (named relative to the working folder; an absolute
+        // one from another machine falls back to the file name): an error and no file.
         let f = film();
         let d = Diagnostics::new();
-        let missing = dir.join("nope").join("x.tif");
+        let missing = PathBuf::from("target")
+            .join("arbor-missing-display-folder")
+            .join("x.tif");
         let r = write_displays(&f, &opts(vec![display(&missing, "tiff", "rgba")]), &d, None);
         assert_eq!(r.unwrap_err().code, "film::write");
         assert!(!missing.exists());

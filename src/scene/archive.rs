@@ -103,8 +103,23 @@ impl Builder<'_> {
     /// Where a file archive is found, with the folders that were searched.
     fn find_archive(&self, name: &str, from: Span) -> (Option<PathBuf>, Vec<String>) {
         let p = Path::new(name);
-        if p.is_absolute() {
-            return (p.is_file().then(|| p.to_path_buf()), vec![]);
+        if p.is_absolute() && p.is_file() {
+            return (Some(p.to_path_buf()), vec![]);
+        }
+        if crate::foreign_path::looks_absolute(name) {
+            // A path on the author's machine: the package's copy beside the scene.
+            let mut bases = Vec::new();
+            if let Some(f) = self.ctx.sources.get(from.file) {
+                if let Some(d) = Path::new(&f.name).parent() {
+                    bases.push(d.to_path_buf());
+                }
+            }
+            if let Some(b) = &self.ctx.base_dir {
+                bases.push(b.clone());
+            }
+            let found = crate::foreign_path::rebase(name, &bases);
+            let searched = bases.iter().map(|d| d.display().to_string()).collect();
+            return (found, searched);
         }
         let mut dirs: Vec<PathBuf> = Vec::new();
         dirs.extend(self.ctx.archive_paths.iter().map(PathBuf::from));
@@ -148,6 +163,11 @@ impl Builder<'_> {
                 .label(arg_span, "not found");
             d = if searched.is_empty() {
                 d.help("check the path")
+            } else if crate::foreign_path::looks_absolute(name) {
+                d.help(format!(
+                    "an absolute path: looked for its last folders under {} and their parents",
+                    searched.join(", ")
+                ))
             } else {
                 d.help(format!(
                     "searched: {} (add a folder with `Option \"searchpath\" \"archive\"` or --archives)",
@@ -156,6 +176,18 @@ impl Builder<'_> {
             };
             return self.report(d);
         };
+        if crate::foreign_path::looks_absolute(name) && !Path::new(name).is_file() {
+            let d = Diag::warning(
+                "scene::archive",
+                format!(
+                    "archive \"{name}\" is not on this machine; reading \"{}\"",
+                    path.display()
+                ),
+            )
+            .label(arg_span, "absolute path from another machine")
+            .help("the scene's own copy, found by the path's last folders beside the scene");
+            self.report(d);
+        }
         let key = std::fs::canonicalize(&path)
             .unwrap_or_else(|_| path.clone())
             .display()

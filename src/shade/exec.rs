@@ -1482,8 +1482,11 @@ impl<'a> Exec<'a> {
             for (name, reg) in outputs {
                 let r = *reg as usize;
                 let vals: Option<Vec<Vec3>> = match name.as_str() {
-                    "surface:Ci" => Some(ci.clone()),
-                    "surface:Oi" => Some(vec![Vec3::ONE; n]),
+                    // PRMan's "volume:" forms are the hit's colour after the volumes along
+                    // the ray; arbor's rays give the surface's (what 3Delight's
+                    // "surface:Ci" gives the same shaders).
+                    "surface:Ci" | "volume:Ci" => Some(ci.clone()),
+                    "surface:Oi" | "volume:Oi" => Some(vec![Vec3::ONE; n]),
                     "ray:direction" => Some(dirs.clone()),
                     "ray:origin" => Some(p.clone()),
                     "primitive:P" | "surface:P" => {

@@ -1017,6 +1017,30 @@ impl<'a> Lowerer<'a> {
                             continue;
                         }
                     };
+                    // PRMan's gather options are inputs, not outputs.
+                    const GATHER_INPUTS: &[&str] = &[
+                        "bias",
+                        "label",
+                        "maxdist",
+                        "samplebase",
+                        "distribution",
+                        "subset",
+                        "hitmode",
+                        "hitsides",
+                        "othreshold",
+                        "raytype",
+                        "samplepattern",
+                    ];
+                    if GATHER_INPUTS.contains(&name.as_str()) {
+                        self.unused_ray_params(
+                            "gather",
+                            &args[k..(k + 2).min(args.len())],
+                            0,
+                            &["label"],
+                        );
+                        k += 2;
+                        continue;
+                    }
                     let Some(target) = args.get(k + 1) else {
                         self.diags.push(
                             Diag::error(
@@ -1046,6 +1070,8 @@ impl<'a> Lowerer<'a> {
                         name.as_str(),
                         "surface:Ci"
                             | "surface:Oi"
+                            | "volume:Ci"
+                            | "volume:Oi"
                             | "ray:length"
                             | "ray:direction"
                             | "ray:origin"
@@ -1056,7 +1082,7 @@ impl<'a> Lowerer<'a> {
                         self.diags.push(
                             Diag::warning("sl::unsupported", format!("`gather` output \"{name}\" is not computed by arbor; the variable keeps its value"))
                                 .label(args[k].span, "unsupported output")
-                                .help("arbor gives surface:Ci, surface:Oi, ray:length, ray:direction, ray:origin, primitive:P"),
+                                .help("arbor gives surface:Ci, surface:Oi, volume:Ci, volume:Oi, ray:length, ray:direction, ray:origin, primitive:P"),
                         );
                     }
                     let want = if name == "ray:length" {
@@ -1191,10 +1217,24 @@ impl<'a> Lowerer<'a> {
                 self.error_val()
             }
         };
-        let axis = self.axis_angle(&rest[rest.len().min(1)..], span);
+        // PRMan's and 3Delight's optional `"name", value` pairs after the axis and angle
+        // (or right after the position): `illuminance("", P, N, PI/2, "light:__nondiffuse",
+        // nd)`. They start at the first string literal past the position.
+        let after_pos = &rest[rest.len().min(1)..];
+        let split = after_pos
+            .iter()
+            .position(|a| matches!(a.kind, ExprKind::Str(_)))
+            .unwrap_or(after_pos.len());
+        let axis = self.axis_angle(&after_pos[..split], span);
+        let reads = self.illuminance_params(&after_pos[split..]);
         self.in_illuminance += 1;
         self.varying_ctx += 1;
-        let (b, ()) = self.with_block(|lw| lw.scoped_stmt(body));
+        let (b, ()) = self.with_block(|lw| {
+            for read in &reads {
+                lw.expr(read, None);
+            }
+            lw.scoped_stmt(body)
+        });
         self.varying_ctx -= 1;
         self.in_illuminance -= 1;
         self.emit(Instr::Illuminance {
@@ -1203,6 +1243,83 @@ impl<'a> Lowerer<'a> {
             axis,
             body: b,
         });
+    }
+
+    /// The `"name", value` pairs of an illuminance loop. `"light:NAME", var` (PRMan's
+    /// message passing from each light) becomes `lightsource("NAME", var)` at the top of the
+    /// loop body, so `var` holds the current light's output parameter; the calls are
+    /// returned for the body to lower. `"send:light:NAME", value` (a value handed to the
+    /// light before it runs) is evaluated and not used, with a warning; `"lightcache"` needs
+    /// nothing (arbor runs the lights afresh for every loop).
+    fn illuminance_params(&mut self, args: &[Expr]) -> Vec<Expr> {
+        let mut reads = Vec::new();
+        let mut k = 0;
+        while k < args.len() {
+            let ExprKind::Str(name) = &args[k].kind else {
+                self.expr(&args[k], None);
+                self.diags.push(
+                    Diag::error(
+                        "sl::call",
+                        "`illuminance` parameters come in \"name\", value pairs",
+                    )
+                    .label(args[k].span, "expected a parameter name"),
+                );
+                k += 1;
+                continue;
+            };
+            let Some(value) = args.get(k + 1) else {
+                self.diags.push(
+                    Diag::error(
+                        "sl::call",
+                        format!("`illuminance` parameter \"{name}\" without a value"),
+                    )
+                    .label(args[k].span, "no value"),
+                );
+                break;
+            };
+            let light_param = name
+                .strip_prefix("light:")
+                .or_else(|| name.strip_prefix("lightsource:"));
+            if let Some(param) = light_param {
+                reads.push(Expr {
+                    kind: ExprKind::Call {
+                        name: "lightsource".to_string(),
+                        name_span: args[k].span,
+                        args: vec![
+                            Expr {
+                                kind: ExprKind::Str(param.to_string()),
+                                span: args[k].span,
+                            },
+                            value.clone(),
+                        ],
+                    },
+                    span: args[k].span.to(value.span),
+                });
+            } else {
+                self.expr(value, None);
+                // arbor runs the lights afresh for every loop, which is what
+                // "lightcache" "refresh" asks for (and "reuse" gives the same light).
+                if name == "lightcache" {
+                    k += 2;
+                    continue;
+                }
+                let what = if name.starts_with("send:light:") {
+                    format!(
+                        "`illuminance` sends \"{name}\" to the lights: arbor does not pass it; \
+                         each light runs with its own parameter values"
+                    )
+                } else {
+                    format!("`illuminance` parameter \"{name}\" is not used by arbor")
+                };
+                self.diags.push(
+                    Diag::warning("sl::unsupported", what)
+                        .label(args[k].span, "not used")
+                        .help("\"light:NAME\", var reads a light's output parameter into var"),
+                );
+            }
+            k += 2;
+        }
+        reads
     }
 
     fn lower_loop(
@@ -2303,6 +2420,11 @@ impl<'a> Lowerer<'a> {
                 return self.transform_call(name, args, span)
             }
             "filterstep" => return self.filterstep(args, span),
+            // PRMan's `trace(P, R, "bias", b, "samples", n, …)`: the ray itself is traced.
+            "trace" if args.len() > 2 && self.is_string_expr(&args[2]) => {
+                self.unused_ray_params("trace", args, 2, &["label"]);
+                return self.call(name, name_span, &args[..2], span, hint);
+            }
             "printf" | "format" => return self.printf(name, args, span),
             "atmosphere" | "displacement" | "lightsource" | "surface" | "incident" | "opposite"
             | "attribute" | "option" | "rendererinfo" | "textureinfo" | "rayinfo" => {
@@ -3232,6 +3354,42 @@ impl<'a> Lowerer<'a> {
             span,
         });
         t
+    }
+
+    /// Optional `"name", value` pairs of a ray call that arbor does not use (one ray per
+    /// point, arbor's own bias): each value is evaluated and each name but those in `silent`
+    /// (names that only label rays) gets one warning.
+    fn unused_ray_params(&mut self, call: &str, args: &[Expr], from: usize, silent: &[&str]) {
+        let mut k = from;
+        while k < args.len() {
+            let pn = self.expr(&args[k], Some(BaseType::String));
+            if let Some(v) = args.get(k + 1) {
+                self.expr(v, None);
+            }
+            let name = match &args[k].kind {
+                ExprKind::Str(n) => n.clone(),
+                _ => String::from("(computed name)"),
+            };
+            if pn.ty != BaseType::String {
+                self.diags.push(
+                    Diag::error(
+                        "sl::call",
+                        format!("`{call}` parameters come in \"name\", value pairs"),
+                    )
+                    .label(args[k].span, "expected a parameter name"),
+                );
+            } else if !silent.contains(&name.as_str()) {
+                self.diags.push(
+                    Diag::warning(
+                        "sl::unsupported",
+                        format!("`{call}` parameter \"{name}\" is not used by arbor"),
+                    )
+                    .label(args[k].span, "not used")
+                    .help("arbor traces one ray per shading point with its own bias"),
+                );
+            }
+            k += 2;
+        }
     }
 
     /// Whether `e` is a string without lowering it: a literal, or a variable or parameter
