@@ -121,10 +121,11 @@ fn bench(c: &mut Criterion) {
     let t0 = std::time::Instant::now();
     let rs = tracer.geometry().expect("ray geometry");
     eprintln!(
-        "ray geometry: {} micropolygons in {} grids, built in {:.2} s",
+        "ray geometry: {} micropolygons in {} grids, built in {:.2} s; tree {:.1} MB",
         rs.micropolygons,
         rs.grids.len(),
-        t0.elapsed().as_secs_f64()
+        t0.elapsed().as_secs_f64(),
+        rs.bvh.bytes() as f64 / (1 << 20) as f64
     );
     let active = vec![true; BATCH];
     let mut ci = vec![Vec3::ZERO; BATCH];

@@ -9,7 +9,8 @@
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to eight
 //! children, tested together, quantised to one 64-byte cache line, see `qbox`, with the
 //! children's indices on a second line; leaves of up to 8 quads, their SAH cost counted in
-//! groups of four, the groups the leaf test takes at once on x86-64, see `quad4`); a quad is
+//! groups of four, the groups the leaf test takes at once on x86-64, see `quad4`, each leaf
+//! one block holding its quads' corners itself, see [`Bvh::leaves`]); a quad is
 //! intersected, watertight, as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)` and
 //! reports bilinear-style coordinates `(a, b)` in `[0, 1]²` across the quad. Traversal visits
 //! the nearest child in reach first (ties by lane), pushing the others farthest first.
@@ -28,10 +29,10 @@ use super::{memhint, qbox};
 
 mod interleave;
 
-/// One micropolygon, its corners in the shared vertex array: `v00 = verts[k]`,
-/// `v10 = verts[k + 1]`, `v01 = verts[k + row]`, `v11 = verts[k + row + 1]` (a grid's points
-/// are stored once, row by row, and its micropolygons point into them: 16 bytes a quad
-/// instead of 56, and the quads of a leaf share their corners' cache lines).
+/// One micropolygon given to [`Bvh::build`], its corners in the shared vertex array:
+/// `v00 = verts[k]`, `v10 = verts[k + 1]`, `v01 = verts[k + row]`,
+/// `v11 = verts[k + row + 1]` (a grid's points are stored once, row by row). The tree keeps
+/// its own copy of each leaf's corners (see [`Bvh::leaves`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Quad {
     pub k: u32,
@@ -71,10 +72,11 @@ struct Node8 {
     valid: u8,
     /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
     q: [[u8; WIDTH]; 6],
-    /// Interior child: node index. Leaf child: its first quad.
+    /// Interior child: node index. Leaf child: its block's first word in [`Bvh::leaves`].
     child: [u32; WIDTH],
-    /// Quads in a leaf child (at most `MAX_LEAF`); 0 for an interior child and an empty lane.
-    count: [u8; WIDTH],
+    /// Leaf child: its quads (at most `MAX_LEAF`, low byte) and its block's words the walk
+    /// reads (high byte, see [`Bvh::leaves`]); 0 for an interior child and an empty lane.
+    count: [u16; WIDTH],
     /// Per axis the quantum itself, `qbox::quantum(exp)` (read by the vector slab test,
     /// which then broadcasts it instead of rebuilding it from the exponent's bits).
     scale: [f32; 3],
@@ -98,6 +100,15 @@ impl Node8 {
     };
 }
 
+/// Which micropolygon a leaf's quad is (what a hit reports).
+#[derive(Clone, Copy, Debug)]
+pub struct QuadId {
+    /// Index of the ray grid it belongs to.
+    pub grid: u32,
+    /// Quad index inside the grid.
+    pub index: u32,
+}
+
 /// The closest intersection along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -112,12 +123,84 @@ pub struct Hit {
 #[derive(Default, Debug)]
 pub struct Bvh {
     nodes: Vec<Node8>,
-    pub quads: Vec<Quad>,
-    /// The quads' corners (see [`Quad`]), then one padding element (the four-quad test
-    /// loads 16 bytes a corner).
-    pub verts: Vec<Vec3>,
-    /// The root when the whole tree is one leaf (then `nodes` is empty): its quad count.
+    /// The leaves, a block of 32-bit words each, everything a leaf's test reads side by side
+    /// (so a leaf visit is one dependent read, prefetched when its parent is visited, instead
+    /// of the quad records and then the rows of the grid their corners lie in): per quad a
+    /// word of its corners' numbers in the block's vertex list (bytes `v00 v10 v01 v11`, low
+    /// first); the distinct corners of the leaf's quads (at most 32), `x y z` each, in the
+    /// order the quads first name them; a padding word (the four-quad test loads 16 bytes a
+    /// corner); then, read only on a hit, per quad its [`QuadId`] (two words). The corners
+    /// are the input's floats bit for bit, so every hit is the one the shared vertex array
+    /// gave; a leaf's quads come from one grid or two and share most corners, so the copies
+    /// cost about what the shared array and the 16-byte quad records did.
+    leaves: Vec<u32>,
+    /// The root when the whole tree is one leaf (then `nodes` is empty): its `count` (see
+    /// [`Node8::count`]); its block starts at word 0.
     root_leaf: u32,
+}
+
+/// A quad's corners' numbers in the shared vertex array: `v00 v10 v01 v11`.
+#[inline]
+fn quad_corners(q: &Quad) -> [usize; 4] {
+    let (k, r) = (q.k as usize, q.row as usize);
+    [k, k + 1, k + r, k + r + 1]
+}
+
+/// A leaf's vertex list: the distinct corners (below `len`) of its quads, in the order the
+/// quads first name them.
+fn leaf_vertices(quads: &[Quad], len: usize) -> Vec<usize> {
+    let mut local: Vec<usize> = Vec::with_capacity(4 * quads.len());
+    for g in quads.iter().flat_map(quad_corners) {
+        if g < len && !local.contains(&g) {
+            local.push(g);
+        }
+    }
+    local
+}
+
+/// A leaf's corner `c` (its number in the leaf's vertex list), if in range.
+#[inline(always)]
+fn leaf_vertex(verts: &[f32], c: u8) -> Option<Vec3> {
+    let f = 3 * c as usize;
+    verts.get(f..f + 3).map(|v| Vec3::new(v[0], v[1], v[2]))
+}
+
+/// A leaf quad's corners `v00 v10 v01 v11` from its corner word (see [`Bvh::leaves`]); `None`
+/// when one is out of range (such a quad is never hit).
+#[inline]
+pub(crate) fn leaf_corners(q: u32, verts: &[f32]) -> Option<[Vec3; 4]> {
+    let [a, b, c, d] = q.to_le_bytes();
+    Some([
+        leaf_vertex(verts, a)?,
+        leaf_vertex(verts, b)?,
+        leaf_vertex(verts, c)?,
+        leaf_vertex(verts, d)?,
+    ])
+}
+
+/// The block's words as floats (the corners' bits).
+#[inline(always)]
+fn as_floats(w: &[u32]) -> &[f32] {
+    // SAFETY: u32 and f32 have the same size and alignment, and every bit pattern is a
+    // valid f32.
+    unsafe { std::slice::from_raw_parts(w.as_ptr().cast::<f32>(), w.len()) }
+}
+
+/// A leaf's parts: the corner words, the corners' floats (with the padding) and the ids.
+struct LeafBlock<'a> {
+    quads: &'a [u32],
+    verts: &'a [f32],
+    ids: &'a [u32],
+}
+
+impl LeafBlock<'_> {
+    #[inline(always)]
+    fn id(&self, q: usize) -> QuadId {
+        QuadId {
+            grid: self.ids.get(2 * q).copied().unwrap_or(0),
+            index: self.ids.get(2 * q + 1).copied().unwrap_or(0),
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -332,33 +415,73 @@ impl Bvh {
             stack.push((left + 1, mid, e));
             stack.push((left, s, mid));
         }
-        // The walks read the nodes, quads and corners at random: on huge pages where the
-        // system allows (see `memhint`; the corners are copied to a fresh reservation, as
-        // pages already written keep their size).
-        let mut sorted: Vec<Quad> = memhint::huge_vec(n);
-        sorted.extend(order.iter().map(|&k| quads[k as usize]));
-        drop(quads);
-        let mut corners: Vec<Vec3> = memhint::huge_vec(verts.len() + 1);
-        corners.extend_from_slice(&verts);
-        corners.push(Vec3::ZERO);
-        drop(verts);
+        drop((boxes, cent));
+        let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
+        drop((quads, order));
+        // The walks read the nodes and leaves at random: on huge pages where the system
+        // allows (see `memhint`), the leaves' room reserved at their exact size (a huge
+        // page is resident whole once touched).
+        let words: usize = nodes
+            .iter()
+            .filter(|b| b.count > 0)
+            .map(|b| {
+                let (s, c) = (b.first as usize, b.count as usize);
+                3 * c + 3 * leaf_vertices(&sorted[s..s + c], verts.len()).len() + 1
+            })
+            .sum();
         let mut bvh = Bvh {
             nodes: memhint::huge_vec(nodes.len() / 2 + 1),
-            quads: sorted,
-            verts: corners,
+            leaves: memhint::huge_vec(words),
             root_leaf: 0,
         };
         if nodes[0].count > 0 {
-            bvh.root_leaf = nodes[0].count;
-            return bvh;
+            bvh.root_leaf = u32::from(bvh.push_leaf(&sorted, &verts));
+        } else {
+            bvh.collapse(&nodes, 0, &sorted, &verts);
         }
-        bvh.collapse(&nodes, 0);
         bvh
+    }
+
+    /// Appends the block of a leaf of `quads` (see [`Bvh::leaves`]); returns its `count`.
+    fn push_leaf(&mut self, quads: &[Quad], verts: &[Vec3]) -> u16 {
+        let local = leaf_vertices(quads, verts.len());
+        for q in quads {
+            let c = quad_corners(q).map(|g| {
+                // Out of range: a number past the list, so the quad is never hit.
+                local
+                    .iter()
+                    .position(|&x| x == g)
+                    .map_or(u8::MAX, |at| at as u8)
+            });
+            self.leaves.push(u32::from_le_bytes(c));
+        }
+        for &g in &local {
+            self.leaves.extend(verts[g].to_array().map(f32::to_bits));
+        }
+        self.leaves.push(0);
+        for q in quads {
+            self.leaves.extend([q.grid, q.index]);
+        }
+        let walk = quads.len() + 3 * local.len() + 1;
+        (quads.len() | walk << 8) as u16
+    }
+
+    /// The block of the leaf at word `first` with `count` (see [`Node8::count`]).
+    #[inline(always)]
+    fn block(&self, first: u32, count: u32) -> Option<LeafBlock<'_>> {
+        let (q, walk) = ((count & 0xff) as usize, (count >> 8) as usize);
+        let s = first as usize;
+        let b = self.leaves.get(s..s + walk + 2 * q)?;
+        Some(LeafBlock {
+            quads: b.get(..q)?,
+            verts: as_floats(b.get(q..walk)?),
+            ids: &b[walk..],
+        })
     }
 
     /// Makes the 8-wide node for binary interior node `i` (children first-come first-placed:
     /// the root is node 0); returns its index.
-    fn collapse(&mut self, nodes: &[Node2], i: usize) -> u32 {
+    fn collapse(&mut self, nodes: &[Node2], i: usize, quads: &[Quad], verts: &[Vec3]) -> u32 {
         // Open the interior child with the largest box until there are eight.
         let mut kids: Vec<usize> = vec![nodes[i].first as usize, nodes[i].first as usize + 1];
         while kids.len() < WIDTH {
@@ -395,10 +518,11 @@ impl Bvh {
             }
             node.valid |= 1 << lane;
             if c.count > 0 {
-                node.child[lane] = c.first;
-                node.count[lane] = c.count as u8;
+                let s = c.first as usize;
+                node.child[lane] = self.leaves.len() as u32;
+                node.count[lane] = self.push_leaf(&quads[s..s + c.count as usize], verts);
             } else {
-                node.child[lane] = self.collapse(nodes, k);
+                node.child[lane] = self.collapse(nodes, k, quads, verts);
                 node.count[lane] = 0;
             }
         }
@@ -407,24 +531,30 @@ impl Bvh {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.quads.is_empty()
+        self.leaves.is_empty()
     }
 
     /// The closest hit with `tmin < t < tmax`.
     pub fn closest(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut tmax = tmax;
-        self.walk::<true>(o, d, tmin, &mut tmax, &mut |q, hit_t, a, b, tmax_ref| {
-            *tmax_ref = hit_t;
-            best = Some(Hit {
-                t: hit_t,
-                grid: q.grid,
-                index: q.index,
-                a,
-                b,
-            });
-            false
-        });
+        self.walk::<true>(
+            o,
+            d,
+            tmin,
+            &mut tmax,
+            &mut |q: QuadId, hit_t, a, b, tmax_ref| {
+                *tmax_ref = hit_t;
+                best = Some(Hit {
+                    t: hit_t,
+                    grid: q.grid,
+                    index: q.index,
+                    a,
+                    b,
+                });
+                false
+            },
+        );
         best
     }
 
@@ -453,13 +583,17 @@ impl Bvh {
         ray: &LeafRay,
         tmin: f32,
         tmax: &mut f32,
-        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) -> bool {
-        let (s, e) = (first as usize, (first + count) as usize);
-        for q in &self.quads[s..e] {
-            if let Some((t, a, b)) = intersect_quad_wt(q.corners(&self.verts), &ray.wt, tmin, *tmax)
-            {
-                if on_hit(q, t, a, b, tmax) {
+        let Some(b) = self.block(first, count) else {
+            return false;
+        };
+        for (l, &q) in b.quads.iter().enumerate() {
+            let Some(p) = leaf_corners(q, b.verts) else {
+                continue;
+            };
+            if let Some((t, a, bb)) = intersect_quad_wt(p, &ray.wt, tmin, *tmax) {
+                if on_hit(b.id(l), t, a, bb, tmax) {
                     return true;
                 }
             }
@@ -478,17 +612,25 @@ impl Bvh {
         ray: &LeafRay,
         tmin: f32,
         tmax: &mut f32,
-        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) -> bool {
-        let (s, e) = (first as usize, (first + count) as usize);
-        let Some(quads) = self.quads.get(s..e) else {
+        let Some(b) = self.block(first, count) else {
             return false;
         };
-        super::quad4::leaf(quads, &self.verts, &ray.w4, &ray.wt, tmin, tmax, on_hit)
+        super::quad4::leaf(
+            b.quads,
+            b.verts,
+            &ray.w4,
+            &ray.wt,
+            tmin,
+            tmax,
+            &mut |l, t, a, bb, tm| on_hit(b.id(l), t, a, bb, tm),
+        )
     }
 
-    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's first
-    /// quads): a later visit then finds them on the way. No effect on results.
+    /// Asks for the cache lines of a pushed child (an interior node's two, or the part of a
+    /// leaf's block its test reads): a later visit then finds them on the way. No effect on
+    /// results.
     #[inline(always)]
     fn prefetch(&self, child: u32, count: u32) {
         if count == 0 {
@@ -496,8 +638,8 @@ impl Bvh {
             memhint::prefetch(p);
             memhint::prefetch(p.cast::<u8>().wrapping_add(64));
         } else {
-            // Not the corners: finding them would wait for the quad.
-            memhint::prefetch(self.quads.as_ptr().wrapping_add(child as usize));
+            let p = self.leaves.as_ptr().wrapping_add(child as usize);
+            memhint::prefetch_span(p, (count >> 8) as usize);
         }
     }
 
@@ -583,7 +725,7 @@ impl Bvh {
         d: Vec3,
         tmin: f32,
         tmax: &mut f32,
-        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -603,7 +745,7 @@ impl Bvh {
         d: Vec3,
         tmin: f32,
         tmax: &mut f32,
-        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) {
         self.walk_with::<ORDERED, true>(o, d, tmin, tmax, on_hit);
     }
@@ -616,9 +758,9 @@ impl Bvh {
         d: Vec3,
         tmin: f32,
         tmax: &mut f32,
-        on_hit: &mut dyn FnMut(&Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) {
-        if self.quads.is_empty() {
+        if self.leaves.is_empty() {
             return;
         }
         let wt = LeafRay::new(o, d);
@@ -1167,15 +1309,85 @@ mod tests {
         );
     }
 
+    /// A leaf holds its quads' corners itself, each shared corner once: a 2 × 2 patch of a
+    /// grid (four quads, nine corners) is one block of 4 + 27 + 1 words the walk reads and
+    /// two ids a quad, and its hits are those of the shared array, bit for bit.
+    #[test]
+    fn leaf_blocks_hold_each_shared_corner_once() {
+        let mut verts = Vec::new();
+        for j in 0..3 {
+            for i in 0..3 {
+                verts.push(Vec3::new(i as f32, j as f32, 0.1 * (i * j) as f32));
+            }
+        }
+        let quads: Vec<Quad> = (0..2u32)
+            .flat_map(|j| {
+                (0..2u32).map(move |i| Quad {
+                    k: j * 3 + i,
+                    row: 3,
+                    grid: 7,
+                    index: j * 2 + i,
+                })
+            })
+            .collect();
+        let bvh = Bvh::build(quads.clone(), verts.clone());
+        assert!(bvh.nodes.is_empty());
+        let b = bvh.block(0, bvh.root_leaf).unwrap();
+        assert_eq!((b.quads.len(), b.verts.len(), b.ids.len()), (4, 28, 8));
+        assert_eq!(bvh.leaves.len(), 4 + 28 + 8);
+        let mut ids: Vec<(u32, u32)> = (0..4).map(|l| (b.id(l).grid, b.id(l).index)).collect();
+        ids.sort_unstable();
+        assert_eq!(ids, vec![(7, 0), (7, 1), (7, 2), (7, 3)]);
+        for l in 0..4 {
+            let c = leaf_corners(b.quads[l], b.verts).unwrap();
+            assert!(quads.iter().any(|q| q.corners(&verts) == c));
+        }
+        let bits = |h: Option<Hit>| {
+            h.map(|h| (h.t.to_bits(), h.grid, h.index, h.a.to_bits(), h.b.to_bits()))
+        };
+        let mut hits = 0;
+        for (x, y) in [
+            (0.5, 0.5),
+            (1.5, 0.25),
+            (1.0, 0.7),
+            (0.3, 1.0),
+            (1.0, 1.0),
+            (1.9, 1.9),
+        ] {
+            let (o, d) = (Vec3::new(x, y, 3.0), Vec3::new(0.01, -0.02, -1.0));
+            let mut want: Option<Hit> = None;
+            for q in &quads {
+                if let Some((t, a, bb)) = intersect_quad(q.corners(&verts), o, d, 0.0, 1e30) {
+                    if want.is_none_or(|w| t < w.t) {
+                        want = Some(Hit {
+                            t,
+                            grid: q.grid,
+                            index: q.index,
+                            a,
+                            b: bb,
+                        });
+                    }
+                }
+            }
+            let got = bvh.closest(o, d, 0.0, 1e30);
+            assert_eq!(bits(got), bits(want), "ray at ({x}, {y})");
+            hits += usize::from(got.is_some());
+        }
+        assert_eq!(hits, 6);
+    }
+
     /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to
     /// lie inside every dequantised box on the way down.
     fn enclosed(bvh: &Bvh, n: usize, lane: usize) -> Aabb {
         let node = &bvh.nodes[n];
         let mut exact = Aabb::EMPTY;
         if node.count[lane] > 0 {
-            let s = node.child[lane] as usize;
-            for q in &bvh.quads[s..s + node.count[lane] as usize] {
-                for p in q.corners(&bvh.verts) {
+            let b = bvh
+                .block(node.child[lane], u32::from(node.count[lane]))
+                .unwrap();
+            assert_eq!(b.quads.len(), usize::from(node.count[lane] & 0xff));
+            for &q in b.quads {
+                for p in leaf_corners(q, b.verts).unwrap() {
                     exact.grow_point(p);
                 }
             }

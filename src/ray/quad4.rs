@@ -1,7 +1,8 @@
 //! The watertight quad test four quads at a time (SSE, the x86-64 baseline).
 //!
-//! Input: up to four quads of a BVH leaf, the shared vertex array, and the ray prepared by
-//! [`WtRay`] (splatted into [`WtRay4`]). Output: per lane the quad's hit `(t, a, b)` as the
+//! Input: up to four quads of a BVH leaf (per quad its four corners' numbers in the leaf's
+//! own vertex list, see `bvh::Leaf`), that list, and the ray prepared by [`WtRay`] (splatted
+//! into [`WtRay4`]). Output: per lane the quad's hit `(t, a, b)` as the
 //! one-quad test [`intersect_quad_wt`] gives it.
 //! Invariants: bit for bit the scalar test: the same operations in the same order on each
 //! lane (vertex to ray frame as `(rx·A)`, edge functions, `t = tt · (1/det)`), and a lane
@@ -14,9 +15,7 @@
 
 use std::arch::x86_64::*;
 
-use glam::Vec3;
-
-use super::bvh::{intersect_quad_wt, Quad, WtRay};
+use super::bvh::{intersect_quad_wt, leaf_corners, WtRay};
 
 /// A [`WtRay`]'s origin and shear splatted across four lanes.
 #[derive(Clone, Copy)]
@@ -97,19 +96,21 @@ unsafe fn select(m: __m128, a: __m128, b: __m128) -> __m128 {
     _mm_or_ps(_mm_and_ps(m, a), _mm_andnot_ps(m, b))
 }
 
-/// The callback of a leaf test: `(quad, t, a, b, &mut tmax)`, true to stop.
-pub(crate) type OnHit<'f> = dyn FnMut(&super::bvh::Quad, f32, f32, f32, &mut f32) -> bool + 'f;
+/// The callback of a leaf test: `(quad's place in the leaf, t, a, b, &mut tmax)`, true to
+/// stop.
+pub(crate) type OnHit<'f> = dyn FnMut(usize, f32, f32, f32, &mut f32) -> bool + 'f;
 
 /// Tests the quads of a leaf four at a time, reporting hits to `on_hit` in quad order, each
 /// only while still nearer than `tmax` (which `on_hit` may shrink): the calls testing them
 /// one by one with [`intersect_quad_wt`] would make (a quad's hit does not depend on `tmax`
-/// but for being below it). True when `on_hit` asked to stop. `verts` must hold one element
-/// past the last corner (the loads read 16 bytes a corner); a quad whose corners are out of
-/// range is never hit.
+/// but for being below it). True when `on_hit` asked to stop. `quads` holds a word per quad,
+/// its corners' numbers in `verts` (bytes `v00 v10 v01 v11`, low first); `verts` is the
+/// leaf's corners as `x y z` floats and must hold one float past the last corner (the loads
+/// read 16 bytes a corner); a quad whose corners are out of range is never hit.
 #[inline]
 pub(crate) fn leaf(
-    quads: &[Quad],
-    verts: &[Vec3],
+    quads: &[u32],
+    verts: &[f32],
     w4: &WtRay4,
     wt: &WtRay,
     tmin: f32,
@@ -142,8 +143,8 @@ pub(crate) fn leaf(
 /// results are bit for bit those of the SSE path).
 #[target_feature(enable = "avx")]
 unsafe fn leaf_avx<const KX: usize, const KY: usize, const KZ: usize>(
-    quads: &[Quad],
-    verts: &[Vec3],
+    quads: &[u32],
+    verts: &[f32],
     w4: &WtRay4,
     wt: &WtRay,
     tmin: f32,
@@ -155,21 +156,21 @@ unsafe fn leaf_avx<const KX: usize, const KY: usize, const KZ: usize>(
 
 #[inline(always)]
 fn leaf_k<const KX: usize, const KY: usize, const KZ: usize>(
-    quads: &[Quad],
-    verts: &[Vec3],
+    quads: &[u32],
+    verts: &[f32],
     w4: &WtRay4,
     wt: &WtRay,
     tmin: f32,
     tmax: &mut f32,
     on_hit: &mut OnHit,
 ) -> bool {
-    for group in quads.chunks(4) {
+    for (g, group) in quads.chunks(4).enumerate() {
         let h = group4::<KX, KY, KZ>(group, verts, w4, wt, tmin, *tmax);
         let mut m = h.mask;
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            if h.t[l] < *tmax && on_hit(&group[l], h.t[l], h.a[l], h.b[l], tmax) {
+            if h.t[l] < *tmax && on_hit(4 * g + l, h.t[l], h.a[l], h.b[l], tmax) {
                 return true;
             }
         }
@@ -177,11 +178,12 @@ fn leaf_k<const KX: usize, const KY: usize, const KZ: usize>(
     false
 }
 
-/// Tests `quads` (one to four), each lane as [`intersect_quad_wt`] with `tmin < t < tmax`.
+/// Tests `quads` (one to four, as in [`leaf`]), each lane as [`intersect_quad_wt`] with
+/// `tmin < t < tmax`.
 #[inline(always)]
 pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
-    quads: &[Quad],
-    verts: &[Vec3],
+    quads: &[u32],
+    verts: &[f32],
     w4: &WtRay4,
     wt: &WtRay,
     tmin: f32,
@@ -193,39 +195,31 @@ pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
         a: [0.0; 4],
         b: [0.0; 4],
     };
-    if verts.len() < 2 {
+    if verts.len() < 4 {
         return out;
     }
-    let base = verts.as_ptr() as *const f32;
-    // Per lane: the first corner (as a float offset) and the row step. Missing lanes read
-    // vertices 0 and 1 and are masked off at the end.
-    let mut first = [0usize; 4];
-    let mut row = [0usize; 4];
+    let base = verts.as_ptr();
+    // Per lane and corner: the corner's first float. Missing lanes read corner 0 and are
+    // masked off at the end.
+    let mut off = [[0usize; 4]; 4];
     let mut active = 0u32;
-    for (l, q) in quads.iter().take(4).enumerate() {
-        let (k, r) = (q.k as usize, q.row as usize);
-        // A corner's 16-byte load reads into the next element: the highest corner, k + r + 1,
-        // must be below the last element (the padding).
-        if k + r + 3 <= verts.len() {
-            first[l] = 3 * k;
-            row[l] = 3 * r;
+    for (l, &q) in quads.iter().take(4).enumerate() {
+        let c = q.to_le_bytes().map(|b| 3 * b as usize);
+        // A corner's 16-byte load reads the float after it: in range up to the padding.
+        if c.iter().all(|&f| f + 4 <= verts.len()) {
+            off[l] = c;
             active |= 1 << l;
         }
     }
     if active == 0 {
         return out;
     }
-    // SAFETY: SSE is baseline; every load reads the 16 bytes from float offset
-    // first + {0, 3, row, row + 3}, i.e. vertex i ≤ k + r + 1 and the 4 bytes after it, with
-    // i + 2 <= verts.len() checked above (or i ∈ {0, 1} and verts.len() >= 2).
+    // SAFETY: SSE is baseline; every load reads the 16 bytes from float offset f with
+    // f + 4 <= verts.len() (checked above, or f = 0 with verts.len() >= 4).
     unsafe {
         // The four corners in the ray frame, each as (x, y, z) vectors across the lanes.
         let corner = |c: usize| -> [__m128; 3] {
-            let ld = |l: usize| {
-                let off =
-                    first[l] + if c >= 2 { row[l] } else { 0 } + if c & 1 == 1 { 3 } else { 0 };
-                _mm_loadu_ps(base.add(off))
-            };
+            let ld = |l: usize| _mm_loadu_ps(base.add(off[l][c]));
             let (p0, p1, p2, p3) = (ld(0), ld(1), ld(2), ld(3));
             // Transpose: lanes become quads.
             let t0 = _mm_unpacklo_ps(p0, p1); // x0 x1 y0 y1
@@ -269,7 +263,11 @@ pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            if let Some((t, a, b)) = intersect_quad_wt(quads[l].corners(verts), wt, tmin, tmax) {
+            // (Active lanes have their corners in range.)
+            let Some(p) = leaf_corners(quads[l], verts) else {
+                continue;
+            };
+            if let Some((t, a, b)) = intersect_quad_wt(p, wt, tmin, tmax) {
                 out.mask |= 1 << l;
                 (out.t[l], out.a[l], out.b[l]) = (t, a, b);
             }
@@ -280,7 +278,7 @@ pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
 
 /// [`group4`] for the ray's axis permutation (tests).
 #[cfg(test)]
-fn quads4(quads: &[Quad], verts: &[Vec3], w4: &WtRay4, wt: &WtRay, tmin: f32, tmax: f32) -> Hits4 {
+fn quads4(quads: &[u32], verts: &[f32], w4: &WtRay4, wt: &WtRay, tmin: f32, tmax: f32) -> Hits4 {
     match wt.k {
         [1, 2, 0] => group4::<1, 2, 0>(quads, verts, w4, wt, tmin, tmax),
         [2, 1, 0] => group4::<2, 1, 0>(quads, verts, w4, wt, tmin, tmax),
@@ -294,6 +292,7 @@ fn quads4(quads: &[Quad], verts: &[Vec3], w4: &WtRay4, wt: &WtRay, tmin: f32, tm
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     /// Random quads, some sharing corners in grids and some hit through an edge or a vertex:
     /// every lane agrees bit for bit with the one-quad test.
@@ -311,14 +310,17 @@ mod tests {
                 verts.push(Vec3::new(i as f32 * 0.2, j as f32 * 0.2, rnd() * 0.05));
             }
         }
-        verts.push(Vec3::ZERO);
-        let quads: Vec<Quad> = (0..5)
-            .flat_map(|j| (0..5).map(move |i| (i, j)))
-            .map(|(i, j)| Quad {
-                k: j * 6 + i,
-                row: 6,
-                grid: 0,
-                index: j * 5 + i,
+        let flat: Vec<f32> = verts
+            .iter()
+            .flat_map(|v| v.to_array())
+            .chain([0.0])
+            .collect();
+        // Per quad its corners v00 v10 v01 v11, a byte each.
+        let quads: Vec<u32> = (0..5u32)
+            .flat_map(|j| (0..5u32).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let k = j * 6 + i;
+                u32::from_le_bytes([k, k + 1, k + 6, k + 7].map(|c| c as u8))
             })
             .collect();
         let mut hits = 0;
@@ -337,9 +339,9 @@ mod tests {
             let tmax = if r % 3 == 0 { 1.0 } else { f32::INFINITY };
             for s in 0..quads.len() {
                 let group = &quads[s..(s + 1 + r % 4).min(quads.len())];
-                let got = quads4(group, &verts, &w4, &wt, 0.0, tmax);
-                for (l, q) in group.iter().enumerate() {
-                    let want = intersect_quad_wt(q.corners(&verts), &wt, 0.0, tmax);
+                let got = quads4(group, &flat, &w4, &wt, 0.0, tmax);
+                for (l, &q) in group.iter().enumerate() {
+                    let want = intersect_quad_wt(leaf_corners(q, &flat).unwrap(), &wt, 0.0, tmax);
                     let have = (got.mask & (1 << l) != 0).then(|| (got.t[l], got.a[l], got.b[l]));
                     let bits = |x: Option<(f32, f32, f32)>| {
                         x.map(|(t, a, b)| (t.to_bits(), a.to_bits(), b.to_bits()))

@@ -12,7 +12,7 @@
 
 use glam::Vec3;
 
-use super::{Bvh, Hit, LeafRay, Quad, SlabRay, Stack};
+use super::{Bvh, Hit, LeafRay, QuadId, SlabRay, Stack};
 
 /// Trees smaller than this (half a core's second-level cache here) are walked one ray at a
 /// time by [`Bvh::each_hit_many`] (the same hits either way): their walks rarely wait for
@@ -25,8 +25,8 @@ const INTERLEAVE_BYTES: usize = 512 << 10;
 impl Bvh {
     /// The closest hits of many rays: `out[k]` is `self.closest(o[k], d[k], tmin[k], tmax)`
     /// bit for bit (each ray's walk makes the same visits in the same order). The walks of
-    /// `LANES` rays are interleaved a step at a time — a node visit, a leaf's quads read, a
-    /// leaf test — and each step prefetches what its ray needs next, so a ray's memory
+    /// `LANES` rays are interleaved a step at a time — a node visit, a leaf test — and each
+    /// step prefetches what its ray needs next, so a ray's memory
     /// waits overlap the other rays' work instead of stalling the core (the walk of a large
     /// scene is latency-bound: its nodes and vertices are rarely in the first-level cache).
     pub fn closest_many(
@@ -118,11 +118,9 @@ impl Bvh {
         );
     }
 
-    /// The tree's size in bytes: nodes, quads and corners.
-    fn bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<super::Node8>()
-            + self.quads.len() * std::mem::size_of::<Quad>()
-            + self.verts.len() * std::mem::size_of::<Vec3>()
+    /// The tree's size in bytes: nodes and leaves.
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<super::Node8>() + self.leaves.len() * 4
     }
 
     /// Runs the walks of rays `0..o.len()` (ordered or not, as [`Bvh::walk`]) `LANES` at a
@@ -142,7 +140,7 @@ impl Bvh {
         d: &[Vec3],
         tmin: &[f32],
         tmax: impl Fn(usize) -> f32,
-        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
         #[cfg(target_arch = "x86_64")]
@@ -163,7 +161,7 @@ impl Bvh {
         d: &[Vec3],
         tmin: &[f32],
         tmax: impl Fn(usize) -> f32,
-        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
         self.interleave_lanes::<ORDERED, true>(o, d, tmin, tmax, on_hit, done);
@@ -177,7 +175,7 @@ impl Bvh {
         d: &[Vec3],
         tmin: &[f32],
         tmax: impl Fn(usize) -> f32,
-        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
     ) {
         let n = o.len();
@@ -217,7 +215,7 @@ impl Bvh {
     fn step<const ORDERED: bool, const AVX2: bool>(
         &self,
         l: &mut Lane,
-        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, &Quad, f32, f32, f32, &mut f32) -> bool,
+        on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
     ) -> bool {
         match l.step {
             Step::Node(c) => {
@@ -230,17 +228,11 @@ impl Bvh {
                     }
                     Some((first, count)) => {
                         self.prefetch(first, count);
-                        l.step = Step::Quads(first, count);
+                        l.step = Step::Leaf(first, count);
                         return true;
                     }
                     None => {}
                 }
-            }
-            Step::Quads(first, count) => {
-                // The quads are (likely) in cache: ask for their corners' rows.
-                self.prefetch_corners(first, count);
-                l.step = Step::Leaf(first, count);
-                return true;
             }
             Step::Leaf(first, count) => {
                 let (ray, best) = (l.ray, &mut l.best);
@@ -265,39 +257,14 @@ impl Bvh {
             if t > l.tmax {
                 continue;
             }
+            // (A leaf's block was prefetched when it was pushed.)
             l.step = if count > 0 {
-                Step::Quads(c, count)
+                Step::Leaf(c, count)
             } else {
                 Step::Node(c)
             };
             return true;
         }
-    }
-
-    /// Asks for the cache lines of a leaf's corners (each quad's two rows). No effect on
-    /// results.
-    #[inline(always)]
-    fn prefetch_corners(&self, first: u32, count: u32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let (s, e) = (first as usize, (first + count) as usize);
-            let Some(quads) = self.quads.get(s..e) else {
-                return;
-            };
-            let v = self.verts.as_ptr();
-            for q in quads {
-                let (k, r) = (q.k as usize, q.row as usize);
-                // SAFETY: a prefetch reads nothing architecturally and never faults; the
-                // addresses are only computed (wrapping_add).
-                unsafe {
-                    _mm_prefetch::<_MM_HINT_T0>(v.wrapping_add(k).cast());
-                    _mm_prefetch::<_MM_HINT_T0>(v.wrapping_add(k + r).cast());
-                }
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = (first, count);
     }
 }
 
@@ -306,9 +273,7 @@ impl Bvh {
 enum Step {
     /// Visit this interior node.
     Node(u32),
-    /// Read this leaf's quads (first, count) and prefetch their corners.
-    Quads(u32, u32),
-    /// Test this leaf's quads.
+    /// Test this leaf's quads (its block, see [`Bvh::leaves`]).
     Leaf(u32, u32),
 }
 
