@@ -186,6 +186,47 @@ fn a_divergent_march_gives_the_same_bits_sparse_or_not() {
     same_both_ways(MARCH, true);
 }
 
+/// An execution leaves its mask buffers to the next one on the thread (a light run at every
+/// step of a march); whatever an earlier run left in them, the next run's bits are the same.
+#[test]
+fn mask_buffers_left_by_earlier_runs_change_nothing() {
+    let march = compile(MARCH);
+    let first = run(&march, true);
+    assert!(arbor::shade::exec::spare_mask_buffers() > 0);
+    let other = compile(
+        r#"
+surface other() {
+    float i = 0;
+    while (i < 5 + 20 * t) {
+        if (s > 0.5) { i += 2; continue; }
+        i += 1;
+    }
+    Ci = color(i, s, t);
+}
+"#,
+    );
+    run(&other, false);
+    run(&other, true);
+    assert_eq!(run(&march, true), first);
+    assert_eq!(run(&march, false).0, first.0);
+}
+
+/// Registers bound from pooled buffers hold exactly their source, whatever the pool held.
+#[test]
+fn pooled_copies_hold_their_source() {
+    use arbor::shade::value::{pooled_vf, pooled_vt, recycle};
+    recycle([
+        Slot::VT(vec![Vec3::splat(9.0); 40]),
+        Slot::VF(vec![9.0; 40]),
+    ]);
+    let t = [Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::X];
+    assert_eq!(pooled_vt(&t), t.to_vec());
+    assert_eq!(pooled_vf(&[4.0, 5.0]), vec![4.0, 5.0]);
+    // Nothing asked, nothing taken from the pool.
+    assert_eq!(pooled_vt(&[]).capacity(), 0);
+    assert_eq!(pooled_vf(&[]).capacity(), 0);
+}
+
 /// Loops of pointwise computations are compacted: a march whose points leave at very
 /// different steps (nested loops, break, continue, an inlined function with early returns,
 /// random numbers, noise, a variable made varying inside the loop, temporaries read after

@@ -470,8 +470,8 @@ impl LightResult {
     /// This result, computed for the grid points `idx`, spread over a grid of `n` points
     /// (the others unlit, with zero L and Cl).
     pub fn scattered(self, idx: &[usize], n: usize) -> LightResult {
-        fn spread<T: Copy>(v: &[T], idx: &[usize], n: usize, fill: T) -> Vec<T> {
-            let mut out = vec![fill; n];
+        fn fill_in<T: Copy>(mut out: Vec<T>, v: &[T], idx: &[usize], fill: T) -> Vec<T> {
+            out.fill(fill);
             for (k, &i) in idx.iter().enumerate() {
                 if let Some(x) = v.get(k) {
                     out[i] = *x;
@@ -479,12 +479,27 @@ impl LightResult {
             }
             out
         }
+        fn spread<T: Copy>(v: &[T], idx: &[usize], n: usize, fill: T) -> Vec<T> {
+            fill_in(vec![fill; n], v, idx, fill)
+        }
+        // Grid-sized buffers from this thread's pool (they are recycled with the result),
+        // and the compact ones go back to it.
+        use crate::shade::value::{grid_vf, grid_vt, recycle};
+        let spread_t = |v: Vec<Vec3>, fill: Vec3| -> Vec<Vec3> {
+            let out = fill_in(grid_vt(n), &v, idx, fill);
+            recycle([Slot::VT(v)]);
+            out
+        };
         let outputs = self
             .outputs
             .into_iter()
             .map(|s| match s {
-                Slot::VF(v) => Slot::VF(spread(&v, idx, n, 0.0)),
-                Slot::VT(v) => Slot::VT(spread(&v, idx, n, Vec3::ZERO)),
+                Slot::VF(v) => {
+                    let out = fill_in(grid_vf(n), &v, idx, 0.0);
+                    recycle([Slot::VF(v)]);
+                    Slot::VF(out)
+                }
+                Slot::VT(v) => Slot::VT(spread_t(v, Vec3::ZERO)),
                 Slot::VM(v) => Slot::VM(spread(&v, idx, n, Mat4::IDENTITY)),
                 s => s,
             })
@@ -492,10 +507,10 @@ impl LightResult {
         LightResult {
             ambient: self.ambient,
             lit: spread(&self.lit, idx, n, false),
-            l: spread(&self.l, idx, n, Vec3::ZERO),
+            l: spread_t(self.l, Vec3::ZERO),
             l_uniform: self.l_uniform,
-            cl: spread(&self.cl, idx, n, Vec3::ZERO),
-            ol: spread(&self.ol, idx, n, Vec3::ONE),
+            cl: spread_t(self.cl, Vec3::ZERO),
+            ol: spread_t(self.ol, Vec3::ONE),
             category: self.category,
             nondiffuse: self.nondiffuse,
             nonspecular: self.nonspecular,
@@ -530,6 +545,58 @@ pub const SPEC_SCALE_RISPEC: f32 = 1.0;
 /// whole iteration leaves every register and the running mask unchanged, it can never end.
 const FIRST_PROGRESS_CHECK: u64 = 1024;
 
+/// Spare mask buffers of a finished execution, for the next one on this thread (a volume
+/// march runs its lights as a new execution at every step: their masks would otherwise be
+/// allocated and freed each time). Their contents are always overwritten before use.
+#[derive(Default)]
+struct SpareMasks {
+    bits: Vec<Vec<bool>>,
+    idx: Vec<Vec<u32>>,
+    sel: Vec<SelMasks>,
+}
+
+thread_local! {
+    static SPARE_MASKS: std::cell::Cell<Option<SpareMasks>> = const { std::cell::Cell::new(None) };
+}
+
+/// How many spare flag buffers this thread holds for its next execution (for tests).
+pub fn spare_mask_buffers() -> usize {
+    SPARE_MASKS.with(|s| {
+        let k = s.take();
+        let n = k.as_ref().map_or(0, |k| k.bits.len());
+        s.set(k);
+        n
+    })
+}
+
+/// At most this many spare buffers of each kind are kept for the next execution.
+const SPARE_MAX: usize = 64;
+
+impl Drop for Exec<'_> {
+    fn drop(&mut self) {
+        let mut bits = std::mem::take(&mut self.bits_pool);
+        for f in self.frames.drain(..) {
+            bits.push(f.broken);
+            bits.push(f.outward);
+        }
+        bits.truncate(SPARE_MAX);
+        let mut idx = std::mem::take(&mut self.idx_pool);
+        idx.truncate(SPARE_MAX);
+        let mut sel = std::mem::take(&mut self.sel_pool);
+        sel.truncate(SPARE_MAX);
+        let mine = SpareMasks { bits, idx, sel };
+        SPARE_MASKS.with(|s| {
+            // An execution running inside another (a light inside a surface's illuminance)
+            // ends first and leaves its buffers; the outer one keeps those.
+            let kept = s.take();
+            s.set(Some(match kept {
+                Some(k) if k.bits.len() >= mine.bits.len() => k,
+                _ => mine,
+            }));
+        });
+    }
+}
+
 impl<'a> Exec<'a> {
     /// Loop iterations run so far in this execution (deterministic for a program and grid):
     /// lets `random()` inside a loop give new numbers on every iteration.
@@ -557,6 +624,7 @@ impl<'a> Exec<'a> {
                 Const::S(x) => Slot::S(x.clone()),
             };
         }
+        let spare = SPARE_MASKS.with(|s| s.take()).unwrap_or_default();
         Exec {
             prog,
             regs,
@@ -574,9 +642,9 @@ impl<'a> Exec<'a> {
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
             spec_scale: SPEC_SCALE_TIGHT,
-            bits_pool: Vec::new(),
-            idx_pool: Vec::new(),
-            sel_pool: Vec::new(),
+            bits_pool: spare.bits,
+            idx_pool: spare.idx,
+            sel_pool: spare.sel,
             lights_at: None,
             relight: None,
             relit: None,
@@ -1306,7 +1374,11 @@ impl<'a> Exec<'a> {
                 return Some(c.clone());
             }
         }
-        let ps: Vec<Vec3> = (0..n).map(|i| p.at(i)).collect();
+        // Pooled: RelitLights::recycle gives it back.
+        let mut ps = crate::shade::value::grid_vt(n);
+        for (i, o) in ps.iter_mut().enumerate() {
+            *o = p.at(i);
+        }
         let lights = if mask.is_all() {
             relight(&ps, &want, None)
         } else {

@@ -113,11 +113,27 @@ impl Grid {
     /// it serves runs that take no derivatives (lights evaluated for a volume march's live
     /// points); motion is dropped.
     pub fn subset(&self, idx: &[usize]) -> Grid {
-        fn pick<T: Copy>(v: &[T], idx: &[usize]) -> Vec<T> {
+        // From this thread's buffer pool (the caller gives them back with
+        // [`Grid::recycle`]), not fresh allocations.
+        fn pick_t(v: &[Vec3], idx: &[usize]) -> Vec<Vec3> {
             if v.is_empty() {
                 return Vec::new();
             }
-            idx.iter().map(|&i| v[i]).collect()
+            let mut out = crate::shade::value::grid_vt(idx.len());
+            for (o, &i) in out.iter_mut().zip(idx) {
+                *o = v[i];
+            }
+            out
+        }
+        fn pick_f(v: &[f32], idx: &[usize]) -> Vec<f32> {
+            if v.is_empty() {
+                return Vec::new();
+            }
+            let mut out = crate::shade::value::grid_vf(idx.len());
+            for (o, &i) in out.iter_mut().zip(idx) {
+                *o = v[i];
+            }
+            out
         }
         let pick_var = |g: &GridVar| -> GridVar {
             if g.uniform {
@@ -140,27 +156,35 @@ impl Grid {
         Grid {
             nu: idx.len(),
             nv: 1,
-            p: pick(&self.p, idx),
-            n: pick(&self.n, idx),
-            ng: pick(&self.ng, idx),
-            dpdu: pick(&self.dpdu, idx),
-            dpdv: pick(&self.dpdv, idx),
-            u: pick(&self.u, idx),
-            v: pick(&self.v, idx),
-            s: pick(&self.s, idx),
-            t: pick(&self.t, idx),
+            p: pick_t(&self.p, idx),
+            n: pick_t(&self.n, idx),
+            ng: pick_t(&self.ng, idx),
+            dpdu: pick_t(&self.dpdu, idx),
+            dpdv: pick_t(&self.dpdv, idx),
+            u: pick_f(&self.u, idx),
+            v: pick_f(&self.v, idx),
+            s: pick_f(&self.s, idx),
+            t: pick_f(&self.t, idx),
             du: self.du,
             dv: self.dv,
-            cs: pick(&self.cs, idx),
-            os: pick(&self.os, idx),
-            i: pick(&self.i, idx),
-            ci: pick(&self.ci, idx),
-            oi: pick(&self.oi, idx),
+            cs: pick_t(&self.cs, idx),
+            os: pick_t(&self.os, idx),
+            i: pick_t(&self.i, idx),
+            ci: pick_t(&self.ci, idx),
+            oi: pick_t(&self.oi, idx),
             primvars: self.primvars.iter().map(pick_var).collect(),
             outputs: Vec::new(),
             displacement_outputs: self.displacement_outputs.iter().map(pick_var).collect(),
             motion: None,
         }
+    }
+    /// Gives the per-point columns back to this thread's buffer pool (a [`Grid::subset`]
+    /// made for one run).
+    pub fn recycle(self) {
+        use crate::shade::value::{recycle, Slot};
+        recycle([self.p, self.n, self.ng, self.dpdu, self.dpdv].map(Slot::VT));
+        recycle([self.u, self.v, self.s, self.t].map(Slot::VF));
+        recycle([self.cs, self.os, self.i, self.ci, self.oi].map(Slot::VT));
     }
     pub fn primvar(&self, name: &str) -> Option<&GridVar> {
         self.primvars.iter().find(|v| v.name == name)

@@ -16,7 +16,7 @@ use crate::diag::{Diag, Diagnostics, SourceMap};
 use crate::render::Camera;
 use crate::scene::{Attributes, ParamData, ParamType, Primitive, Scene, ShaderRef};
 use crate::shade::exec::{Env, Exec, InfoValue, LightResult, LightState, Relight, TextureLookup};
-use crate::shade::value::Slot;
+use crate::shade::value::{pooled_vf, pooled_vt, Slot};
 use crate::shade::{Grid, GridVar};
 use crate::sl::ast::{BaseType, ShaderKind};
 use crate::sl::ir::{Instr, Program};
@@ -1111,7 +1111,9 @@ impl<'a> ShadeSystem<'a> {
                     cones: None,
                     ..*ctx
                 };
-                self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want))
+                let out = self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want));
+                sub.recycle();
+                out
             }
         }
     }
@@ -1233,7 +1235,7 @@ impl<'a> ShadeSystem<'a> {
         let mut get = |name: &str, def: Vec3| -> Vec<Vec3> {
             prog.global(name)
                 .map(|g| own_vt(&mut regs[g.reg as usize], n))
-                .unwrap_or_else(|| vec![def; n])
+                .unwrap_or_else(|| crate::shade::value::grid_vt_filled(n, def))
         };
         let mut l: Vec<Vec3> = get("L", Vec3::ZERO);
         // One pass: L points from the surface to the light, and is it the same everywhere?
@@ -1258,21 +1260,21 @@ impl<'a> ShadeSystem<'a> {
                 depth: ctx.depth,
                 skip_light: gl.area.as_ref().map(|_| gl.index),
             };
-            let to: Vec<Vec3> = (0..n)
-                .map(|i| {
-                    if gl.solar {
-                        ps[i] + l[i].normalize_or_zero() * 1.0e8
-                    } else {
-                        ps[i] + l[i]
-                    }
-                })
-                .collect();
+            let mut to = crate::shade::value::grid_vt(n);
+            for (i, o) in to.iter_mut().enumerate() {
+                *o = if gl.solar {
+                    ps[i] + l[i].normalize_or_zero() * 1.0e8
+                } else {
+                    ps[i] + l[i]
+                };
+            }
             let active: Vec<bool> = (0..n).map(|i| lit[i] && cl[i] != Vec3::ZERO).collect();
-            let mut t = vec![Vec3::ONE; n];
+            let mut t = crate::shade::value::grid_vt_filled(n, Vec3::ONE);
             crate::shade::exec::RayTracer::transmission(&tracer, &ps[..], &to, &active, &mut t);
             for (c, t) in cl.iter_mut().zip(&t) {
                 *c *= *t;
             }
+            crate::shade::value::recycle([Slot::VT(to), Slot::VT(t)]);
         }
         if !lit.iter().all(|&b| b) {
             for (c, &on) in cl.iter_mut().zip(&lit) {
@@ -1409,29 +1411,29 @@ impl<'a> ShadeSystem<'a> {
                     if prog.kind == ShaderKind::Light && ctx.area_light.is_none() {
                         Slot::T(camera_from_shader.transform_point3(Vec3::ZERO))
                     } else {
-                        Slot::VT(grid.p.clone())
+                        Slot::VT(pooled_vt(&grid.p))
                     }
                 }
                 "Ps" => match &lit_ps {
-                    Some(ps) => Slot::VT(ps.to_vec()),
-                    None => Slot::VT(grid.p.clone()),
+                    Some(ps) => Slot::VT(pooled_vt(ps)),
+                    None => Slot::VT(pooled_vt(&grid.p)),
                 },
-                "N" => Slot::VT(grid.n.clone()),
-                "Ng" => Slot::VT(grid.ng.clone()),
-                "dPdu" => Slot::VT(grid.dpdu.clone()),
-                "dPdv" => Slot::VT(grid.dpdv.clone()),
-                "u" => Slot::VF(grid.u.clone()),
-                "v" => Slot::VF(grid.v.clone()),
-                "s" => Slot::VF(grid.s.clone()),
-                "t" => Slot::VF(grid.t.clone()),
+                "N" => Slot::VT(pooled_vt(&grid.n)),
+                "Ng" => Slot::VT(pooled_vt(&grid.ng)),
+                "dPdu" => Slot::VT(pooled_vt(&grid.dpdu)),
+                "dPdv" => Slot::VT(pooled_vt(&grid.dpdv)),
+                "u" => Slot::VF(pooled_vf(&grid.u)),
+                "v" => Slot::VF(pooled_vf(&grid.v)),
+                "s" => Slot::VF(pooled_vf(&grid.s)),
+                "t" => Slot::VF(pooled_vf(&grid.t)),
                 "du" => Slot::F(grid.du),
                 "dv" => Slot::F(grid.dv),
-                "Cs" => Slot::VT(grid.cs.clone()),
-                "Os" => Slot::VT(grid.os.clone()),
-                "I" => Slot::VT(grid.i.clone()),
+                "Cs" => Slot::VT(pooled_vt(&grid.cs)),
+                "Os" => Slot::VT(pooled_vt(&grid.os)),
+                "I" => Slot::VT(pooled_vt(&grid.i)),
                 "E" => Slot::T(Vec3::ZERO),
                 "Ci" => match ci_oi {
-                    Some((ci, _)) => Slot::VT(ci.to_vec()),
+                    Some((ci, _)) => Slot::VT(pooled_vt(ci)),
                     None => {
                         // Output-only globals start as one uniform value: the grid-sized
                         // buffer is made by the first store (Mov broadcasts), not here.
@@ -1440,8 +1442,8 @@ impl<'a> ShadeSystem<'a> {
                     }
                 },
                 "Oi" => match ci_oi {
-                    Some((_, oi)) => Slot::VT(oi.to_vec()),
-                    None => Slot::VT(grid.os.clone()),
+                    Some((_, oi)) => Slot::VT(pooled_vt(oi)),
+                    None => Slot::VT(pooled_vt(&grid.os)),
                 },
                 "Cl" | "L" => {
                     ex.set(g.reg, Slot::T(Vec3::ZERO));
@@ -1453,9 +1455,9 @@ impl<'a> ShadeSystem<'a> {
                 }
                 "ncomps" => Slot::F(3.0),
                 "time" | "dtime" => Slot::F(0.0),
-                "dPdtime" => Slot::VT(vec![Vec3::ZERO; n]),
+                "dPdtime" => Slot::VT(crate::shade::value::grid_vt_filled(n, Vec3::ZERO)),
                 "alpha" => match ctx.alpha {
-                    Some(a) => Slot::VF(a.to_vec()),
+                    Some(a) => Slot::VF(pooled_vf(a)),
                     None => Slot::F(1.0),
                 },
                 _ => continue,
@@ -1475,7 +1477,7 @@ impl<'a> ShadeSystem<'a> {
                 ex.run_body();
             }
         }
-        Some(ex.regs)
+        Some(std::mem::take(&mut ex.regs))
     }
 }
 
@@ -1629,12 +1631,14 @@ fn fit(v: Slot, varying: bool, n: usize) -> Slot {
     if varying && !v.is_varying() {
         crate::shade::exec::broadcast(&v, n)
     } else if !varying && v.is_varying() {
-        match v {
+        let u = match &v {
             Slot::VF(x) => Slot::F(x.first().copied().unwrap_or(0.0)),
             Slot::VT(x) => Slot::T(x.first().copied().unwrap_or(Vec3::ZERO)),
             Slot::VM(x) => Slot::M(Box::new(x.first().copied().unwrap_or(Mat4::IDENTITY))),
-            s => s,
-        }
+            s => return s.clone(),
+        };
+        crate::shade::value::recycle([v]);
+        u
     } else {
         v
     }
@@ -1784,8 +1788,8 @@ fn own_vt(s: &mut Slot, n: usize) -> Vec<Vec3> {
 
 fn slot_vt(s: &Slot, n: usize) -> Vec<Vec3> {
     match s {
-        Slot::VT(v) if v.len() == n => v.clone(),
-        Slot::T(x) => vec![*x; n],
+        Slot::VT(v) if v.len() == n => pooled_vt(v),
+        Slot::T(x) => crate::shade::value::grid_vt_filled(n, *x),
         other => {
             let t = other.t();
             (0..n).map(|i| t.at(i)).collect()

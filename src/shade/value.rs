@@ -221,6 +221,31 @@ pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
     v
 }
 
+/// A pooled copy of `src` (empty stays empty: no pooled buffer held for nothing). Buffers
+/// that end in [`recycle`] should come from here rather than a fresh `to_vec`: a run's
+/// register file is recycled, and fresh buffers recycled into a full pool are freed, so the
+/// pool would turn over through `malloc`/`free` at every run.
+pub fn pooled_vt(src: &[Vec3]) -> Vec<Vec3> {
+    if src.is_empty() {
+        return Vec::new();
+    }
+    let mut v = pool::TRIPLES.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
+    v.clear();
+    v.extend_from_slice(src);
+    v
+}
+
+/// [`pooled_vt`] for floats.
+pub fn pooled_vf(src: &[f32]) -> Vec<f32> {
+    if src.is_empty() {
+        return Vec::new();
+    }
+    let mut v = pool::FLOATS.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
+    v.clear();
+    v.extend_from_slice(src);
+    v
+}
+
 /// Gives the grid buffers of finished registers back to this thread's pool.
 pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
     pool::FLOATS.with(|fp| {
@@ -228,8 +253,9 @@ pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
             let (mut fp, mut tp) = (fp.borrow_mut(), tp.borrow_mut());
             for s in slots {
                 match s {
-                    Slot::VF(v) if fp.len() < pool::POOL_MAX => fp.push(v),
-                    Slot::VT(v) if tp.len() < pool::POOL_MAX => tp.push(v),
+                    // (An empty buffer would only take a place in the pool.)
+                    Slot::VF(v) if fp.len() < pool::POOL_MAX && v.capacity() > 0 => fp.push(v),
+                    Slot::VT(v) if tp.len() < pool::POOL_MAX && v.capacity() > 0 => tp.push(v),
                     _ => {}
                 }
             }
