@@ -331,27 +331,14 @@ fn focus_rows(bucket: &str) -> String {
 #[test]
 fn lens_cells_skip_only_samples_that_cannot_be_hit() {
     let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
-    let brute = |t: &str| {
-        t.replacen(
-            "WorldBegin",
-            "Hider \"hidden\" \"lensslots\" [1]\nWorldBegin",
-            1,
-        )
-    };
-    for (name, text, speedup) in [
-        ("focus rows", focus_rows("16 16"), 2.0),
-        ("focus rows 7x5", focus_rows("7 5"), 2.0),
-        ("busy", busy("16 16"), 1.0),
-    ] {
-        let (a, [_, tested, hits]) = render_stats(&text);
-        let (b, [_, tested_all, hits_all]) = render_stats(&brute(&text));
-        assert!(bits(&a) == bits(&b), "{name}: the picture changed");
-        assert_eq!(hits, hits_all, "{name}");
-        assert!(
-            tested as f64 * speedup <= tested_all as f64,
-            "{name}: {tested} samples tested, {tested_all} without cells"
-        );
-    }
+    binning_skips_only_misses(
+        "\"lensslots\" [1]",
+        [
+            ("focus rows", focus_rows("16 16"), 2.0),
+            ("focus rows 7x5", focus_rows("7 5"), 2.0),
+            ("busy", busy("16 16"), 1.0),
+        ],
+    );
     // Out of focus, the picture does not depend on the buckets either.
     let (a, _) = render_stats(&focus_rows("16 16"));
     let (b, _) = render_stats(&focus_rows("7 5"));
@@ -454,35 +441,43 @@ const SWEEP: &str = "Format 64 16 1\nPixelSamples 8 8\nPixelFilter \"box\" 1 1\n
     Surface \"constant\"\nMotionBegin [0 1]\nTranslate -24 0 0\nTranslate 24 0 0\nMotionEnd\n\
     Polygon \"P\" [-1 -6 5  1 -6 5  1 6 5  -1 6 5]\nWorldEnd\n";
 
+/// Each case renders the same bits and hits with the Z-buffer's sample binning as with it
+/// turned off (`off`, a `Hider "hidden"` parameter), testing at least `speedup` times fewer
+/// samples.
+fn binning_skips_only_misses<const N: usize>(off: &str, cases: [(&str, String, f64); N]) {
+    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+    for (name, text, speedup) in cases {
+        let brute = text.replacen(
+            "WorldBegin",
+            &format!("Hider \"hidden\" {off}\nWorldBegin"),
+            1,
+        );
+        let (a, [_, tested, hits]) = render_stats(&text);
+        let (b, [_, tested_all, hits_all]) = render_stats(&brute);
+        assert!(bits(&a) == bits(&b), "{name}: the picture changed");
+        assert_eq!(hits, hits_all, "{name}");
+        assert!(
+            tested as f64 * speedup <= tested_all as f64,
+            "{name}: {tested} samples tested, {tested_all} with {off}"
+        );
+    }
+}
+
 /// Time slots (the Z-buffer tests a fast micropolygon slot by slot, each against its bound
 /// over the slot's times) skip only samples that cannot be hit: the same hits and the same
 /// bits as testing every sample under the whole-shutter bound (`"timeslots" [1]`), with
 /// far fewer samples tested.
 #[test]
 fn time_slots_skip_only_samples_that_cannot_be_hit() {
-    let bits = |f: &Film| f.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
-    let brute = |t: &str| {
-        t.replacen(
-            "WorldBegin",
-            "Hider \"hidden\" \"timeslots\" [1]\nWorldBegin",
-            1,
-        )
-    };
     let spin = busy("16 16").replacen("PixelSamples 3 3", "PixelSamples 5 4", 1);
-    for (name, text, speedup) in [
-        ("sweep", SWEEP.to_string(), 8.0),
-        ("busy", busy("16 16"), 1.0),
-        ("busy 5x4", spin, 1.0),
-    ] {
-        let (a, [_, tested, hits]) = render_stats(&text);
-        let (b, [_, tested_all, hits_all]) = render_stats(&brute(&text));
-        assert!(bits(&a) == bits(&b), "{name}: the picture changed");
-        assert_eq!(hits, hits_all, "{name}");
-        assert!(
-            tested as f64 * speedup <= tested_all as f64,
-            "{name}: {tested} samples tested, {tested_all} without slots"
-        );
-    }
+    binning_skips_only_misses(
+        "\"timeslots\" [1]",
+        [
+            ("sweep", SWEEP.to_string(), 8.0),
+            ("busy", busy("16 16"), 1.0),
+            ("busy 5x4", spin, 1.0),
+        ],
+    );
     // The bar's energy (24 pixels of alpha) spreads evenly over the 50 columns it sweeps:
     // where it passes whole, each column holds 12 rows × 2/48 of the shutter.
     let (f, _) = render_stats(SWEEP);

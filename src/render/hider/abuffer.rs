@@ -903,15 +903,9 @@ fn fragment_grid_blurred(
     let mut aov = vec![0f32; aw];
     for &(m, k, mb) in &visible {
         let corner = [k, k + 1, k + nu + 1, k + nu];
-        let bx = [
-            mb[0].max(wx0),
-            mb[1].max(wy0),
-            mb[2].min(wx1),
-            mb[3].min(wy1),
-        ];
-        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+        let Some(bx) = super::clip_box(mb, [wx0, wy0, wx1, wy1]) else {
             continue;
-        }
+        };
         let px0 = floor_i32(bx[0]).max(rect.x0);
         let px1 = floor_i32(bx[2]).min(rect.x1 - 1);
         let py0 = floor_i32(bx[1]).max(rect.y0);

@@ -341,6 +341,19 @@ pub struct CsgGrid {
     pub entering: Vec<bool>,
 }
 
+/// Box `a` (x0, y0, x1, y1) clipped to box `b`; None when they do not meet (or a bound is
+/// not a number).
+#[inline]
+pub fn clip_box(a: [f32; 4], b: [f32; 4]) -> Option<[f32; 4]> {
+    let c = [
+        a[0].max(b[0]),
+        a[1].max(b[1]),
+        a[2].min(b[2]),
+        a[3].min(b[3]),
+    ];
+    (c[0] <= c[2] && c[1] <= c[3]).then_some(c)
+}
+
 /// Whether bound `b` (x0, y0, x1, y1) meets the window `[x0, x1] × [y0, y1]`.
 #[inline]
 pub fn overlaps(b: &[f32; 4], x0: f32, y0: f32, x1: f32, y1: f32) -> bool {

@@ -1240,15 +1240,9 @@ fn sample_quads(
     let cols = lay.cols;
     let (mut tested, mut hits) = (0u64, 0u64);
     for &(m, k, mb) in visible {
-        let bx = [
-            mb[0].max(win[0]),
-            mb[1].max(win[1]),
-            mb[2].min(win[2]),
-            mb[3].min(win[3]),
-        ];
-        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+        let Some(bx) = super::clip_box(mb, win) else {
             continue;
-        }
+        };
         let corner = [k, k + 1, k + nu + 1, k + nu];
         if occlusion {
             // The nearest depth anywhere on the micropolygon (depth interpolates between
@@ -1361,15 +1355,9 @@ fn sample_grid(b: &mut Bucket, g: &ShadedGrid, kernel: QuadKernel, visible: &mut
     let mut interp_aov = vec![0f32; aw];
     let [wx0, wy0, wx1, wy1] = win;
     for &(m, k, mb) in visible.iter() {
-        let bx = [
-            mb[0].max(wx0),
-            mb[1].max(wy0),
-            mb[2].min(wx1),
-            mb[3].min(wy1),
-        ];
-        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+        let Some(bx) = super::clip_box(mb, [wx0, wy0, wx1, wy1]) else {
             continue;
-        }
+        };
         sample_micro(b, g, m, k, bx, &mut mean_aov, &mut interp_aov);
     }
 }
@@ -1530,15 +1518,9 @@ fn sample_grid_blurred(
     let mut group_boxes: Vec<([f32; 4], usize, usize)> = Vec::new();
     for &(m, k, mb) in visible.iter() {
         let corner = [k, k + 1, k + nu + 1, k + nu];
-        let bx = [
-            mb[0].max(wx0),
-            mb[1].max(wy0),
-            mb[2].min(wx1),
-            mb[3].min(wy1),
-        ];
-        if !(bx[0] <= bx[2] && bx[1] <= bx[3]) {
+        let Some(bx) = super::clip_box(mb, [wx0, wy0, wx1, wy1]) else {
             continue;
-        }
+        };
         let (cc, co) = flat_shade(g, &corner, &mut mean_aov);
         let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
         let mut test = |b: &mut Bucket, s: usize, pos: [f32; 2]| {
@@ -1644,13 +1626,7 @@ fn slot_boxes(
             return false;
         };
         at_start = ends[1];
-        let gb = [
-            tb[0].max(bx[0]),
-            tb[1].max(bx[1]),
-            tb[2].min(bx[2]),
-            tb[3].min(bx[3]),
-        ];
-        if gb[0] <= gb[2] && gb[1] <= gb[3] {
+        if let Some(gb) = super::clip_box(tb, bx) {
             out.push((gb, k0, k1));
         }
     }
@@ -1698,15 +1674,9 @@ fn for_samples_in_lens_cells(
                 continue;
             }
             let gb = lb.box_for(r[0], r[1]);
-            let gb = [
-                gb[0].max(bx[0]),
-                gb[1].max(bx[1]),
-                gb[2].min(bx[2]),
-                gb[3].min(bx[3]),
-            ];
-            if !(gb[0] <= gb[2] && gb[1] <= gb[3]) {
+            let Some(gb) = super::clip_box(gb, bx) else {
                 continue;
-            }
+            };
             for cy in y0..=y1 {
                 for_samples_in_slots(b, cells, cy * l + x0, cy * l + x1, gb, &mut *f);
             }
