@@ -915,3 +915,25 @@ fn illuminance_trace_and_gather_take_prmans_optional_parameters() {
     );
     assert!(err, "a constant cannot receive a light's value:\n{log}");
 }
+
+#[test]
+fn area_with_a_measure_is_the_area_with_one_warning() {
+    // PRMan's `area(P, "dicing")` gives the same value as `area(P)`, point by point.
+    let (two, rendered) = compile_ok(
+        "surface a() { float x = area(P, \"dicing\"); float y = area(P); \
+         Ci = color(x, y, x == y ? 1 : 0); Oi = 1; }",
+    );
+    assert_eq!(
+        rendered.matches("area(P, measure)").count(),
+        1,
+        "{rendered}"
+    );
+    let (ci, _) = run(&two, 4);
+    for c in ci {
+        assert_eq!(c.x, c.y);
+        assert_eq!(c.z, 1.0);
+    }
+    // A measure that is not a string is still a type error.
+    let (_, rendered, err) = compile("surface b() { float x = area(P, 1); Ci = x; }");
+    assert!(err, "{rendered}");
+}

@@ -2425,6 +2425,18 @@ impl<'a> Lowerer<'a> {
                 self.unused_ray_params("trace", args, 2, &["label"]);
                 return self.call(name, name_span, &args[..2], span, hint);
             }
+            // PRMan's `area(P, "dicing")` names how to measure; the area is the
+            // micropolygon's in current space, as `area(P)`.
+            "area" if args.len() == 2 && self.is_string_expr(&args[1]) => {
+                let m = self.expr(&args[1], Some(BaseType::String));
+                let _ = self.coerce(m, BaseType::String, args[1].span);
+                self.warn_extension(
+                    "area-measure",
+                    args[1].span,
+                    "`area(P, measure)` (PRMan): the measure is ignored and the area of the micropolygon around P in current space is returned, as `area(P)`",
+                );
+                return self.call(name, name_span, &args[..1], span, hint);
+            }
             "printf" | "format" => return self.printf(name, args, span),
             "atmosphere" | "displacement" | "lightsource" | "surface" | "incident" | "opposite"
             | "attribute" | "option" | "rendererinfo" | "textureinfo" | "rayinfo" => {
