@@ -642,3 +642,31 @@ surface snprobe() {
         "one orientation kept, the other turned: {front:?} {back:?}"
     );
 }
+
+#[test]
+fn arbors_own_headers_raise_no_extension_warnings_in_user_shaders() {
+    // PRMan's lights call normals.h's shadingnormal, which reads I in a light (a PRMan
+    // extension arbor supports): the warning would point into arbor's own header, so it is
+    // not shown. The same read written in the user's light still warns.
+    let warnings = |src: &str| {
+        let sources = SourceMap::new();
+        let diags = Diagnostics::new();
+        let progs = compile_source(
+            "l.sl",
+            src,
+            None,
+            &sources,
+            &diags,
+            &CompileOptions::default(),
+        );
+        assert_eq!(progs.len(), 1, "{}", diags.render_plain(&sources));
+        diags.render_plain(&sources)
+    };
+    let via_header = warnings(
+        "#include \"normals.h\"\nlight a() { normal Ns = shadingnormal(N); \
+         illuminate(Ps + Ns) { Cl = 1; } }\n",
+    );
+    assert!(!via_header.contains("PRMan extension"), "{via_header}");
+    let own = warnings("light b() { vector v = I; illuminate(Ps + v) { Cl = 1; } }\n");
+    assert!(own.contains("`I` in a light shader"), "{own}");
+}

@@ -67,6 +67,15 @@ impl IncludeResolver for SearchResolver<'_> {
     }
 }
 
+/// Whether a diagnostic points into one of the embedded standard headers.
+fn in_stdlib(sources: &SourceMap, d: &Diag) -> bool {
+    d.labels.first().is_some_and(|(span, _)| {
+        sources
+            .get(span.file)
+            .is_some_and(|f| f.name.starts_with("<stdlib>/"))
+    })
+}
+
 /// Compiles every shader defined in a source text. Diagnostics go to `diags`; the programs
 /// that compiled cleanly are returned.
 pub fn compile_source(
@@ -179,6 +188,11 @@ pub fn compile_with(
             match crate::sl::lower::lower_shader(def, &functions) {
                 Ok((prog, warnings)) => {
                     for w in warnings {
+                        // arbor's own headers use extensions on purpose (PRMan's normals.h
+                        // reads `I` in lights, as PRMan allows): not the user's to fix.
+                        if w.code == "sl::extension" && in_stdlib(sources, &w) {
+                            continue;
+                        }
                         diags.report(w);
                     }
                     out.push(prog);
