@@ -15,6 +15,14 @@ use common::{film_mean, render_rib, scratch_dir};
 /// Compiles `src` with the default options only (no -I, no search path): every include must
 /// come from the embedded library.  Returns the rendered diagnostics on failure.
 fn compile_embedded(src: &str) -> Result<usize, String> {
+    match compile_report(src) {
+        (n, _, false) if n > 0 => Ok(n),
+        (_, rendered, _) => Err(rendered),
+    }
+}
+
+/// Compiles `src` against the embedded headers: (programs, rendered diagnostics, errors?).
+fn compile_report(src: &str) -> (usize, String, bool) {
     let sources = SourceMap::new();
     let diags = Diagnostics::new();
     let progs = compile_source(
@@ -25,11 +33,11 @@ fn compile_embedded(src: &str) -> Result<usize, String> {
         &diags,
         &CompileOptions::default(),
     );
-    if diags.has_errors() || progs.is_empty() {
-        Err(diags.render_plain(&sources))
-    } else {
-        Ok(progs.len())
-    }
+    (
+        progs.len(),
+        diags.render_plain(&sources),
+        diags.has_errors(),
+    )
 }
 
 /// One small shader per header, calling its main functions.
@@ -649,18 +657,9 @@ fn arbors_own_headers_raise_no_extension_warnings_in_user_shaders() {
     // extension arbor supports): the warning would point into arbor's own header, so it is
     // not shown. The same read written in the user's light still warns.
     let warnings = |src: &str| {
-        let sources = SourceMap::new();
-        let diags = Diagnostics::new();
-        let progs = compile_source(
-            "l.sl",
-            src,
-            None,
-            &sources,
-            &diags,
-            &CompileOptions::default(),
-        );
-        assert_eq!(progs.len(), 1, "{}", diags.render_plain(&sources));
-        diags.render_plain(&sources)
+        let (n, rendered, _) = compile_report(src);
+        assert_eq!(n, 1, "{rendered}");
+        rendered
     };
     let via_header = warnings(
         "#include \"normals.h\"\nlight a() { normal Ns = shadingnormal(N); \

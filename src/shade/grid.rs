@@ -29,6 +29,26 @@ impl GridVar {
     pub fn width(&self) -> usize {
         self.ty.components() * self.array_len
     }
+
+    /// The values at points `idx` (a uniform variable is kept whole).
+    pub fn pick(&self, idx: &[usize]) -> GridVar {
+        if self.uniform {
+            return self.clone();
+        }
+        let w = self.width();
+        let mut floats = Vec::with_capacity(idx.len() * w);
+        for &i in idx {
+            floats.extend_from_slice(&self.floats[i * w..(i + 1) * w]);
+        }
+        GridVar {
+            name: self.name.clone(),
+            ty: self.ty,
+            array_len: self.array_len,
+            uniform: false,
+            floats,
+            strings: Vec::new(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -115,63 +135,39 @@ impl Grid {
     pub fn subset(&self, idx: &[usize]) -> Grid {
         // From this thread's buffer pool (the caller gives them back with
         // [`Grid::recycle`]), not fresh allocations.
-        fn pick_t(v: &[Vec3], idx: &[usize]) -> Vec<Vec3> {
+        fn pick<T: Copy>(v: &[T], idx: &[usize], buffer: fn(usize) -> Vec<T>) -> Vec<T> {
             if v.is_empty() {
                 return Vec::new();
             }
-            let mut out = crate::shade::value::grid_vt(idx.len());
+            let mut out = buffer(idx.len());
             for (o, &i) in out.iter_mut().zip(idx) {
                 *o = v[i];
             }
             out
         }
-        fn pick_f(v: &[f32], idx: &[usize]) -> Vec<f32> {
-            if v.is_empty() {
-                return Vec::new();
-            }
-            let mut out = crate::shade::value::grid_vf(idx.len());
-            for (o, &i) in out.iter_mut().zip(idx) {
-                *o = v[i];
-            }
-            out
-        }
-        let pick_var = |g: &GridVar| -> GridVar {
-            if g.uniform {
-                return g.clone();
-            }
-            let w = g.width();
-            let mut floats = Vec::with_capacity(idx.len() * w);
-            for &i in idx {
-                floats.extend_from_slice(&g.floats[i * w..(i + 1) * w]);
-            }
-            GridVar {
-                name: g.name.clone(),
-                ty: g.ty,
-                array_len: g.array_len,
-                uniform: false,
-                floats,
-                strings: Vec::new(),
-            }
-        };
+        use crate::shade::value::{grid_vf, grid_vt};
+        let pick_t = |v: &[Vec3]| pick(v, idx, grid_vt);
+        let pick_f = |v: &[f32]| pick(v, idx, grid_vf);
+        let pick_var = |g: &GridVar| g.pick(idx);
         Grid {
             nu: idx.len(),
             nv: 1,
-            p: pick_t(&self.p, idx),
-            n: pick_t(&self.n, idx),
-            ng: pick_t(&self.ng, idx),
-            dpdu: pick_t(&self.dpdu, idx),
-            dpdv: pick_t(&self.dpdv, idx),
-            u: pick_f(&self.u, idx),
-            v: pick_f(&self.v, idx),
-            s: pick_f(&self.s, idx),
-            t: pick_f(&self.t, idx),
+            p: pick_t(&self.p),
+            n: pick_t(&self.n),
+            ng: pick_t(&self.ng),
+            dpdu: pick_t(&self.dpdu),
+            dpdv: pick_t(&self.dpdv),
+            u: pick_f(&self.u),
+            v: pick_f(&self.v),
+            s: pick_f(&self.s),
+            t: pick_f(&self.t),
             du: self.du,
             dv: self.dv,
-            cs: pick_t(&self.cs, idx),
-            os: pick_t(&self.os, idx),
-            i: pick_t(&self.i, idx),
-            ci: pick_t(&self.ci, idx),
-            oi: pick_t(&self.oi, idx),
+            cs: pick_t(&self.cs),
+            os: pick_t(&self.os),
+            i: pick_t(&self.i),
+            ci: pick_t(&self.ci),
+            oi: pick_t(&self.oi),
             primvars: self.primvars.iter().map(pick_var).collect(),
             outputs: Vec::new(),
             displacement_outputs: self.displacement_outputs.iter().map(pick_var).collect(),

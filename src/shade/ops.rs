@@ -2213,34 +2213,34 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             None => (ex.env.info)(&which, &name),
         },
         "attribute" | "option" | "rendererinfo" | "rayinfo" => (ex.env.info)(&which, &name),
-        "displacement" => {
-            let Some(gv) = ex.env.displacement_outputs.iter().find(|v| v.name == name) else {
+        "displacement" | "surface" => {
+            let vars = if &*which == "surface" {
+                ex.env.surface_params
+            } else {
+                ex.env.displacement_outputs
+            };
+            let Some((gv, &r)) = vars.iter().find(|v| v.name == name).zip(outs.first()) else {
                 return false;
             };
-            let Some((slot, &r)) = displacement_message(gv, &ty, ex.n).zip(outs.first()) else {
+            let slot = if &*ty == "string" {
+                gv.strings.first().map(|s| Slot::S(Arc::from(s.as_str())))
+            } else {
+                passed_value(gv, &ty, ex.n)
+            };
+            let Some(slot) = slot else {
                 return false;
             };
-            set_passed(ex, r, slot);
-            return true;
-        }
-        "surface" => {
-            let Some(gv) = ex.env.surface_params.iter().find(|v| v.name == name) else {
-                return false;
+            // A uniform destination takes the first point's value.
+            let slot = if ex.prog.regs[r as usize].varying || !slot.is_varying() {
+                slot
+            } else {
+                match slot {
+                    Slot::VF(v) => Slot::F(v.first().copied().unwrap_or(0.0)),
+                    Slot::VT(v) => Slot::T(v.first().copied().unwrap_or(Vec3::ZERO)),
+                    other => other,
+                }
             };
-            let Some(&r) = outs.first() else {
-                return false;
-            };
-            if &*ty == "string" {
-                let Some(s) = gv.strings.first() else {
-                    return false;
-                };
-                set_out(ex, r, Slot::S(Arc::from(s.as_str())));
-                return true;
-            }
-            let Some(slot) = displacement_message(gv, &ty, ex.n) else {
-                return false;
-            };
-            set_passed(ex, r, slot);
+            set_out(ex, r, slot);
             return true;
         }
         other => {
@@ -2301,26 +2301,11 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
     }
 }
 
-/// Stores a value passed from another shader into output temporary `r`: a uniform
-/// destination takes the first point's value.
-fn set_passed(ex: &mut Exec, r: Reg, slot: Slot) {
-    let slot = if ex.prog.regs[r as usize].varying || !slot.is_varying() {
-        slot
-    } else {
-        match slot {
-            Slot::VF(v) => Slot::F(v.first().copied().unwrap_or(0.0)),
-            Slot::VT(v) => Slot::T(v.first().copied().unwrap_or(Vec3::ZERO)),
-            other => other,
-        }
-    };
-    set_out(ex, r, slot);
-}
-
 /// The value of another shader's variable `gv` (a displacement output, a surface parameter)
 /// for a destination of type `ty`
 /// (`"float"`, or a colour/point/vector/normal taking any triple): None when the two do not
 /// fit, as RISpec's message passing reports a variable of another type as not found.
-fn displacement_message(gv: &crate::shade::GridVar, ty: &str, n: usize) -> Option<Slot> {
+fn passed_value(gv: &crate::shade::GridVar, ty: &str, n: usize) -> Option<Slot> {
     let w = gv.width();
     // An area light's run covers samples × points, sample-major: point i of a longer run
     // reads the value of point i modulo the grid's.

@@ -1067,8 +1067,6 @@ impl<'a> ShadeSystem<'a> {
         Some(shape.clone())
     }
 
-    /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
-    /// those grid points only, as a grid of just them.
     /// The surface program's parameters as bound on `grid` (its defaults, then instance
     /// values and primitive variables), without running its body.
     fn param_values(
@@ -1090,6 +1088,8 @@ impl<'a> ShadeSystem<'a> {
         vars
     }
 
+    /// The lights evaluated with the lit points at `ps`: for the whole grid, or (`idx`) for
+    /// those grid points only, as a grid of just them.
     fn relight(
         &self,
         grid: &Grid,
@@ -1103,12 +1103,16 @@ impl<'a> ShadeSystem<'a> {
             None => self.eval_lights(grid, ctx, lights, Some(ps), Some(want)),
             Some(idx) => {
                 let sub = grid.subset(idx);
+                // The surface's parameters at those points, for lights that read them.
+                let surface_params: Vec<GridVar> =
+                    ctx.surface_params.iter().map(|v| v.pick(idx)).collect();
                 let sub_ctx = RunCtx {
                     alpha: None,
                     // Its neighbours are unrelated points: derivatives read zero.
                     hits: true,
                     triples: false,
                     cones: None,
+                    surface_params: &surface_params,
                     ..*ctx
                 };
                 let out = self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want));
@@ -1498,15 +1502,15 @@ fn asks_message(prog: &Program, which: &str) -> bool {
 }
 
 /// A program's parameters after set-up, as message passing hands them out: one uniform
-/// value or one per point, strings as strings. Array parameters are left out.
+/// value or one per point, strings as strings. Array and matrix parameters are left out.
 fn param_vars(prog: &Program, regs: &[Slot], n: usize) -> Vec<GridVar> {
     let mut out = Vec::new();
     for par in prog.params.iter().filter(|p| p.array.is_none()) {
         let Some(slot) = regs.get(par.reg as usize) else {
             continue;
         };
-        let mut gv = match slot {
-            Slot::S(s) => GridVar {
+        let gv = match (par.ty, slot) {
+            (BaseType::String, Slot::S(s)) => GridVar {
                 name: par.name.clone(),
                 ty: ParamType::String,
                 array_len: 1,
@@ -1514,16 +1518,16 @@ fn param_vars(prog: &Program, regs: &[Slot], n: usize) -> Vec<GridVar> {
                 floats: Vec::new(),
                 strings: vec![s.to_string()],
             },
-            _ => slot_to_gridvar(&par.name, par.ty, slot, n),
+            (BaseType::String | BaseType::Matrix, _) | (_, Slot::S(_)) => continue,
+            _ => {
+                // One value for a uniform parameter, one per point for a varying one.
+                let points = if slot.is_varying() { n } else { 1 };
+                GridVar {
+                    uniform: !slot.is_varying(),
+                    ..slot_to_gridvar(&par.name, par.ty, slot, points)
+                }
+            }
         };
-        if matches!(slot, Slot::F(_) | Slot::T(_)) {
-            gv.uniform = true;
-            let w = gv.width();
-            gv.floats.truncate(w);
-        }
-        if par.ty != BaseType::String && matches!(slot, Slot::S(_)) {
-            continue;
-        }
         out.push(gv);
     }
     out

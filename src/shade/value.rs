@@ -226,21 +226,22 @@ pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
 /// register file is recycled, and fresh buffers recycled into a full pool are freed, so the
 /// pool would turn over through `malloc`/`free` at every run.
 pub fn pooled_vt(src: &[Vec3]) -> Vec<Vec3> {
-    if src.is_empty() {
-        return Vec::new();
-    }
-    let mut v = pool::TRIPLES.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
-    v.clear();
-    v.extend_from_slice(src);
-    v
+    pooled_copy(&pool::TRIPLES, src)
 }
 
 /// [`pooled_vt`] for floats.
 pub fn pooled_vf(src: &[f32]) -> Vec<f32> {
+    pooled_copy(&pool::FLOATS, src)
+}
+
+fn pooled_copy<T: Copy>(
+    pool: &'static std::thread::LocalKey<std::cell::RefCell<Vec<Vec<T>>>>,
+    src: &[T],
+) -> Vec<T> {
     if src.is_empty() {
         return Vec::new();
     }
-    let mut v = pool::FLOATS.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
+    let mut v = pool.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
     v.clear();
     v.extend_from_slice(src);
     v

@@ -1644,7 +1644,7 @@ fn for_samples_in_lens_cells(
     bx: [f32; 4],
     f: &mut impl FnMut(&mut Bucket, usize, [f32; 2]),
 ) -> bool {
-    let l = (cells.slots() as f32).sqrt() as usize;
+    let l = b.cfg.lens_slots;
     let travel = lb.travel();
     // About one group per half its own size (plus a pixel) of blur. Under callgrind on
     // examples/dof.rib at 160×100 (36 samples a pixel, 8 × 8 cells), one group per size
