@@ -240,6 +240,10 @@ pub struct Builder<'a> {
     /// While a deforming motion block runs its keys: the primitives they emit.
     pub(super) capture: Option<Vec<(Span, Arc<Geometry>, Arc<ParamList>)>>,
     pub(super) archives: HashMap<String, Arc<Vec<Request>>>,
+    /// `Resource … "attributes"` states saved outside any `ResourceBegin` block.
+    pub(super) resources: HashMap<String, super::resources::SavedAttributes>,
+    /// One map per open `ResourceBegin` block: the names saved inside it.
+    pub(super) resource_scopes: Vec<HashMap<String, super::resources::SavedAttributes>>,
     /// Archives being read, outermost first, for cycle detection.
     pub(super) include: Vec<String>,
     pub(super) conds: Vec<Cond>,
@@ -300,6 +304,8 @@ impl<'a> Builder<'a> {
             world_count: 0,
             frame_active: true,
             light_handles: HashMap::new(),
+            resources: HashMap::new(),
+            resource_scopes: Vec::new(),
             objects: HashMap::new(),
             defining: None,
             motion_block: None,
