@@ -630,9 +630,11 @@ impl Bvh {
         )
     }
 
-    /// Asks for the cache lines of a pushed child (an interior node's two, or the part of a
-    /// leaf's block its test reads): a later visit then finds them on the way. No effect on
-    /// results.
+    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's
+    /// block: the part its test reads and the ids, read on a hit, which otherwise were a
+    /// miss the walk waited for; rays bench, medians of 5 interleaved pairs: 2.41 → 2.46 M
+    /// shaded, 3.07 → 3.12 M shadow rays/s): a later visit then finds them on the way. No
+    /// effect on results.
     #[inline(always)]
     fn prefetch(&self, child: u32, count: u32) {
         if count == 0 {
@@ -641,7 +643,7 @@ impl Bvh {
             memhint::prefetch(p.cast::<u8>().wrapping_add(64));
         } else {
             let p = self.leaves.as_ptr().wrapping_add(child as usize);
-            memhint::prefetch_span(p, (count >> 8) as usize);
+            memhint::prefetch_span(p, (count >> 8) as usize + 2 * (count & 0xff) as usize);
         }
     }
 
