@@ -945,13 +945,6 @@ fn lights_read_the_surface_parameters_by_message_passing() {
     )
     .unwrap();
     let out = dir.join("m.png");
-    let square = |y: f32| {
-        format!(
-            "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
-            a = y + 0.25,
-            b = y - 0.25
-        )
-    };
     let rib = format!(
         "Format 16 12 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
          ScreenWindow -1 1 -0.75 0.75\nWorldBegin\nLightSource \"obeylight\" 1\nTranslate 0 0 5\n\
@@ -959,9 +952,9 @@ fn lights_read_the_surface_parameters_by_message_passing() {
          AttributeBegin\nSurface \"shiny\"\nDeclare \"Kr\" \"varying float\"\n{} \"Kr\" [0 1 0 1]\nAttributeEnd\n\
          AttributeBegin\nSurface \"dull\"\n{}\nAttributeEnd\nWorldEnd\n",
         out.display(),
-        square(0.5),
-        square(0.0),
-        square(-0.5)
+        band(0.5),
+        band(0.0),
+        band(-0.5)
     );
     let (text, err) = common::render_scene_file(&dir, &rib);
     assert!(!err && !text.contains("not supported"), "{text}");
@@ -1018,13 +1011,6 @@ fn surfaces_and_lights_read_the_atmosphere_parameters_by_message_passing() {
     )
     .unwrap();
     let out = dir.join("a.png");
-    let square = |y: f32| {
-        format!(
-            "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
-            a = y + 0.25,
-            b = y - 0.25
-        )
-    };
     let rib = format!(
         "Format 16 12 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
          ScreenWindow -1 1 -0.75 0.75\nWorldBegin\nLightSource \"dimlight\" 1\nTranslate 0 0 5\n\
@@ -1033,9 +1019,9 @@ fn surfaces_and_lights_read_the_atmosphere_parameters_by_message_passing() {
          AttributeBegin\nAtmosphere \"thinfog\" \"dim\" [0]\nDeclare \"fogdist\" \"varying float\"\n{} \"fogdist\" [0 1 0 1]\nAttributeEnd\n\
          AttributeBegin\n{}\nAttributeEnd\nWorldEnd\n",
         out.display(),
-        square(0.5),
-        square(0.0),
-        square(-0.5)
+        band(0.5),
+        band(0.0),
+        band(-0.5)
     );
     let (text, err) = common::render_scene_file(&dir, &rib);
     assert!(!err && !text.contains("not supported"), "{text}");
@@ -1085,4 +1071,14 @@ fn illuminance_light_parameter_reads_each_lights_output() {
     for ch in c {
         assert!((ch - 0.5).abs() < 1e-4, "{c:?}");
     }
+}
+
+/// A bilinear patch across the frame, half a unit tall, centred at height `y` (the message
+/// passing tests stack three of them).
+fn band(y: f32) -> String {
+    format!(
+        "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
+        a = y + 0.25,
+        b = y - 0.25
+    )
 }

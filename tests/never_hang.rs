@@ -311,13 +311,7 @@ Polygon "P" [-3 -3 1  -1 -3 1  -1 -1 1  -3 -1 1]
 Patch "bilinear" "P" [-1 -1 0  1 -1 0  -1 1 0  1 -1e38 0]
 WorldEnd
 "#;
-    let stats = arbor::render::Stats::new();
-    let opts = arbor::render::RenderOptions {
-        stats: Some(&stats),
-        ..Default::default()
-    };
-    let (film, diags, _) = common::render_rib_with(rib, &[], &opts);
-    let splits = stats.splits.load(std::sync::atomic::Ordering::Relaxed);
+    let (film, diags, splits) = render_counting_splits(rib);
     let budget = arbor::render::driver::MIN_SPLIT_BUDGET;
     assert!(splits <= budget + 16, "{splits} splits");
     assert!(!find(&diags, "render::splits").is_empty(), "{diags:#?}");
@@ -347,14 +341,20 @@ Patch "bicubic" "P" [-1 -1 0  -0.3 -1 0  0.3 -1 0  1 -1 0
   -1 1 0  -0.3 1 0  0.3 1 0  1 1 0]
 WorldEnd
 "#;
+    let (film, _, splits) = render_counting_splits(rib);
+    assert!(splits < 1000, "{splits} splits");
+    // The patch's corners still cover the middle of the frame.
+    assert!(common::film_mean(&film)[0] > 0.1);
+}
+
+/// Renders `rib` and counts the splits its surfaces made.
+fn render_counting_splits(rib: &str) -> (arbor::film::Film, Vec<(Diag, usize)>, u64) {
     let stats = arbor::render::Stats::new();
     let opts = arbor::render::RenderOptions {
         stats: Some(&stats),
         ..Default::default()
     };
-    let (film, _, _) = common::render_rib_with(rib, &[], &opts);
+    let (film, diags, _) = common::render_rib_with(rib, &[], &opts);
     let splits = stats.splits.load(std::sync::atomic::Ordering::Relaxed);
-    assert!(splits < 1000, "{splits} splits");
-    // The patch's corners still cover the middle of the frame.
-    assert!(common::film_mean(&film)[0] > 0.1);
+    (film, diags, splits)
 }

@@ -45,10 +45,9 @@ impl Builder<'_> {
                     attrs: self.gs.attrs.clone(),
                     trim: self.gs.trim.clone(),
                 };
-                match self.resource_scopes.last_mut() {
-                    Some(scope) => scope.insert(name, saved),
-                    None => self.resources.insert(name, saved),
-                };
+                if let Some(scope) = self.resource_scopes.last_mut() {
+                    scope.insert(name, saved);
+                }
             }
             "restore" => {
                 let found = self
@@ -56,7 +55,6 @@ impl Builder<'_> {
                     .iter()
                     .rev()
                     .find_map(|s| s.get(&name))
-                    .or_else(|| self.resources.get(&name))
                     .cloned();
                 let Some(saved) = found else {
                     self.report(
@@ -104,7 +102,10 @@ impl Builder<'_> {
     }
 
     pub(super) fn resource_end(&mut self, call: &Call<'_>) {
-        if self.resource_scopes.pop().is_none() {
+        // The first scope is the file's own, outside every block.
+        if self.resource_scopes.len() > 1 {
+            self.resource_scopes.pop();
+        } else {
             self.report(
                 Diag::warning(
                     "scene::nesting",
