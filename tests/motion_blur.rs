@@ -441,6 +441,14 @@ const SWEEP: &str = "Format 64 16 1\nPixelSamples 8 8\nPixelFilter \"box\" 1 1\n
     Surface \"constant\"\nMotionBegin [0 1]\nTranslate -24 0 0\nTranslate 24 0 0\nMotionEnd\n\
     Polygon \"P\" [-1 -6 5  1 -6 5  1 6 5  -1 6 5]\nWorldEnd\n";
 
+/// A sphere shrinking to half its radius while it moves diagonally (as Essential RenderMan's
+/// `deform.rib`).
+const DIAGONAL: &str =
+    "Format 96 72 1\nPixelSamples 3 3\nProjection \"perspective\" \"fov\" [30]\n\
+    Shutter 0 1\nTranslate 0 0 5\nWorldBegin\nLightSource \"distantlight\" 1\nSurface \"plastic\"\n\
+    MotionBegin [0 1]\nTranslate -0.6 -0.4 0\nTranslate 0.6 0.4 0\nMotionEnd\n\
+    MotionBegin [0 1]\nSphere 1 -1 1 360\nSphere 0.5 -0.5 0.5 360\nMotionEnd\nWorldEnd\n";
+
 /// Each case renders the same bits and hits with the Z-buffer's sample binning as with it
 /// turned off (`off`, a `Hider "hidden"` parameter), testing at least `speedup` times fewer
 /// samples.
@@ -474,6 +482,9 @@ fn time_slots_skip_only_samples_that_cannot_be_hit() {
         "\"timeslots\" [1]",
         [
             ("sweep", SWEEP.to_string(), 8.0),
+            // Moving diagonally while it shrinks: each slot's box is mostly empty, the
+            // swept band is not (65: 54 with boxes only).
+            ("diagonal", DIAGONAL.to_string(), 65.0),
             ("busy", busy("16 16"), 1.0),
             ("busy 5x4", spin, 1.0),
         ],

@@ -11,6 +11,7 @@
 
 pub mod abuffer;
 pub mod csg;
+pub mod sweep;
 pub mod timebins;
 pub mod zbuffer;
 

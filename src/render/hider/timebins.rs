@@ -18,6 +18,7 @@
 
 use crate::render::camera::Dof;
 
+use super::sweep::{self, Sweep};
 use super::{corners_at, CornerBox, ShadedGrid};
 
 /// Slots per bucket: one per sample of a pixel up to this many, so a pixel usually holds one
@@ -241,18 +242,20 @@ pub fn bound_between(
     t1: f32,
     dof: Option<&Dof>,
 ) -> Option<[f32; 4]> {
-    let mo = g.motion.as_deref()?;
+    bound_and_pad(g, corner, ends, t0, t1, dof).map(|(bx, _)| bx)
+}
+
+/// [`bound_between`] and the pad it was grown by on each axis.
+pub fn bound_and_pad(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    ends: &[Corners; 2],
+    t0: f32,
+    t1: f32,
+    dof: Option<&Dof>,
+) -> Option<([f32; 4], [f32; 2])> {
     let mut c = CornerBox::EMPTY;
-    c.add(&ends[0].0, &ends[0].1);
-    c.add(&ends[1].0, &ends[1].1);
-    for (k, &tk) in mo.times.iter().enumerate() {
-        if tk > t0 && tk < t1 {
-            c.add(
-                &corner.map(|c| mo.xy[k][c]),
-                &corner.map(|c| mo.depth[k][c]),
-            );
-        }
-    }
+    each_position(g, corner, ends, t0, t1, |xy, q| c.add(xy, q))?;
     if !c.finite {
         return None;
     }
@@ -267,7 +270,127 @@ pub fn bound_between(
         ry += d.raster_k[1].abs() * f * (1.0 + 1e-5);
     }
     let out = [bx[0] - rx, bx[1] - ry, bx[2] + rx, bx[3] + ry];
-    out.iter().all(|v| v.is_finite()).then_some(out)
+    out.iter().all(|v| v.is_finite()).then_some((out, [rx, ry]))
+}
+
+/// The region micropolygon `corner` sweeps over [t0, t1] (`ends` its corners there), grown
+/// by `pad` (from [`bound_and_pad`]); None when too many keys lie between.
+pub fn sweep_between(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    ends: &[Corners; 2],
+    t0: f32,
+    t1: f32,
+    pad: [f32; 2],
+) -> Option<Sweep> {
+    let mut pts = [[0f32; 2]; sweep::MAX_POINTS];
+    let mut n = 0;
+    each_position(g, corner, ends, t0, t1, |xy, _| {
+        for p in xy {
+            if n < pts.len() {
+                pts[n] = *p;
+            }
+            n += 1;
+        }
+    })?;
+    (n <= pts.len())
+        .then(|| Sweep::new(&pts[..n], pad[0], pad[1]))
+        .flatten()
+}
+
+/// The shutter times (a conservative interval `(ta, tb)`) at which micropolygon `corner` can
+/// meet window `w` (raster box; through the lens centre), or None when it never does.
+///
+/// Between two keys each corner moves as `a + (b − a)·f`, so the micropolygon's box at `f`
+/// lies within the same mix of its boxes at the keys: per axis its low and high edges are
+/// linear in `f`, and the box meets the window on one interval of `f` per segment. The window
+/// is grown by a pixel (and the positions' size · 10⁻⁴) and the interval by 10⁻⁴ of the
+/// segment, far beyond the rounding of the positions and of a sample's `f`.
+pub fn time_window(g: &ShadedGrid, corner: &[usize; 4], w: [f32; 4]) -> Option<(f32, f32)> {
+    const ALWAYS: Option<(f32, f32)> = Some((f32::NEG_INFINITY, f32::INFINITY));
+    let Some(mo) = g.motion.as_deref() else {
+        return ALWAYS;
+    };
+    let keys = mo.times.len();
+    let boxes = |k: usize| {
+        let mut c = CornerBox::EMPTY;
+        c.add(&corner.map(|c| mo.xy[k][c]), &[0.0; 4]);
+        c
+    };
+    let (mut ta, mut tb) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut a = boxes(0);
+    for k in 0..keys.saturating_sub(1) {
+        let b = boxes(k + 1);
+        if !(a.finite && b.finite) {
+            return ALWAYS;
+        }
+        let size = a.bx.iter().chain(&b.bx).fold(0f32, |m, v| m.max(v.abs()));
+        let m = 1.0 + size as f64 * 1e-4;
+        // f in [lo, hi] where lo(f) ≤ w1 + m and hi(f) ≥ w0 − m on both axes.
+        let (mut f0, mut f1) = (0f64, 1f64);
+        for axis in 0..2 {
+            let (la, lb) = (a.bx[axis] as f64, b.bx[axis] as f64);
+            let (ha, hb) = (a.bx[axis + 2] as f64, b.bx[axis + 2] as f64);
+            let (w0, w1) = (w[axis] as f64 - m, w[axis + 2] as f64 + m);
+            // la + (lb − la)·f ≤ w1, and ha + (hb − ha)·f ≥ w0, i.e. −ha − (hb − ha)·f ≤ −w0.
+            for (alpha, beta, gamma) in [(la, lb - la, w1), (-ha, ha - hb, -w0)] {
+                if beta > 0.0 {
+                    f1 = f1.min((gamma - alpha) / beta);
+                } else if beta < 0.0 {
+                    f0 = f0.max((gamma - alpha) / beta);
+                } else if alpha > gamma {
+                    f1 = -1.0;
+                }
+            }
+        }
+        let (f0, f1) = (f0 - 1e-4, f1 + 1e-4);
+        if f0 <= f1 && f1 >= 0.0 && f0 <= 1.0 {
+            let (t0, t1) = (mo.times[k] as f64, mo.times[k + 1] as f64);
+            // Times before the first key are the first key's; after the last, the last's.
+            let lo = if k == 0 && f0 <= 0.0 {
+                f64::NEG_INFINITY
+            } else {
+                t0 + (t1 - t0) * f0.max(0.0) - 1e-4 * (t1 - t0)
+            };
+            let hi = if k + 2 == keys && f1 >= 1.0 {
+                f64::INFINITY
+            } else {
+                t0 + (t1 - t0) * f1.min(1.0) + 1e-4 * (t1 - t0)
+            };
+            ta = ta.min(lo);
+            tb = tb.max(hi);
+        }
+        a = b;
+    }
+    if keys < 2 {
+        return ALWAYS;
+    }
+    (ta <= tb).then_some((ta as f32, tb as f32))
+}
+
+/// Calls `f` with the corners (raster positions, depths) at both ends and at every motion
+/// key strictly between them: between those each corner moves on a straight segment. None
+/// for a still grid.
+fn each_position(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    ends: &[Corners; 2],
+    t0: f32,
+    t1: f32,
+    mut f: impl FnMut(&[[f32; 2]; 4], &[f32; 4]),
+) -> Option<()> {
+    let mo = g.motion.as_deref()?;
+    f(&ends[0].0, &ends[0].1);
+    f(&ends[1].0, &ends[1].1);
+    for (k, &tk) in mo.times.iter().enumerate() {
+        if tk > t0 && tk < t1 {
+            f(
+                &corner.map(|c| mo.xy[k][c]),
+                &corner.map(|c| mo.depth[k][c]),
+            );
+        }
+    }
+    Some(())
 }
 
 #[cfg(test)]
@@ -291,6 +414,45 @@ mod tests {
             })),
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn the_time_window_holds_every_time_a_micropolygon_meets_the_window() {
+        let sq = |dx: f32, dy: f32| {
+            [
+                [dx, dy],
+                [dx + 1.0, dy],
+                [dx + 1.0, dy + 1.0],
+                [dx, dy + 1.0],
+            ]
+        };
+        // Right 100 pixels and down 50 over the shutter.
+        let g = grid(&[0.0, 1.0], &[sq(0.0, 0.0), sq(100.0, 50.0)]);
+        let c = [0, 1, 3, 2];
+        let (ta, tb) = time_window(&g, &c, [40.0, 0.0, 41.0, 100.0]).unwrap();
+        // It is over x 40..41 from t = 0.39 to 0.41; a pixel's margin each way.
+        assert!(ta <= 0.39 && ta > 0.37, "{ta}");
+        assert!(tb >= 0.41 && tb < 0.43, "{tb}");
+        // Every time at which a corner is in the window lies in the interval.
+        for i in 0..=1000 {
+            let t = i as f32 / 1000.0;
+            let (p, _) = corners(&g, &c, t);
+            let inside = p.iter().any(|q| (40.0..=41.0).contains(&q[0]));
+            assert!(!inside || (ta <= t && t <= tb), "{t}");
+        }
+        // A window it never reaches; one below its path.
+        assert_eq!(time_window(&g, &c, [200.0, 0.0, 210.0, 10.0]), None);
+        assert_eq!(time_window(&g, &c, [0.0, 30.0, 10.0, 40.0]), None);
+        // Still at the first key: times before it are the first key's.
+        let (ta, _) = time_window(&g, &c, [0.0, 0.0, 2.0, 2.0]).unwrap();
+        assert_eq!(ta, f32::NEG_INFINITY);
+        // Out and back over two segments: the hull of both visits.
+        let g = grid(
+            &[0.0, 0.5, 1.0],
+            &[sq(0.0, 0.0), sq(100.0, 0.0), sq(0.0, 0.0)],
+        );
+        let (ta, tb) = time_window(&g, &c, [50.0, 0.0, 51.0, 1.0]).unwrap();
+        assert!(ta <= 0.245 && tb >= 0.755 && tb < 0.8, "{ta} {tb}");
     }
 
     #[test]

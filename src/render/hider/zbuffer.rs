@@ -33,6 +33,7 @@ use super::super::camera::PixelRect;
 use super::super::sampler::{pixel_positions, pixel_positions_xy, time_and_lens};
 use super::super::stats::Stats;
 use super::csg::{self, CsgHit};
+use super::sweep::Sweep;
 use super::timebins::{self, TimeBins};
 use super::{may_meet, DepthFilter, GridSource, Hider, HiderConfig, ShadedGrid};
 
@@ -1515,7 +1516,7 @@ fn sample_grid_blurred(
     let dof = cfg.dof;
     // Time slots only help a moving grid.
     let bins = bins.filter(|t| g.motion.is_some() && t.trusted() && t.slots() > 1);
-    let mut group_boxes: Vec<([f32; 4], usize, usize)> = Vec::new();
+    let mut group_boxes: Vec<GroupBox> = Vec::new();
     for &(m, k, mb) in visible.iter() {
         let corner = [k, k + 1, k + nu + 1, k + nu];
         let Some(bx) = super::clip_box(mb, [wx0, wy0, wx1, wy1]) else {
@@ -1580,15 +1581,20 @@ fn sample_grid_blurred(
             for_samples(b, bx, &mut test);
             continue;
         }
-        for &(gb, k0, k1) in &group_boxes {
-            for_samples_in_slots(b, bins, k0, k1, gb, &mut test);
+        for (gb, k0, k1, sweep) in &group_boxes {
+            for_samples_in_slots(b, bins, *k0, *k1, *gb, sweep.as_ref(), &mut test);
         }
     }
 }
 
-/// The boxes (each within `bx`) and slot ranges `k0..=k1` of the `groups` groups of time
-/// slots of a moving micropolygon, into `out`: groups whose bound misses `bx` or that hold
-/// no sample are left out. False when a bound cannot be trusted (test the whole `bx`).
+/// A group of time slots of a moving micropolygon: the bound of its positions over the
+/// group's times (within the bucket's), the slots `k0..=k1`, and the region it sweeps when
+/// the bound spans a few pixels both ways (where a box is mostly empty).
+type GroupBox = ([f32; 4], usize, usize, Option<Sweep>);
+
+/// The [`GroupBox`]es of the `groups` groups of time slots of a moving micropolygon (each
+/// box within `bx`), into `out`: groups whose bound misses `bx` or that hold no sample are
+/// left out. False when a bound cannot be trusted (test the whole `bx`).
 fn slot_boxes(
     g: &ShadedGrid,
     corner: &[usize; 4],
@@ -1596,7 +1602,7 @@ fn slot_boxes(
     groups: usize,
     bx: [f32; 4],
     dof: Option<&crate::render::camera::Dof>,
-    out: &mut Vec<([f32; 4], usize, usize)>,
+    out: &mut Vec<GroupBox>,
 ) -> bool {
     out.clear();
     let slots = bins.slots();
@@ -1613,21 +1619,37 @@ fn slot_boxes(
             n += 1;
         }
     }
-    let Some(&(_, _, first, _)) = spans[..n].first() else {
-        return true;
+    // Only the groups of the times it can be in `bx`: a micropolygon crossing many buckets
+    // is in each for a few of its groups (under depth of field, all).
+    let (ta, tb) = match dof {
+        Some(_) => (f32::NEG_INFINITY, f32::INFINITY),
+        None => match timebins::time_window(g, corner, bx) {
+            Some(w) => w,
+            None => return true,
+        },
     };
-    let mut at_start = timebins::corners(g, corner, first);
+    // The corners at the previous group's end, when it was bounded.
+    let mut at_start: Option<timebins::Corners> = None;
     for i in 0..n {
         let (k0, k1, t0, t1) = spans[i];
+        if t1 < ta || t0 > tb {
+            at_start = None;
+            continue;
+        }
         let t_end = spans.get(i + 1).filter(|_| i + 1 < n).map_or(t1, |s| s.2);
+        let start = at_start.unwrap_or_else(|| timebins::corners(g, corner, t0));
         let at_end = timebins::corners(g, corner, t_end);
-        let ends = [at_start, at_end];
-        let Some(tb) = timebins::bound_between(g, corner, &ends, t0, t_end, dof) else {
+        let ends = [start, at_end];
+        let Some((gb, pad)) = timebins::bound_and_pad(g, corner, &ends, t0, t_end, dof) else {
             return false;
         };
-        at_start = ends[1];
-        if let Some(gb) = super::clip_box(tb, bx) {
-            out.push((gb, k0, k1));
+        at_start = Some(ends[1]);
+        if let Some(gb) = super::clip_box(gb, bx) {
+            // A hull pays for its set-up and its rows' only where the box is wide and tall.
+            let sweep = (gb[2] - gb[0] > SWEEP_MIN && gb[3] - gb[1] > SWEEP_MIN)
+                .then(|| timebins::sweep_between(g, corner, &ends, t0, t_end, pad))
+                .flatten();
+            out.push((gb, k0, k1, sweep));
         }
     }
     true
@@ -1678,14 +1700,18 @@ fn for_samples_in_lens_cells(
                 continue;
             };
             for cy in y0..=y1 {
-                for_samples_in_slots(b, cells, cy * l + x0, cy * l + x1, gb, &mut *f);
+                for_samples_in_slots(b, cells, cy * l + x0, cy * l + x1, gb, None, &mut *f);
             }
         }
     }
     true
 }
 
-/// [`for_samples`] over the samples of time slots `k0..=k1` only.
+/// Width and height (pixels) a group's box must exceed for its swept region to be used.
+const SWEEP_MIN: f32 = 3.0;
+
+/// [`for_samples`] over the samples of time slots `k0..=k1` only; with a `sweep`, in each
+/// pixel row only those within the row's span of the swept region.
 #[inline]
 fn for_samples_in_slots(
     b: &mut Bucket,
@@ -1693,6 +1719,7 @@ fn for_samples_in_slots(
     k0: usize,
     k1: usize,
     bx: [f32; 4],
+    sweep: Option<&Sweep>,
     mut f: impl FnMut(&mut Bucket, usize, [f32; 2]),
 ) {
     let Some(((i0, i1), (j0, j1))) = b.pixels_of(bx) else {
@@ -1701,9 +1728,22 @@ fn for_samples_in_slots(
     let w = b.lay.width;
     let mut tested = 0u64;
     for j in j0..=j1 {
-        for i in i0..=i1 {
+        // Row j's samples lie in [y0 + j, y0 + j + 1].
+        let (mut rx0, mut rx1, mut ri0, mut ri1) = (bx[0], bx[2], i0, i1);
+        if let Some(sw) = sweep {
+            let y = (b.lay.y0 + j as i32) as f32;
+            let Some((lo, hi)) = sw.x_range(y.max(bx[1]), (y + 1.0).min(bx[3])) else {
+                continue;
+            };
+            (rx0, rx1) = (rx0.max(lo), rx1.min(hi));
+            let Some(((a, c), _)) = b.pixels_of([rx0, bx[1], rx1, bx[3]]) else {
+                continue;
+            };
+            (ri0, ri1) = (a.max(i0), c.min(i1));
+        }
+        for i in ri0..=ri1 {
             bins.each(j * w + i, k0, k1, |s, pos| {
-                if pos[0] < bx[0] || pos[0] > bx[2] || pos[1] < bx[1] || pos[1] > bx[3] {
+                if pos[0] < rx0 || pos[0] > rx1 || pos[1] < bx[1] || pos[1] > bx[3] {
                     return;
                 }
                 tested += 1;
