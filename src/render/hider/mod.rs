@@ -129,26 +129,52 @@ pub fn corners_at(
     lens: [f32; 2],
     dof: Option<&super::camera::Dof>,
 ) -> ([[f32; 2]; 4], [f32; 4]) {
-    let mut p = [[0f32; 2]; 4];
-    let mut q = [0f32; 4];
-    match g.motion.as_deref() {
+    let (mut p, q) = match g.motion.as_deref() {
         Some(mo) => {
             let (ki, f) = crate::scene::motion_segment(&mo.times, time);
             let (xa, xb) = (&mo.xy[ki], &mo.xy[ki + 1]);
             let (da, db) = (&mo.depth[ki], &mo.depth[ki + 1]);
-            for c in 0..4 {
-                let (a, e) = (xa[corner[c]], xb[corner[c]]);
-                p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
-                q[c] = da[corner[c]] + (db[corner[c]] - da[corner[c]]) * f;
-            }
+            lerp_corners(
+                &corner.map(|c| xa[c]),
+                &corner.map(|c| xb[c]),
+                &corner.map(|c| da[c]),
+                &corner.map(|c| db[c]),
+                f,
+            )
         }
-        None => {
-            for c in 0..4 {
-                p[c] = g.xy[corner[c]];
-                q[c] = g.depth[corner[c]];
-            }
-        }
+        None => (corner.map(|c| g.xy[c]), corner.map(|c| g.depth[c])),
+    };
+    lens_shift(&mut p, &q, lens, dof);
+    (p, q)
+}
+
+/// Corners `a` moved towards `b` by `f` (0…1).
+#[inline(always)]
+fn lerp_corners(
+    xa: &[[f32; 2]; 4],
+    xb: &[[f32; 2]; 4],
+    da: &[f32; 4],
+    db: &[f32; 4],
+    f: f32,
+) -> ([[f32; 2]; 4], [f32; 4]) {
+    let mut p = [[0f32; 2]; 4];
+    let mut q = [0f32; 4];
+    for c in 0..4 {
+        let (a, e) = (xa[c], xb[c]);
+        p[c] = [a[0] + (e[0] - a[0]) * f, a[1] + (e[1] - a[1]) * f];
+        q[c] = da[c] + (db[c] - da[c]) * f;
     }
+    (p, q)
+}
+
+/// Shifts corners `p` (depths `q`) by lens position `lens` times their circle of confusion.
+#[inline(always)]
+fn lens_shift(
+    p: &mut [[f32; 2]; 4],
+    q: &[f32; 4],
+    lens: [f32; 2],
+    dof: Option<&super::camera::Dof>,
+) {
     if let Some(d) = dof {
         let (kx, ky) = (lens[0] * d.raster_k[0], lens[1] * d.raster_k[1]);
         for c in 0..4 {
@@ -157,7 +183,71 @@ pub fn corners_at(
             p[c][1] += ky * f;
         }
     }
-    (p, q)
+}
+
+/// Motion keys a [`KeyCorners`] holds on the stack.
+const MAX_KEYS: usize = 4;
+
+/// A micropolygon's corners at every motion key, gathered once for the many samples that
+/// test it: [`KeyCorners::at`] is [`corners_at`] bit for bit without its lookups.
+pub struct KeyCorners<'a> {
+    /// The key times; empty for a still grid.
+    times: &'a [f32],
+    xy: [[[f32; 2]; 4]; MAX_KEYS],
+    q: [[f32; 4]; MAX_KEYS],
+}
+
+impl<'a> KeyCorners<'a> {
+    /// None when the grid has more keys than [`MAX_KEYS`] (use [`corners_at`]).
+    #[inline]
+    pub fn new(g: &'a ShadedGrid, corner: &[usize; 4]) -> Option<Self> {
+        let mut k = KeyCorners {
+            times: &[],
+            xy: [[[0.0; 2]; 4]; MAX_KEYS],
+            q: [[0.0; 4]; MAX_KEYS],
+        };
+        match g.motion.as_deref() {
+            Some(mo) => {
+                if mo.times.len() > MAX_KEYS || mo.times.len() < 2 {
+                    return None;
+                }
+                k.times = &mo.times;
+                for i in 0..mo.times.len() {
+                    k.xy[i] = corner.map(|c| mo.xy[i][c]);
+                    k.q[i] = corner.map(|c| mo.depth[i][c]);
+                }
+            }
+            None => {
+                k.xy[0] = corner.map(|c| g.xy[c]);
+                k.q[0] = corner.map(|c| g.depth[c]);
+            }
+        }
+        Some(k)
+    }
+
+    /// The corners at `time` through `lens`, as [`corners_at`].
+    #[inline]
+    pub fn at(
+        &self,
+        time: f32,
+        lens: [f32; 2],
+        dof: Option<&super::camera::Dof>,
+    ) -> ([[f32; 2]; 4], [f32; 4]) {
+        let (mut p, q) = if self.times.is_empty() {
+            (self.xy[0], self.q[0])
+        } else {
+            let (ki, f) = crate::scene::motion_segment(self.times, time);
+            lerp_corners(
+                &self.xy[ki],
+                &self.xy[ki + 1],
+                &self.q[ki],
+                &self.q[ki + 1],
+                f,
+            )
+        };
+        lens_shift(&mut p, &q, lens, dof);
+        (p, q)
+    }
 }
 
 /// The raster box `[x0, y0, x1, y1]` and depth range of micropolygon corners gathered so far;

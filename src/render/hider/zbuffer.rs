@@ -1524,6 +1524,7 @@ fn sample_grid_blurred(
         };
         let (cc, co) = flat_shade(g, &corner, &mut mean_aov);
         let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
+        let keys = super::KeyCorners::new(g, &corner);
         let mut test = |b: &mut Bucket, s: usize, pos: [f32; 2]| {
             if lens_bound
                 .as_ref()
@@ -1531,7 +1532,16 @@ fn sample_grid_blurred(
             {
                 return;
             }
-            let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
+            let (p, q) = match &keys {
+                Some(k) => k.at(times[s], lens[s], dof.as_ref()),
+                None => super::corners_at(g, &corner, times[s], lens[s], dof.as_ref()),
+            };
+            // Most samples under a moving bound are far from the micropolygon at their own
+            // time: a box test (grown far beyond the edge functions' rounding, so it never
+            // turns away a sample they would take) spares the triangles' set-up.
+            if far_from(&p, pos) {
+                return;
+            }
             for (t, tri) in [[0usize, 1, 2], [0, 2, 3]].into_iter().enumerate() {
                 let Some((v, idx, dq, area)) = super::ccw_triangle(&p, &q, &corner, tri) else {
                     continue;
@@ -1591,6 +1601,22 @@ fn sample_grid_blurred(
 /// group's times (within the bucket's), the slots `k0..=k1`, and the region it sweeps when
 /// the bound spans a few pixels both ways (where a box is mostly empty).
 type GroupBox = ([f32; 4], usize, usize, Option<Sweep>);
+
+/// Whether `pos` lies outside the box of corners `p` by more than 10⁻³ pixel plus 10⁻⁵ of
+/// the coordinates: outside both triangles whatever the rounding of their edge functions.
+#[inline]
+fn far_from(p: &[[f32; 2]; 4], pos: [f32; 2]) -> bool {
+    let (mut x0, mut y0, mut x1, mut y1) = (p[0][0], p[0][1], p[0][0], p[0][1]);
+    for c in &p[1..] {
+        x0 = x0.min(c[0]);
+        y0 = y0.min(c[1]);
+        x1 = x1.max(c[0]);
+        y1 = y1.max(c[1]);
+    }
+    let m = 1e-3 + 1e-5 * (pos[0].abs() + pos[1].abs() + x1.abs() + y1.abs() + x0.abs() + y0.abs());
+    // False for NaN corners: the triangles decide.
+    pos[0] < x0 - m || pos[0] > x1 + m || pos[1] < y0 - m || pos[1] > y1 + m
+}
 
 /// The [`GroupBox`]es of the `groups` groups of time slots of a moving micropolygon (each
 /// box within `bx`), into `out`: groups whose bound misses `bx` or that hold no sample are
