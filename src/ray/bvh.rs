@@ -7,10 +7,10 @@
 //! Invariants: the build is sequential and depends only on the input order, so the tree (and
 //! every hit) is the same whatever the thread count; nodes are 8 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to eight
-//! children, tested together, quantised, with where the children are, to one 64-byte cache
-//! line, see `qbox` and [`Node8`]; leaves of up to 8 quads, their SAH cost counted in
+//! children, tested together, quantised to one 64-byte cache line, see `qbox`, with the
+//! children's indices on a second line; leaves of up to 8 quads, their SAH cost counted in
 //! groups of four, the groups the leaf test takes at once on x86-64, see `quad4`, each leaf
-//! one block holding its quads' corners itself, see [`Bvh::lines`]); a quad is
+//! one block holding its quads' corners itself, see [`Bvh::leaves`]); a quad is
 //! intersected, watertight, as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)` and
 //! reports bilinear-style coordinates `(a, b)` in `[0, 1]²` across the quad. Traversal visits
 //! the nearest child in reach first (ties by lane), pushing the others farthest first.
@@ -34,7 +34,7 @@ pub use interleave::WalkStats;
 /// One micropolygon given to [`Bvh::build`], its corners in the shared vertex array:
 /// `v00 = verts[k]`, `v10 = verts[k + 1]`, `v01 = verts[k + row]`,
 /// `v11 = verts[k + row + 1]` (a grid's points are stored once, row by row). The tree keeps
-/// its own copy of each leaf's corners (see [`Bvh::lines`]).
+/// its own copy of each leaf's corners (see [`Bvh::leaves`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Quad {
     pub k: u32,
@@ -57,98 +57,49 @@ impl Quad {
 /// Children a node holds.
 const WIDTH: usize = 8;
 
-/// An 8-wide node in one 64-byte cache line (a line of [`Bvh::lines`]): the boxes of up to
-/// eight children side by side (lane `i` of each row) in 8-bit steps of a power-of-two
-/// quantum per axis from the node's low corner (see `qbox`: the dequantised planes enclose
-/// each child's exact box), so one ray tests all eight with the same few vector
-/// instructions (AVX2; two SSE halves' worth otherwise), and where the children are: side
-/// by side from line `base`, in lane order, each at a small offset.
-///
-/// The low corner is not stored: it is the node's low planes in its parent (the child's
-/// quantised box's low side, computed by the parent's slab test as the build computed it),
-/// handed down by the walk; the root's is [`Bvh::root_origin`]. That, and the children side
-/// by side (one base index and a byte a lane instead of a word and a count a lane), is what
-/// fits a node in one line where it was two.
+/// An 8-wide node in two 64-byte cache lines. The first holds all the slab test reads: the
+/// node's low corner, a power-of-two quantum per axis and the boxes of up to eight children
+/// side by side (lane `i` of each row) in 8-bit steps of the quantum from that corner (see
+/// `qbox`: the dequantised planes enclose each child's exact box), so one ray tests all
+/// eight with the same few vector instructions (AVX2; two SSE halves' worth otherwise). The
+/// second holds the children themselves, read for those in reach.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node8 {
-    /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
-    q: [[u8; WIDTH]; 6],
+    /// The node's low corner: step 0 on each axis.
+    origin: [f32; 3],
     /// Per axis the quantum's biased exponent (`qbox::quantum`).
     exp: [u8; 3],
-    /// The children's end: the offset (from `base`) of the line past the last one.
-    end: u8,
-    /// Per lane: [`EMPTY_LANE`] (no child: the lanes holding children come first), or the
-    /// child's offset in lines from `base`, with [`LEAF_LANE`] set for a leaf (its block
-    /// runs to the next lane's offset, or `end`).
-    lane: [u8; WIDTH],
-    /// The line of the first child.
-    base: u32,
+    /// A bit per lane holding a child (the others are never visited).
+    valid: u8,
+    /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
+    q: [[u8; WIDTH]; 6],
+    /// Interior child: node index. Leaf child: its block's first word in [`Bvh::leaves`].
+    child: [u32; WIDTH],
+    /// Leaf child: its quads (at most `MAX_LEAF`, low byte) and its block's words the walk
+    /// reads (high byte, see [`Bvh::leaves`]); 0 for an interior child and an empty lane.
+    count: [u16; WIDTH],
+    /// Per axis the quantum itself, `qbox::quantum(exp)` (read by the vector slab test,
+    /// which then broadcasts it instead of rebuilding it from the exponent's bits).
+    scale: [f32; 3],
 }
 
-/// A [`Node8::lane`] without a child.
-const EMPTY_LANE: u8 = 0xff;
-/// The [`Node8::lane`] bit of a leaf child.
-const LEAF_LANE: u8 = 0x80;
-
 const _: () = assert!(
-    std::mem::size_of::<Node8>() == 64
-        && std::mem::size_of::<Line>() == 64
-        && std::mem::align_of::<Node8>() == std::mem::align_of::<Line>()
+    std::mem::size_of::<Node8>() == 128
+        && std::mem::offset_of!(Node8, child) == 64
         && MAX_LEAF <= u8::MAX as usize
-        // A node's children fit the 7-bit offsets: at most eight leaf blocks of
-        // `MAX_LEAF_LINES` lines each.
-        && WIDTH * MAX_LEAF_LINES < LEAF_LANE as usize
 );
-
-/// A 64-byte line of the tree's arena (see [`Bvh::lines`]).
-#[derive(Clone, Copy)]
-#[repr(C, align(64))]
-struct Line([u32; 16]);
-
-/// The most lines a leaf's block takes: a header word, a corner word a quad, the corners
-/// (at most four a quad), the padding word and two id words a quad.
-const MAX_LEAF_LINES: usize = (1 + MAX_LEAF + 3 * 4 * MAX_LEAF + 1 + 2 * MAX_LEAF).div_ceil(16);
 
 impl Node8 {
     const EMPTY: Node8 = Node8 {
-        q: [[0; WIDTH]; 6],
+        origin: [0.0; 3],
         exp: [1; 3],
-        end: 0,
-        lane: [EMPTY_LANE; WIDTH],
-        base: 0,
+        valid: 0,
+        q: [[0; WIDTH]; 6],
+        child: [0; WIDTH],
+        count: [0; WIDTH],
+        scale: [0.0; 3],
     };
-
-    /// The lanes holding children, a bit each (they come first: the empty lanes' bytes,
-    /// all ones, are the top ones).
-    #[inline(always)]
-    fn valid(&self) -> u32 {
-        let empty = (!u64::from_le_bytes(self.lane)).leading_zeros() / 8;
-        0xff >> empty
-    }
-
-    /// The quanta, `qbox::quantum(exp)` (without its clamp: the build only makes exponents
-    /// 1…254).
-    #[inline(always)]
-    fn scales(&self) -> [f32; 3] {
-        self.exp.map(|e| f32::from_bits(u32::from(e) << 23))
-    }
-
-    /// Lane `i`'s child: (its line, its block's lines for a leaf, 0 for a node).
-    #[inline(always)]
-    fn child(&self, i: usize) -> (u32, u32) {
-        let b = self.lane[i];
-        let off = u32::from(b & !LEAF_LANE);
-        let c = self.base.wrapping_add(off);
-        if b & LEAF_LANE == 0 {
-            return (c, 0);
-        }
-        let next = match self.lane.get(i + 1) {
-            Some(&n) if n != EMPTY_LANE => u32::from(n & !LEAF_LANE),
-            _ => u32::from(self.end),
-        };
-        (c, next.wrapping_sub(off).max(1))
-    }
 }
 
 /// Which micropolygon a leaf's quad is (what a hit reports).
@@ -171,36 +122,23 @@ pub struct Hit {
     pub b: f32,
 }
 
-#[derive(Default)]
+#[derive(Default, Debug)]
 pub struct Bvh {
-    /// The tree, line by line: the root node at line 0 (or, for a tree of one leaf, that
-    /// leaf's block); each node's children side by side after it (see [`Node8`]): nodes a
-    /// line each, leaves a block of whole lines each. A leaf's block is 32-bit words,
-    /// everything a leaf's test reads side by side (so a leaf visit is one dependent read,
-    /// prefetched when its parent is visited, instead of the quad records and then the rows
-    /// of the grid their corners lie in): a header word (the quads, low byte, and the words
-    /// after the header the walk reads, above); per quad a word of its corners' numbers in
-    /// the block's vertex list (bytes `v00 v10 v01 v11`, low first); the distinct corners
-    /// of the leaf's quads (at most 32), `x y z` each, in the order the quads first name
-    /// them; a padding word (the four-quad test loads 16 bytes a corner); then, read only on
-    /// a hit, per quad its [`QuadId`] (two words); then zeros to the line's end. The corners
+    nodes: Vec<Node8>,
+    /// The leaves, a block of 32-bit words each, everything a leaf's test reads side by side
+    /// (so a leaf visit is one dependent read, prefetched when its parent is visited, instead
+    /// of the quad records and then the rows of the grid their corners lie in): per quad a
+    /// word of its corners' numbers in the block's vertex list (bytes `v00 v10 v01 v11`, low
+    /// first); the distinct corners of the leaf's quads (at most 32), `x y z` each, in the
+    /// order the quads first name them; a padding word (the four-quad test loads 16 bytes a
+    /// corner); then, read only on a hit, per quad its [`QuadId`] (two words). The corners
     /// are the input's floats bit for bit, so every hit is the one the shared vertex array
     /// gave; a leaf's quads come from one grid or two and share most corners, so the copies
     /// cost about what the shared array and the 16-byte quad records did.
-    lines: Vec<Line>,
-    /// The root node's low corner (see [`Node8`]).
-    root_origin: [f32; 3],
-    /// Whether the whole tree is one leaf (its block at line 0).
-    root_leaf: bool,
-}
-
-impl std::fmt::Debug for Bvh {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Bvh")
-            .field("lines", &self.lines.len())
-            .field("root_leaf", &self.root_leaf)
-            .finish()
-    }
+    leaves: Vec<u32>,
+    /// The root when the whole tree is one leaf (then `nodes` is empty): its `count` (see
+    /// [`Node8::count`]); its block starts at word 0.
+    root_leaf: u32,
 }
 
 /// A quad's corners' numbers in the shared vertex array: `v00 v10 v01 v11`.
@@ -229,7 +167,7 @@ fn leaf_vertex(verts: &[f32], c: u8) -> Option<Vec3> {
     verts.get(f..f + 3).map(|v| Vec3::new(v[0], v[1], v[2]))
 }
 
-/// A leaf quad's corners `v00 v10 v01 v11` from its corner word (see [`Bvh::lines`]); `None`
+/// A leaf quad's corners `v00 v10 v01 v11` from its corner word (see [`Bvh::leaves`]); `None`
 /// when one is out of range (such a quad is never hit).
 #[inline]
 pub(crate) fn leaf_corners(q: u32, verts: &[f32]) -> Option<[Vec3; 4]> {
@@ -248,12 +186,6 @@ fn as_floats(w: &[u32]) -> &[f32] {
     // SAFETY: u32 and f32 have the same size and alignment, and every bit pattern is a
     // valid f32.
     unsafe { std::slice::from_raw_parts(w.as_ptr().cast::<f32>(), w.len()) }
-}
-
-/// A leaf's block's words: the header, the corner words, the corners (at most four a quad)
-/// with the padding word, the ids.
-fn leaf_words(quads: usize, corners: usize) -> usize {
-    1 + quads + 3 * corners + 1 + 2 * quads
 }
 
 /// A leaf's parts: the corner words, the corners' floats (with the padding) and the ids.
@@ -488,39 +420,33 @@ impl Bvh {
         drop((boxes, cent));
         let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
         drop((quads, order));
-        // The walks read the lines at random: on huge pages where the system allows (see
-        // `memhint`), their room reserved at about their size (a huge page is resident whole
-        // once touched, not before): the leaves' blocks exactly, and a line for each interior
-        // binary node (each 8-wide node opens at least one).
-        let leaf_lines: usize = nodes
+        // The walks read the nodes and leaves at random: on huge pages where the system
+        // allows (see `memhint`), the leaves' room reserved at their exact size (a huge
+        // page is resident whole once touched).
+        let words: usize = nodes
             .iter()
             .filter(|b| b.count > 0)
             .map(|b| {
                 let (s, c) = (b.first as usize, b.count as usize);
-                leaf_words(c, leaf_vertices(&sorted[s..s + c], verts.len()).len()).div_ceil(16)
+                3 * c + 3 * leaf_vertices(&sorted[s..s + c], verts.len()).len() + 1
             })
             .sum();
-        let interior = nodes.len() - nodes.iter().filter(|b| b.count > 0).count();
         let mut bvh = Bvh {
-            lines: memhint::huge_vec(leaf_lines + interior + 1),
-            root_origin: nodes[0].bb.min.to_array(),
-            root_leaf: nodes[0].count > 0,
+            nodes: memhint::huge_vec(nodes.len() / 2 + 1),
+            leaves: memhint::huge_vec(words),
+            root_leaf: 0,
         };
-        if bvh.root_leaf {
-            bvh.push_leaf(&sorted, &verts);
+        if nodes[0].count > 0 {
+            bvh.root_leaf = u32::from(bvh.push_leaf(&sorted, &verts));
         } else {
-            bvh.lines.push(Line([0; 16]));
-            bvh.collapse(&nodes, 0, 0, bvh.root_origin, &sorted, &verts);
+            bvh.collapse(&nodes, 0, &sorted, &verts);
         }
         bvh
     }
 
-    /// Appends the block of a leaf of `quads` (see [`Bvh::lines`]); returns its lines.
-    fn push_leaf(&mut self, quads: &[Quad], verts: &[Vec3]) -> usize {
+    /// Appends the block of a leaf of `quads` (see [`Bvh::leaves`]); returns its `count`.
+    fn push_leaf(&mut self, quads: &[Quad], verts: &[Vec3]) -> u16 {
         let local = leaf_vertices(quads, verts.len());
-        let walk = quads.len() + 3 * local.len() + 1;
-        let mut w: Vec<u32> = Vec::with_capacity(leaf_words(quads.len(), local.len()));
-        w.push((quads.len() | walk << 8) as u32);
         for q in quads {
             let c = quad_corners(q).map(|g| {
                 // Out of range: a number past the list, so the quad is never hit.
@@ -529,50 +455,25 @@ impl Bvh {
                     .position(|&x| x == g)
                     .map_or(u8::MAX, |at| at as u8)
             });
-            w.push(u32::from_le_bytes(c));
+            self.leaves.push(u32::from_le_bytes(c));
         }
         for &g in &local {
-            w.extend(verts[g].to_array().map(f32::to_bits));
+            self.leaves.extend(verts[g].to_array().map(f32::to_bits));
         }
-        w.push(0);
+        self.leaves.push(0);
         for q in quads {
-            w.extend([q.grid, q.index]);
+            self.leaves.extend([q.grid, q.index]);
         }
-        for chunk in w.chunks(16) {
-            let mut line = [0u32; 16];
-            line[..chunk.len()].copy_from_slice(chunk);
-            self.lines.push(Line(line));
-        }
-        w.len().div_ceil(16)
+        let walk = quads.len() + 3 * local.len() + 1;
+        (quads.len() | walk << 8) as u16
     }
 
-    /// The lines as 32-bit words.
+    /// The block of the leaf at word `first` with `count` (see [`Node8::count`]).
     #[inline(always)]
-    fn words(&self) -> &[u32] {
-        // SAFETY: a `Line` is 16 `u32`s without padding; the slice covers the vector's
-        // initialised lines exactly.
-        unsafe {
-            std::slice::from_raw_parts(self.lines.as_ptr().cast::<u32>(), 16 * self.lines.len())
-        }
-    }
-
-    /// The node at line `c`.
-    #[inline(always)]
-    fn node(&self, c: u32) -> &Node8 {
-        let line: &Line = &self.lines[c as usize];
-        // SAFETY: `Node8` and `Line` have the same size and alignment, and every bit pattern
-        // is a valid `Node8` (bytes and a `u32`, no padding).
-        unsafe { &*(line as *const Line).cast::<Node8>() }
-    }
-
-    /// The block of the leaf at line `c` (see [`Bvh::lines`]).
-    #[inline(always)]
-    fn block(&self, c: u32) -> Option<LeafBlock<'_>> {
-        let w = self.words();
-        let s = 16 * c as usize;
-        let h = *w.get(s)?;
-        let (q, walk) = ((h & 0xff) as usize, (h >> 8) as usize);
-        let b = w.get(s + 1..s + 1 + walk + 2 * q)?;
+    fn block(&self, first: u32, count: u32) -> Option<LeafBlock<'_>> {
+        let (q, walk) = ((count & 0xff) as usize, (count >> 8) as usize);
+        let s = first as usize;
+        let b = self.leaves.get(s..s + walk + 2 * q)?;
         Some(LeafBlock {
             quads: b.get(..q)?,
             verts: as_floats(b.get(q..walk)?),
@@ -580,17 +481,9 @@ impl Bvh {
         })
     }
 
-    /// Fills line `me` with the 8-wide node for binary interior node `i`, whose low corner
-    /// is `origin`, appending its children side by side (then theirs, depth first).
-    fn collapse(
-        &mut self,
-        nodes: &[Node2],
-        i: usize,
-        me: usize,
-        origin: [f32; 3],
-        quads: &[Quad],
-        verts: &[Vec3],
-    ) {
+    /// Makes the 8-wide node for binary interior node `i` (children first-come first-placed:
+    /// the root is node 0); returns its index.
+    fn collapse(&mut self, nodes: &[Node2], i: usize, quads: &[Quad], verts: &[Vec3]) -> u32 {
         // Open the interior child with the largest box until there are eight.
         let mut kids: Vec<usize> = vec![nodes[i].first as usize, nodes[i].first as usize + 1];
         while kids.len() < WIDTH {
@@ -606,47 +499,41 @@ impl Bvh {
             kids[pos] = l;
             kids.insert(pos + 1, l + 1);
         }
+        let me = self.nodes.len();
+        self.nodes.push(Node8::EMPTY);
         let mut node = Node8::EMPTY;
         let mut bb = Aabb::EMPTY;
         for &k in &kids {
             bb.grow(&nodes[k].bb);
         }
+        node.origin = bb.min.to_array();
         for axis in 0..3 {
-            node.exp[axis] = qbox::exponent(origin[axis], bb.max[axis]);
+            node.exp[axis] = qbox::exponent(bb.min[axis], bb.max[axis]);
+            node.scale[axis] = qbox::quantum(node.exp[axis]);
         }
-        let base = self.lines.len();
-        node.base = base as u32;
-        let mut inner = Vec::new();
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
             for axis in 0..3 {
-                let (o, e) = (origin[axis], node.exp[axis]);
+                let (o, e) = (node.origin[axis], node.exp[axis]);
                 node.q[axis][lane] = qbox::step_down(o, e, c.bb.min[axis]);
                 node.q[3 + axis][lane] = qbox::step_up(o, e, c.bb.max[axis]);
             }
-            let off = (self.lines.len() - base) as u8;
+            node.valid |= 1 << lane;
             if c.count > 0 {
                 let s = c.first as usize;
-                self.push_leaf(&quads[s..s + c.count as usize], verts);
-                node.lane[lane] = off | LEAF_LANE;
+                node.child[lane] = self.leaves.len() as u32;
+                node.count[lane] = self.push_leaf(&quads[s..s + c.count as usize], verts);
             } else {
-                inner.push((lane, k, self.lines.len()));
-                self.lines.push(Line([0; 16]));
-                node.lane[lane] = off;
+                node.child[lane] = self.collapse(nodes, k, quads, verts);
+                node.count[lane] = 0;
             }
         }
-        node.end = (self.lines.len() - base) as u8;
-        // SAFETY: the same size and alignment, no padding (see `node`).
-        self.lines[me] = unsafe { std::mem::transmute::<Node8, Line>(node) };
-        for (lane, k, at) in inner {
-            // The child's low corner: its low planes here, as the walk computes them.
-            let o = std::array::from_fn(|a| qbox::plane(origin[a], node.exp[a], node.q[a][lane]));
-            self.collapse(nodes, k, at, o, quads, verts);
-        }
+        self.nodes[me] = node;
+        me as u32
     }
 
     pub fn is_empty(&self) -> bool {
-        self.lines.is_empty()
+        self.leaves.is_empty()
     }
 
     /// The closest hit with `tmin < t < tmax`.
@@ -693,13 +580,14 @@ impl Bvh {
     #[inline]
     fn leaf(
         &self,
-        c: u32,
+        first: u32,
+        count: u32,
         ray: &LeafRay,
         tmin: f32,
         tmax: &mut f32,
         on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) -> bool {
-        let Some(b) = self.block(c) else {
+        let Some(b) = self.block(first, count) else {
             return false;
         };
         for (l, &q) in b.quads.iter().enumerate() {
@@ -721,13 +609,14 @@ impl Bvh {
     #[inline]
     fn leaf(
         &self,
-        c: u32,
+        first: u32,
+        count: u32,
         ray: &LeafRay,
         tmin: f32,
         tmax: &mut f32,
         on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) -> bool {
-        let Some(b) = self.block(c) else {
+        let Some(b) = self.block(first, count) else {
             return false;
         };
         super::quad4::leaf(
@@ -741,51 +630,37 @@ impl Bvh {
         )
     }
 
-    /// Asks for the cache lines of a pushed child (an interior node's line, or a leaf's
+    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's
     /// block: the part its test reads and the ids, read on a hit, which otherwise were a
     /// miss the walk waited for; rays bench, medians of 5 interleaved pairs: 2.41 → 2.46 M
     /// shaded, 3.07 → 3.12 M shadow rays/s): a later visit then finds them on the way. No
     /// effect on results.
     #[inline(always)]
-    fn prefetch(&self, c: Child) {
-        let p = self.lines.as_ptr().wrapping_add(c.line as usize);
-        memhint::prefetch(p);
-        for k in 1..c.lines as usize {
-            memhint::prefetch(p.wrapping_add(k));
+    fn prefetch(&self, child: u32, count: u32) {
+        if count == 0 {
+            let p = self.nodes.as_ptr().wrapping_add(child as usize);
+            memhint::prefetch(p);
+            memhint::prefetch(p.cast::<u8>().wrapping_add(64));
+        } else {
+            let p = self.leaves.as_ptr().wrapping_add(child as usize);
+            memhint::prefetch_span(p, (count >> 8) as usize + 2 * (count & 0xff) as usize);
         }
     }
 
-    /// Visits node `n`, whose low corner is `origin`: pushes the children in reach other
-    /// than the one to visit now (farthest first, each prefetched) and returns that one, if
+    /// Visits node `n`: pushes the children in reach other than the one to visit now
+    /// (farthest first, each prefetched) and returns that one as (child, quad count), if
     /// any. With `ORDERED` the nearest child in reach is visited first (ties by lane).
     /// `AVX2`: the slab test in AVX2 (only where the CPU has it; the same results).
     #[inline(always)]
     fn visit<const ORDERED: bool, const AVX2: bool>(
         &self,
         n: &Node8,
-        origin: &[f32; 3],
         rb: &SlabRay,
         tmin: f32,
         tmax: f32,
         stack: &mut Stack,
-    ) -> Option<Child> {
-        let (mask, tnear) = slab8::<AVX2>(n, origin, rb, tmin, tmax);
-        let scale = n.scales();
-        let child = |i: usize| {
-            let (line, lines) = n.child(i);
-            // A node's low corner: its low planes here, as the slab test computed them
-            // (`qbox::plane`: the same operations, the same bits).
-            let origin = if lines == 0 {
-                std::array::from_fn(|a| origin[a] + f32::from(n.q[a][i]) * scale[a])
-            } else {
-                [0.0; 3]
-            };
-            Child {
-                line,
-                lines,
-                origin,
-            }
-        };
+    ) -> Option<(u32, u32)> {
+        let (mask, tnear) = slab8::<AVX2>(n, rb, tmin, tmax);
         let first = if mask == 0 {
             return None;
         } else if mask & (mask - 1) == 0 {
@@ -805,9 +680,9 @@ impl Bvh {
             } else {
                 (i, j)
             };
-            let e = child(far);
-            self.prefetch(e);
-            stack.push((e, tnear[far]));
+            let e = (n.child[far], u32::from(n.count[far]), tnear[far]);
+            self.prefetch(e.0, e.1);
+            stack.push(e);
             near
         } else {
             // Sort keys: the entry distance's bits (distances are ≥ tmin ≥ 0, whose bits
@@ -836,13 +711,13 @@ impl Bvh {
             // and popped at once: the same order).
             for &kk in key[1..c].iter().rev() {
                 let i = (kk & 7) as usize;
-                let e = child(i);
-                self.prefetch(e);
-                stack.push((e, tnear[i]));
+                let e = (n.child[i], u32::from(n.count[i]), tnear[i]);
+                self.prefetch(e.0, e.1);
+                stack.push(e);
             }
             (key[0] & 7) as usize
         };
-        Some(child(first))
+        Some((n.child[first], u32::from(n.count[first])))
     }
 
     /// Traversal, nearest child first when `ordered`. `on_hit(quad, t, a, b, &mut tmax)` may
@@ -889,66 +764,57 @@ impl Bvh {
         tmax: &mut f32,
         on_hit: &mut dyn FnMut(QuadId, f32, f32, f32, &mut f32) -> bool,
     ) {
-        if self.lines.is_empty() {
+        if self.leaves.is_empty() {
             return;
         }
         let wt = LeafRay::new(o, d);
-        if self.root_leaf {
-            self.leaf(0, &wt, tmin, tmax, on_hit);
+        if self.nodes.is_empty() {
+            self.leaf(0, self.root_leaf, &wt, tmin, tmax, on_hit);
             return;
         }
         let rb = SlabRay::new(o, d);
         let mut stack = Stack::new();
-        let mut cur = (0u32, self.root_origin);
+        let mut cur = 0u32;
         loop {
-            let n = self.node(cur.0);
-            if let Some(c) = self.visit::<ORDERED, AVX2>(n, &cur.1, &rb, tmin, *tmax, &mut stack) {
-                if c.lines == 0 {
-                    cur = (c.line, c.origin);
+            let n = &self.nodes[cur as usize];
+            if let Some((c, count)) = self.visit::<ORDERED, AVX2>(n, &rb, tmin, *tmax, &mut stack) {
+                if count == 0 {
+                    cur = c;
                     continue;
                 }
-                if self.leaf(c.line, &wt, tmin, tmax, on_hit) {
+                if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
                     return;
                 }
             }
             // Pop: leaves are tested as they come; the first interior node still in reach
             // is visited next.
             loop {
-                let Some((c, t)) = stack.pop() else {
+                let Some((c, count, t)) = stack.pop() else {
                     return;
                 };
                 if t > *tmax {
                     continue;
                 }
-                if c.lines > 0 {
-                    if self.leaf(c.line, &wt, tmin, tmax, on_hit) {
+                if count > 0 {
+                    if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
                         return;
                     }
                     continue;
                 }
-                cur = (c.line, c.origin);
+                cur = c;
                 break;
             }
         }
     }
 }
 
-/// A child to visit: its line, its block's lines for a leaf (0 for a node), and a node's low
-/// corner (its low planes in its parent, see [`Node8`]).
-#[derive(Clone, Copy)]
-struct Child {
-    line: u32,
-    lines: u32,
-    origin: [f32; 3],
-}
-
-/// The pending children of a walk with their entry distances, last in first out. Deeper
-/// than the array (a degenerate tree), they spill to the heap.
+/// The pending children of a walk: (child, quad count (0: interior), entry distance), last
+/// in first out. Deeper than the array (a degenerate tree), they spill to the heap.
 struct Stack {
     /// Not initialised: only entries below `sp` are ever read (no memset per ray).
-    items: [std::mem::MaybeUninit<(Child, f32)>; 64],
+    items: [std::mem::MaybeUninit<(u32, u32, f32)>; 64],
     sp: usize,
-    spill: Vec<(Child, f32)>,
+    spill: Vec<(u32, u32, f32)>,
 }
 
 impl Stack {
@@ -966,7 +832,7 @@ impl Stack {
         self.spill.clear();
     }
     #[inline(always)]
-    fn push(&mut self, e: (Child, f32)) {
+    fn push(&mut self, e: (u32, u32, f32)) {
         if self.sp < self.items.len() {
             self.items[self.sp].write(e);
             self.sp += 1;
@@ -980,7 +846,7 @@ impl Stack {
         self.sp + self.spill.len()
     }
     #[inline(always)]
-    fn pop(&mut self) -> Option<(Child, f32)> {
+    fn pop(&mut self) -> Option<(u32, u32, f32)> {
         if let Some(e) = self.spill.pop() {
             Some(e)
         } else if self.sp > 0 {
@@ -1036,64 +902,51 @@ impl SlabRay {
     }
 }
 
-/// The slab test of a node's eight boxes, the node's low corner `origin`: a bit per child
-/// hit, and the entry distances. `AVX2` (only where
-/// the CPU has it) runs it as eight-lane vectors: the same operations in the same order as
-/// the portable form (`vminps`/`vmaxps` return their second operand exactly where
-/// `vmin`/`vmax` do), so the same children are visited.
+/// The slab test of a node's eight boxes: a bit per child hit, and the entry distances.
+/// `AVX2` (only where the CPU has it) runs it as eight-lane vectors: the same operations in
+/// the same order as the portable form (`vminps`/`vmaxps` return their second operand
+/// exactly where `vmin`/`vmax` do), so the same children are visited.
 ///
 /// Each box side is first dequantised to the `f32` plane the build checked (`qbox::plane`),
 /// then crossed as an exact box's side would be (`p · inv − oi`, both rounded monotonically
 /// in `p`), so a quantised box, enclosing the exact one, is entered no later and left no
 /// earlier. Per axis the near side is the smaller crossing and the far side the larger (for
 /// a box with `lo ≤ hi` that is picking the low or high side by the direction's sign; empty
-/// lanes are masked out by [`Node8::valid`] instead).
+/// lanes are masked out by the node's `valid` bits instead).
 #[inline(always)]
-fn slab8<const AVX2: bool>(
-    n: &Node8,
-    origin: &[f32; 3],
-    r: &SlabRay,
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; WIDTH]) {
+fn slab8<const AVX2: bool>(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only set in code compiled for (and run where the CPU has) AVX2.
-        return unsafe { slab8_avx2(n, origin, r, tmin, tmax) };
+        return unsafe { slab8_avx2(n, r, tmin, tmax) };
     }
-    slab8_portable(n, origin, r, tmin, tmax)
+    slab8_portable(n, r, tmin, tmax)
 }
 
 /// [`slab8`] in AVX2 intrinsics (the caller makes sure the CPU has AVX2).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn slab8_avx2(
-    n: &Node8,
-    origin: &[f32; 3],
-    r: &SlabRay,
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; WIDTH]) {
+unsafe fn slab8_avx2(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
     use std::arch::x86_64::*;
     // SAFETY (of the loads): each reads 8 bytes of a row of `q`, inside the node; the store
     // writes a [f32; 8].
     let q: *const u8 = n.q.as_ptr().cast();
-    let scale = n.scales().map(|s| _mm256_set1_ps(s));
-    let plane = |row: usize, a: usize| {
+    let cross = |row: usize, a: usize| {
         let steps = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
             q.add(row * WIDTH).cast(),
         )));
-        _mm256_add_ps(_mm256_set1_ps(origin[a]), _mm256_mul_ps(steps, scale[a]))
-    };
-    let cross = |p: __m256, a: usize| {
+        let p = _mm256_add_ps(
+            _mm256_set1_ps(n.origin[a]),
+            _mm256_mul_ps(steps, _mm256_set1_ps(n.scale[a])),
+        );
         _mm256_sub_ps(
             _mm256_mul_ps(p, _mm256_set1_ps(r.inv[a])),
             _mm256_set1_ps(r.oi[a]),
         )
     };
-    let (lx, hx) = (cross(plane(0, 0), 0), cross(plane(3, 0), 0));
-    let (ly, hy) = (cross(plane(1, 1), 1), cross(plane(4, 1), 1));
-    let (lz, hz) = (cross(plane(2, 2), 2), cross(plane(5, 2), 2));
+    let (lx, hx) = (cross(0, 0), cross(3, 0));
+    let (ly, hy) = (cross(1, 1), cross(4, 1));
+    let (lz, hz) = (cross(2, 2), cross(5, 2));
     let t0 = _mm256_max_ps(
         _mm256_max_ps(_mm256_min_ps(lx, hx), _mm256_min_ps(ly, hy)),
         _mm256_max_ps(_mm256_min_ps(lz, hz), _mm256_set1_ps(tmin)),
@@ -1106,7 +959,7 @@ unsafe fn slab8_avx2(
         _mm256_mul_ps(f, _mm256_set1_ps(1.000_000_24)),
         _mm256_set1_ps(tmax),
     );
-    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32 & n.valid();
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32 & u32::from(n.valid);
     let mut out = [0f32; WIDTH];
     _mm256_storeu_ps(out.as_mut_ptr(), t0);
     (mask, out)
@@ -1124,22 +977,15 @@ fn vmax(a: [f32; WIDTH], b: [f32; WIDTH]) -> [f32; WIDTH] {
 
 /// [`slab8`] lane by lane.
 #[inline(always)]
-fn slab8_portable(
-    n: &Node8,
-    origin: &[f32; 3],
-    r: &SlabRay,
-    tmin: f32,
-    tmax: f32,
-) -> (u32, [f32; WIDTH]) {
-    let plane = |row: usize, a: usize| -> [f32; WIDTH] {
-        std::array::from_fn(|i| qbox::plane(origin[a], n.exp[a], n.q[row][i]))
+fn slab8_portable(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
+    let cross = |row: usize, a: usize| -> [f32; WIDTH] {
+        std::array::from_fn(|i| {
+            qbox::plane(n.origin[a], n.exp[a], n.q[row][i]) * r.inv[a] - r.oi[a]
+        })
     };
-    let cross = |p: [f32; WIDTH], a: usize| -> [f32; WIDTH] {
-        std::array::from_fn(|i| p[i] * r.inv[a] - r.oi[a])
-    };
-    let (lx, hx) = (cross(plane(0, 0), 0), cross(plane(3, 0), 0));
-    let (ly, hy) = (cross(plane(1, 1), 1), cross(plane(4, 1), 1));
-    let (lz, hz) = (cross(plane(2, 2), 2), cross(plane(5, 2), 2));
+    let (lx, hx) = (cross(0, 0), cross(3, 0));
+    let (ly, hy) = (cross(1, 1), cross(4, 1));
+    let (lz, hz) = (cross(2, 2), cross(5, 2));
     let t0 = vmax(
         vmax(vmin(lx, hx), vmin(ly, hy)),
         vmax(vmin(lz, hz), [tmin; WIDTH]),
@@ -1151,7 +997,7 @@ fn slab8_portable(
     for i in 0..WIDTH {
         mask |= u32::from(t0[i] <= t1[i]) << i;
     }
-    (mask & n.valid(), t0)
+    (mask & u32::from(n.valid), t0)
 }
 
 /// A ray prepared for the watertight test (Woop, Benthin & Wald 2013): the axis where the
@@ -1494,11 +1340,10 @@ mod tests {
             })
             .collect();
         let bvh = Bvh::build(quads.clone(), verts.clone());
-        assert!(bvh.root_leaf);
-        let b = bvh.block(0).unwrap();
+        assert!(bvh.nodes.is_empty());
+        let b = bvh.block(0, bvh.root_leaf).unwrap();
         assert_eq!((b.quads.len(), b.verts.len(), b.ids.len()), (4, 28, 8));
-        // A header word, then the block: three lines.
-        assert_eq!(bvh.lines.len(), (1 + 4 + 28 + 8usize).div_ceil(16));
+        assert_eq!(bvh.leaves.len(), 4 + 28 + 8);
         let mut ids: Vec<(u32, u32)> = (0..4).map(|l| (b.id(l).grid, b.id(l).index)).collect();
         ids.sort_unstable();
         assert_eq!(ids, vec![(7, 0), (7, 1), (7, 2), (7, 3)]);
@@ -1540,65 +1385,37 @@ mod tests {
         assert_eq!(hits, 6);
     }
 
-    /// The tree's nodes, depth first: (line, low corner).
-    fn nodes_of(bvh: &Bvh) -> Vec<(u32, [f32; 3])> {
-        let mut out = Vec::new();
-        if bvh.root_leaf || bvh.lines.is_empty() {
-            return out;
-        }
-        let mut todo = vec![(0u32, bvh.root_origin)];
-        while let Some((c, o)) = todo.pop() {
-            out.push((c, o));
-            let n = bvh.node(c);
-            for lane in 0..WIDTH {
-                let (line, lines) = n.child(lane);
-                if n.valid() & (1 << lane) != 0 && lines == 0 {
-                    let co = std::array::from_fn(|a| qbox::plane(o[a], n.exp[a], n.q[a][lane]));
-                    todo.push((line, co));
-                }
-            }
-        }
-        out
-    }
-
-    /// The exact box of the quads under lane `lane` of the node at line `c` with low corner
-    /// `o`, checked (recursively) to lie inside every dequantised box on the way down; the
-    /// children are checked to lie side by side, each leaf's block exactly its lines.
-    fn enclosed(bvh: &Bvh, c: u32, o: [f32; 3], lane: usize) -> Aabb {
-        let node = bvh.node(c);
+    /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to
+    /// lie inside every dequantised box on the way down.
+    fn enclosed(bvh: &Bvh, n: usize, lane: usize) -> Aabb {
+        let node = &bvh.nodes[n];
         let mut exact = Aabb::EMPTY;
-        let (line, lines) = node.child(lane);
-        // Lanes in order, side by side.
-        let off = u32::from(node.lane[lane] & !LEAF_LANE);
-        assert_eq!(line, node.base + off);
-        if lane > 0 {
-            let (prev, prev_lines) = node.child(lane - 1);
-            assert_eq!(prev + prev_lines.max(1), line, "line {c} lane {lane}");
-        }
-        if lines > 0 {
-            let b = bvh.block(line).unwrap();
-            let words = 1 + b.quads.len() + b.verts.len() + b.ids.len();
-            assert_eq!(words.div_ceil(16), lines as usize, "line {c} lane {lane}");
+        if node.count[lane] > 0 {
+            let b = bvh
+                .block(node.child[lane], u32::from(node.count[lane]))
+                .unwrap();
+            assert_eq!(b.quads.len(), usize::from(node.count[lane] & 0xff));
             for &q in b.quads {
                 for p in leaf_corners(q, b.verts).unwrap() {
                     exact.grow_point(p);
                 }
             }
         } else {
-            let co = std::array::from_fn(|a| qbox::plane(o[a], node.exp[a], node.q[a][lane]));
+            let c = node.child[lane] as usize;
             for l in 0..WIDTH {
-                if bvh.node(line).valid() & (1 << l) != 0 {
-                    exact.grow(&enclosed(bvh, line, co, l));
+                if bvh.nodes[c].valid & (1 << l) != 0 {
+                    exact.grow(&enclosed(bvh, c, l));
                 }
             }
         }
         for a in 0..3 {
-            let e = node.exp[a];
-            let lo = qbox::plane(o[a], e, node.q[a][lane]);
-            let hi = qbox::plane(o[a], e, node.q[3 + a][lane]);
+            let (o, e) = (node.origin[a], node.exp[a]);
+            assert_eq!(node.scale[a].to_bits(), qbox::quantum(e).to_bits());
+            let lo = qbox::plane(o, e, node.q[a][lane]);
+            let hi = qbox::plane(o, e, node.q[3 + a][lane]);
             assert!(
                 lo <= exact.min[a] && hi >= exact.max[a],
-                "line {c} lane {lane} axis {a}"
+                "node {n} lane {lane} axis {a}"
             );
         }
         exact
@@ -1630,11 +1447,11 @@ mod tests {
             quads.push(quad(&mut verts, [c, c + u, c + v, c + u + v], k));
         }
         let bvh = Bvh::build(quads, verts);
-        assert!(nodes_of(&bvh).len() > 100);
+        assert!(bvh.nodes.len() > 100);
         let mut total = Aabb::EMPTY;
         for l in 0..WIDTH {
-            if bvh.node(0).valid() & (1 << l) != 0 {
-                total.grow(&enclosed(&bvh, 0, bvh.root_origin, l));
+            if bvh.nodes[0].valid & (1 << l) != 0 {
+                total.grow(&enclosed(&bvh, 0, l));
             }
         }
         assert!(total.max.x - total.min.x > 1e7);
@@ -1651,8 +1468,7 @@ mod tests {
         let mut rnd = signed_rng(31u32);
         let (quads, verts) = random_soup(&mut rnd, 2000, 20.0, 0.5);
         let bvh = Bvh::build(quads, verts);
-        let nodes = nodes_of(&bvh);
-        assert!(nodes.len() > 30);
+        assert!(bvh.nodes.len() > 30);
         let mut hits = 0;
         for r in 0..400 {
             let o = Vec3::new(rnd(), rnd(), rnd()) * 30.0;
@@ -1666,11 +1482,10 @@ mod tests {
             } else {
                 (0.0, f32::INFINITY)
             };
-            for &(c, o) in &nodes {
-                let n = bvh.node(c);
-                let (m0, t0) = slab8::<false>(n, &o, &ray, tmin, tmax);
+            for n in &bvh.nodes {
+                let (m0, t0) = slab8::<false>(n, &ray, tmin, tmax);
                 // SAFETY: AVX2 was detected above.
-                let (m1, t1) = unsafe { slab8_avx2(n, &o, &ray, tmin, tmax) };
+                let (m1, t1) = unsafe { slab8_avx2(n, &ray, tmin, tmax) };
                 assert_eq!(m0, m1, "ray {r}");
                 assert_eq!(t0.map(f32::to_bits), t1.map(f32::to_bits), "ray {r}");
                 hits += m0.count_ones();
@@ -1687,7 +1502,7 @@ mod tests {
         let mut rnd = signed_rng(77u32);
         let (quads, verts) = random_soup(&mut rnd, 2000, 20.0, 3.0);
         let bvh = Bvh::build(quads, verts);
-        assert!(nodes_of(&bvh).len() > 30);
+        assert!(bvh.nodes.len() > 30);
         let n = 600;
         let o: Vec<Vec3> = (0..n)
             .map(|_| Vec3::new(rnd(), rnd(), rnd()) * 15.0)

@@ -12,7 +12,7 @@
 
 use glam::Vec3;
 
-use super::{Bvh, Child, Hit, LeafRay, QuadId, SlabRay, Stack};
+use super::{Bvh, Hit, LeafRay, QuadId, SlabRay, Stack};
 
 /// Trees smaller than this (half a core's second-level cache here) are walked one ray at a
 /// time by [`Bvh::each_hit_many`] (the same hits either way): their walks rarely wait for
@@ -67,7 +67,7 @@ impl Bvh {
         stats: &mut WalkStats,
     ) {
         let n = o.len().min(d.len()).min(tmin.len()).min(out.len());
-        if self.root_leaf || self.lines.is_empty() {
+        if self.nodes.is_empty() {
             // (One leaf: counted as rays alone.)
             if STATS {
                 stats.rays += n as u64;
@@ -113,7 +113,7 @@ impl Bvh {
         f: &mut dyn FnMut(usize, Hit) -> bool,
     ) {
         let n = o.len().min(d.len()).min(tmin.len()).min(tmax.len());
-        if self.root_leaf || self.bytes() < INTERLEAVE_BYTES {
+        if self.nodes.is_empty() || self.bytes() < INTERLEAVE_BYTES {
             for k in 0..n {
                 self.each_hit(o[k], d[k], tmin[k], tmax[k], &mut |h| f(k, h));
             }
@@ -155,7 +155,7 @@ impl Bvh {
 
     /// The tree's size in bytes: nodes and leaves.
     pub fn bytes(&self) -> usize {
-        self.lines.len() * std::mem::size_of::<super::Line>()
+        self.nodes.len() * std::mem::size_of::<super::Node8>() + self.leaves.len() * 4
     }
 
     /// Runs the walks of rays `0..o.len()` (ordered or not, as [`Bvh::walk`]) `LANES` at a
@@ -228,14 +228,10 @@ impl Bvh {
         const LANES: usize = 16;
         let mut lanes: Vec<Lane> = (0..LANES.min(n)).map(|_| Lane::new()).collect();
         for (k, l) in lanes.iter_mut().enumerate() {
-            l.start(k, o[k], d[k], tmin[k], tmax(k), self.root_origin);
+            l.start(k, o[k], d[k], tmin[k], tmax(k));
         }
         let mut next_ray = lanes.len();
-        self.prefetch(Child {
-            line: 0,
-            lines: 1,
-            origin: self.root_origin,
-        });
+        self.prefetch(0, 0);
         while !lanes.is_empty() {
             let mut i = 0;
             while i < lanes.len() {
@@ -246,7 +242,7 @@ impl Bvh {
                 done(lanes[i].ray, lanes[i].best);
                 if next_ray < n {
                     let k = next_ray;
-                    lanes[i].start(k, o[k], d[k], tmin[k], tmax(k), self.root_origin);
+                    lanes[i].start(k, o[k], d[k], tmin[k], tmax(k));
                     next_ray += 1;
                     i += 1;
                 } else {
@@ -266,36 +262,43 @@ impl Bvh {
         stats: &mut WalkStats,
     ) -> bool {
         match l.step {
-            Step::Node(c, origin) => {
-                let n = self.node(c);
+            Step::Node(c) => {
+                let n = &self.nodes[c as usize];
                 let depth = l.stack.len();
-                let next =
-                    self.visit::<ORDERED, AVX2>(n, &origin, &l.rb, l.tmin, l.tmax, &mut l.stack);
+                let next = self.visit::<ORDERED, AVX2>(n, &l.rb, l.tmin, l.tmax, &mut l.stack);
                 if STATS {
                     stats.nodes += 1;
                     stats.pushes += (l.stack.len() - depth) as u64;
                 }
-                if let Some(c) = next {
-                    self.prefetch(c);
-                    l.step = if c.lines == 0 {
-                        Step::Node(c.line, c.origin)
-                    } else {
-                        Step::Leaf(c.line)
-                    };
-                    return true;
+                match next {
+                    Some((c, 0)) => {
+                        self.prefetch(c, 0);
+                        l.step = Step::Node(c);
+                        return true;
+                    }
+                    Some((first, count)) => {
+                        self.prefetch(first, count);
+                        l.step = Step::Leaf(first, count);
+                        return true;
+                    }
+                    None => {}
                 }
             }
-            Step::Leaf(c) => {
+            Step::Leaf(first, count) => {
                 if STATS {
-                    let h = self.words().get(16 * c as usize).copied().unwrap_or(0);
                     stats.leaves += 1;
-                    stats.quads += u64::from(h & 0xff);
-                    stats.leaf_bytes += 4 * u64::from(1 + (h >> 8));
+                    stats.quads += u64::from(count & 0xff);
+                    stats.leaf_bytes += 4 * u64::from(count >> 8);
                 }
                 let (ray, best) = (l.ray, &mut l.best);
-                let stop = self.leaf(c, &l.wt, l.tmin, &mut l.tmax, &mut |q, t, a, b, tm| {
-                    on_hit(ray, best, q, t, a, b, tm)
-                });
+                let stop = self.leaf(
+                    first,
+                    count,
+                    &l.wt,
+                    l.tmin,
+                    &mut l.tmax,
+                    &mut |q, t, a, b, tm| on_hit(ray, best, q, t, a, b, tm),
+                );
                 if stop {
                     return false;
                 }
@@ -303,7 +306,7 @@ impl Bvh {
         }
         // Pop (as `walk` does, but a leaf popped is read in later steps like any other).
         loop {
-            let Some((c, t)) = l.stack.pop() else {
+            let Some((c, count, t)) = l.stack.pop() else {
                 return false;
             };
             if t > l.tmax {
@@ -313,10 +316,10 @@ impl Bvh {
                 continue;
             }
             // (A leaf's block was prefetched when it was pushed.)
-            l.step = if c.lines > 0 {
-                Step::Leaf(c.line)
+            l.step = if count > 0 {
+                Step::Leaf(c, count)
             } else {
-                Step::Node(c.line, c.origin)
+                Step::Node(c)
             };
             return true;
         }
@@ -328,10 +331,9 @@ impl Bvh {
 pub struct WalkStats {
     /// Walks (rays).
     pub rays: u64,
-    /// Interior nodes visited (their slab tests: a cache line each).
+    /// Interior nodes visited (their slab tests: two cache lines each).
     pub nodes: u64,
-    /// Leaves tested, the quads in them, and the bytes of their blocks the tests read (with
-    /// the header word).
+    /// Leaves tested, the quads in them, and the bytes of their blocks the tests read.
     pub leaves: u64,
     pub quads: u64,
     pub leaf_bytes: u64,
@@ -344,10 +346,10 @@ pub struct WalkStats {
 /// What a lane of an interleaved walk does next.
 #[derive(Clone, Copy)]
 enum Step {
-    /// Visit the interior node at this line, with this low corner.
-    Node(u32, [f32; 3]),
-    /// Test the quads of the leaf at this line (its block, see [`Bvh::lines`]).
-    Leaf(u32),
+    /// Visit this interior node.
+    Node(u32),
+    /// Test this leaf's quads (its block, see [`Bvh::leaves`]).
+    Leaf(u32, u32),
 }
 
 /// One ray's walk in an interleaved run ([`Bvh::closest_many`], [`Bvh::each_hit_many`]).
@@ -372,13 +374,13 @@ impl Lane {
             tmax: 0.0,
             best: None,
             stack: Stack::new(),
-            step: Step::Node(0, [0.0; 3]),
+            step: Step::Node(0),
         }
     }
 
     /// Starts the walk of ray `ray` from the root, in place.
     #[inline(always)]
-    fn start(&mut self, ray: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32, root: [f32; 3]) {
+    fn start(&mut self, ray: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) {
         self.ray = ray;
         self.wt = LeafRay::new(o, d);
         self.rb = SlabRay::new(o, d);
@@ -386,6 +388,6 @@ impl Lane {
         self.tmax = tmax;
         self.best = None;
         self.stack.clear();
-        self.step = Step::Node(0, root);
+        self.step = Step::Node(0);
     }
 }
