@@ -483,8 +483,14 @@ fn time_slots_skip_only_samples_that_cannot_be_hit() {
         [
             ("sweep", SWEEP.to_string(), 8.0),
             // Moving diagonally while it shrinks: each slot's box is mostly empty, the
-            // swept band is not (65: 54 with boxes only).
-            ("diagonal", DIAGONAL.to_string(), 65.0),
+            // swept band is not (about 100×; 54× with boxes of as many slots as samples).
+            ("diagonal", DIAGONAL.to_string(), 90.0),
+            // One sample a pixel still has its 64 time slots (about 35×; there was one).
+            (
+                "diagonal 1x1",
+                DIAGONAL.replacen("PixelSamples 3 3", "PixelSamples 1 1", 1),
+                30.0,
+            ),
             ("busy", busy("16 16"), 1.0),
             ("busy 5x4", spin, 1.0),
         ],

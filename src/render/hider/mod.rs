@@ -839,7 +839,7 @@ pub struct HiderConfig {
     /// The scene's CSG trees (empty without boolean solids).
     pub csg: std::sync::Arc<csg::CsgTree>,
     /// Time slots the Z-buffer bins a bucket's samples into when a grid moves
-    /// (`Hider "hidden" "timeslots" n`; by default the samples per pixel, at most 64). 1
+    /// (`Hider "hidden" "timeslots" n`; by default 64, the most; a micropolygon is tested in fewer groups of them by [`timebins::groups`]). 1
     /// tests every sample under a micropolygon's whole-shutter bound: the same picture,
     /// slower.
     pub time_slots: usize,
@@ -926,7 +926,7 @@ impl HiderConfig {
             csg: Default::default(),
             time_slots: params
                 .float("timeslots")
-                .map_or(spp[0] * spp[1], |n| n.max(1.0) as usize)
+                .map_or(timebins::MAX_SLOTS, |n| n.max(1.0) as usize)
                 .clamp(1, timebins::MAX_SLOTS),
             lens_slots: params
                 .float("lensslots")

@@ -1585,7 +1585,7 @@ fn sample_grid_blurred(
             continue;
         };
         let slots = bins.slots();
-        let groups = timebins::groups(g, &corner, &mb, slots);
+        let groups = timebins::groups(g, &corner, &mb, slots, cfg.spp[0] * cfg.spp[1]);
         if groups <= 1 || !slot_boxes(g, &corner, bins, groups, bx, dof.as_ref(), &mut group_boxes)
         {
             for_samples(b, bx, &mut test);
@@ -1632,19 +1632,6 @@ fn slot_boxes(
 ) -> bool {
     out.clear();
     let slots = bins.slots();
-    // The groups holding samples with their time intervals. A later slot's times are never
-    // earlier (slots are monotonic in time), so each group's interval reaches at most to the
-    // next group's start: consecutive groups share the corners evaluated there.
-    let mut spans: [(usize, usize, f32, f32); timebins::MAX_SLOTS] =
-        [(0, 0, 0.0, 0.0); timebins::MAX_SLOTS];
-    let mut n = 0;
-    for q in 0..groups.min(timebins::MAX_SLOTS) {
-        let (k0, k1) = (q * slots / groups, (q + 1) * slots / groups - 1);
-        if let Some((t0, t1)) = bins.interval(k0, k1) {
-            spans[n] = (k0, k1, t0, t1);
-            n += 1;
-        }
-    }
     // Only the groups of the times it can be in `bx`: a micropolygon crossing many buckets
     // is in each for a few of its groups (under depth of field, all).
     let (ta, tb) = match dof {
@@ -1654,22 +1641,49 @@ fn slot_boxes(
             None => return true,
         },
     };
-    // The corners at the previous group's end, when it was bounded.
-    let mut at_start: Option<timebins::Corners> = None;
+    // A sample's slot is monotonic in its time, so those that can be hit lie in slots
+    // ka..=kb; group q holds slots q·slots/groups ..= (q + 1)·slots/groups − 1.
+    let groups = groups.min(timebins::MAX_SLOTS);
+    let (ka, kb) = (
+        bins.slot_of_time(ta.max(0.0)),
+        bins.slot_of_time(tb.min(1.0)),
+    );
+    let group_of = |k: usize| {
+        let mut q = k * groups / slots;
+        while q > 0 && q * slots / groups > k {
+            q -= 1;
+        }
+        while q + 1 < groups && (q + 1) * slots / groups <= k {
+            q += 1;
+        }
+        q
+    };
+    // The groups holding samples with their time intervals. A later slot's times are never
+    // earlier (slots are monotonic in time), so each group's interval reaches at most to the
+    // next group's start: consecutive groups share the corners evaluated there.
+    let mut spans: [(usize, usize, f32, f32); timebins::MAX_SLOTS] =
+        [(0, 0, 0.0, 0.0); timebins::MAX_SLOTS];
+    let mut n = 0;
+    for q in group_of(ka)..=group_of(kb) {
+        let (k0, k1) = (q * slots / groups, (q + 1) * slots / groups - 1);
+        if let Some((t0, t1)) = bins.interval(k0, k1) {
+            spans[n] = (k0, k1, t0, t1);
+            n += 1;
+        }
+    }
+    let Some(&(_, _, first, _)) = spans[..n].first() else {
+        return true;
+    };
+    let mut at_start = timebins::corners(g, corner, first);
     for i in 0..n {
         let (k0, k1, t0, t1) = spans[i];
-        if t1 < ta || t0 > tb {
-            at_start = None;
-            continue;
-        }
         let t_end = spans.get(i + 1).filter(|_| i + 1 < n).map_or(t1, |s| s.2);
-        let start = at_start.unwrap_or_else(|| timebins::corners(g, corner, t0));
         let at_end = timebins::corners(g, corner, t_end);
-        let ends = [start, at_end];
+        let ends = [at_start, at_end];
         let Some((gb, pad)) = timebins::bound_and_pad(g, corner, &ends, t0, t_end, dof) else {
             return false;
         };
-        at_start = Some(ends[1]);
+        at_start = ends[1];
         if let Some(gb) = super::clip_box(gb, bx) {
             // A hull pays for its set-up and its rows' only where the box is wide and tall.
             let sweep = (gb[2] - gb[0] > SWEEP_MIN && gb[3] - gb[1] > SWEEP_MIN)
