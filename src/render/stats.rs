@@ -83,12 +83,13 @@ pub enum Phase {
     Setup = 0,
     /// The film's allocation alongside the first bucket row's surfaces.
     FirstRow = 1,
-    /// Hiding a bucket row (filtering the row above's tiles as their neighbours are hidden)
-    /// alongside the next row's splitting, dicing and shading.
+    /// Every bucket row after the first row's surfaces: making rows, hiding buckets,
+    /// filtering tiles and putting finished rows into the film, overlapped without a barrier
+    /// between rows (`driver::Flow`).
     Rows = 2,
-    /// Putting the filtered tiles into the film; at the end, filtering the last rows.
+    /// What is left of the film's rows after the rows' dataflow (nothing, normally).
     Filter = 3,
-    /// Freeing rows and grids no longer needed, and the end of the frame.
+    /// The end of the frame.
     Other = 4,
     /// Imager, quantising and writing the displays (after the render; the thread that
     /// writes).
