@@ -55,6 +55,10 @@ pub struct Stats {
     pub samples_hit: Counter,
     /// Grids a bucket skipped whole: behind every sample's opaque front.
     pub grids_occluded: Counter,
+    /// Times a bucket asked for a grid another thread was shading, and the nanoseconds
+    /// buckets then waited with no other work to do meanwhile (see `driver::LazyGrid`).
+    pub grid_waits: Counter,
+    pub grid_wait_ns: Counter,
     pub buckets: Counter,
     /// Nanoseconds per [`Stage`].
     pub stage_ns: [Counter; 5],
@@ -254,6 +258,12 @@ impl fmt::Display for Stats {
         writeln!(f, "  samples hit      {:>12}", g(&self.samples_hit))?;
         writeln!(f, "  grids occluded   {:>12}", g(&self.grids_occluded))?;
         writeln!(f, "  grids unshaded   {:>12}", g(&self.grids_unshaded))?;
+        writeln!(
+            f,
+            "  grid waits       {:>12} ({:.3} s idle: no other work meanwhile)",
+            g(&self.grid_waits),
+            g(&self.grid_wait_ns) as f64 * 1e-9
+        )?;
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,
