@@ -497,7 +497,15 @@ impl LazyGrid {
             }
             let t = Instant::now();
             let before = SHADING_NS.with(Cell::get);
-            let worked = matches!(rayon::yield_now(), Some(rayon::Yield::Executed));
+            // Work done meanwhile runs on this thread's stack, above this bucket: a few
+            // levels at most (shading and tracing need stack of their own).
+            let depth = WAITS_NESTED.with(Cell::get);
+            let worked = depth < MAX_WAITS_NESTED && {
+                WAITS_NESTED.with(|d| d.set(depth + 1));
+                let y = rayon::yield_now();
+                WAITS_NESTED.with(|d| d.set(depth));
+                matches!(y, Some(rayon::Yield::Executed))
+            };
             // The other work is not this bucket's hiding (its own shading counted inside).
             let ns = t.elapsed().as_nanos() as u64;
             SHADING_NS.with(|c| c.set(before + ns));
@@ -533,7 +541,13 @@ impl LazyGrid {
     }
 }
 
+/// Most bucket waits for a grid (see [`LazyGrid::state_for_bucket`]) one thread does other
+/// work inside at once; a deeper one waits.
+const MAX_WAITS_NESTED: u32 = 3;
+
 thread_local! {
+    /// Bucket waits for a grid this thread is doing other work inside.
+    static WAITS_NESTED: Cell<u32> = const { Cell::new(0) };
     /// Nanoseconds this thread spent shading grids asked for by a hider, or on other work
     /// while a bucket waited for a grid: the bucket's hiding time leaves them out.
     static SHADING_NS: Cell<u64> = const { Cell::new(0) };
