@@ -143,6 +143,30 @@ fn bench(c: &mut Criterion) {
         dist.iter().filter(|d| d.is_finite()).count()
     };
     eprintln!("hit fraction: {:.2}", hits as f64 / BATCH as f64);
+    // What the walks of one batch do (counted apart from the timed runs), from the origins
+    // at the bias `trace` steps off (the directions are unit).
+    let mut st = arbor::ray::bvh::WalkStats::default();
+    let mut found = vec![None; BATCH];
+    let tmin = vec![arbor::shade::rays::bias(&r.scene); BATCH];
+    rs.bvh.closest_many_counted(
+        &batches[0].0,
+        &batches[0].1,
+        &tmin,
+        f32::INFINITY,
+        &mut found,
+        &mut st,
+    );
+    let per = |x: u64| x as f64 / st.rays.max(1) as f64;
+    eprintln!(
+        "per ray: {:.1} nodes, {:.2} leaves ({:.1} quads, {:.0} bytes), {:.1} pushed, {:.1} \
+         skipped",
+        per(st.nodes),
+        per(st.leaves),
+        per(st.quads),
+        per(st.leaf_bytes),
+        per(st.pushes),
+        per(st.skipped)
+    );
     // Shadow segments: from each origin K along its direction (across the field).
     let reach = field() as f32;
     let ends: Vec<Vec<Vec3>> = batches

@@ -152,6 +152,52 @@ fn prman_requests_arbor_lacks_warn_by_name() {
 }
 
 #[test]
+fn resource_saves_and_restores_the_attribute_state() {
+    // PRMan's `Resource "name" "attributes"`: a look saved inside one block is put back on
+    // a later object outside it, whatever the attribute stack did in between; the
+    // transform stays where the restoring object is. A name saved inside
+    // `ResourceBegin`/`ResourceEnd` is forgotten at its end.
+    let b = build(
+        "Format 8 8 1\nWorldBegin\n\
+         AttributeBegin\nColor [1 0 0]\nSurface \"plastic\" \"Ks\" [0.9]\n\
+         Resource \"redlook\" \"attributes\" \"string operation\" \"save\"\nAttributeEnd\n\
+         Color [0 0 1]\nSurface \"matte\"\nSphere 1 -1 1 360\n\
+         AttributeBegin\nTranslate 3 0 0\n\
+         Resource \"redlook\" \"attributes\" \"string operation\" \"restore\"\nSphere 1 -1 1 360\nAttributeEnd\n\
+         ResourceBegin\nResource \"inner\" \"attributes\" \"string operation\" \"save\"\nResourceEnd\n\
+         Resource \"inner\" \"attributes\" \"string operation\" \"restore\"\n\
+         Sphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let w = b.of(Severity::Warning);
+    assert!(!w.iter().any(|m| m.contains("not implemented")), "{w:#?}");
+    // Restoring a name saved only inside a closed ResourceBegin block warns.
+    assert!(w.iter().any(|m| m.contains("\"inner\"")), "{w:#?}");
+    let prims = &b.scenes[0].primitives;
+    assert_eq!(prims.len(), 3);
+    let look = |i: usize| {
+        let a = &prims[i].attributes;
+        (a.color, a.surface.as_ref().map(|s| s.name.clone()))
+    };
+    assert_eq!(
+        look(0),
+        (glam::Vec3::new(0.0, 0.0, 1.0), Some("matte".into()))
+    );
+    assert_eq!(
+        look(1),
+        (glam::Vec3::new(1.0, 0.0, 0.0), Some("plastic".into()))
+    );
+    assert_eq!(look(2), look(0));
+    // The restored sphere stays where its own block put it.
+    let x = prims[1].world_from_object.w_axis.x;
+    assert!((x - 3.0).abs() < 1e-6, "{x}");
+}
+
+#[test]
 fn a_geometry_only_file_is_one_archive_warning() {
     let b = build(
         "AttributeBegin\nPatch \"bilinear\" \"P\" [0 0 0 1 0 0 0 1 0 1 1 0]\nPatch \"bilinear\" \"P\" [0 0 1 1 0 1 0 1 1 1 1 1]\nSphere 1 -1 1 360\nAttributeEnd\n",
@@ -899,13 +945,6 @@ fn lights_read_the_surface_parameters_by_message_passing() {
     )
     .unwrap();
     let out = dir.join("m.png");
-    let square = |y: f32| {
-        format!(
-            "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
-            a = y + 0.25,
-            b = y - 0.25
-        )
-    };
     let rib = format!(
         "Format 16 12 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
          ScreenWindow -1 1 -0.75 0.75\nWorldBegin\nLightSource \"obeylight\" 1\nTranslate 0 0 5\n\
@@ -913,9 +952,9 @@ fn lights_read_the_surface_parameters_by_message_passing() {
          AttributeBegin\nSurface \"shiny\"\nDeclare \"Kr\" \"varying float\"\n{} \"Kr\" [0 1 0 1]\nAttributeEnd\n\
          AttributeBegin\nSurface \"dull\"\n{}\nAttributeEnd\nWorldEnd\n",
         out.display(),
-        square(0.5),
-        square(0.0),
-        square(-0.5)
+        band(0.5),
+        band(0.0),
+        band(-0.5)
     );
     let (text, err) = common::render_scene_file(&dir, &rib);
     assert!(!err && !text.contains("not supported"), "{text}");
@@ -945,6 +984,71 @@ fn lights_read_the_surface_parameters_by_message_passing() {
 }
 
 #[test]
+fn surfaces_and_lights_read_the_atmosphere_parameters_by_message_passing() {
+    // RISpec's `atmosphere("name", var)`: a surface that fades to its atmosphere's colour
+    // by the atmosphere's `fogdist` (instance value 0.5 on the top square, a varying
+    // primitive variable ramp on the middle one), and a light that dims to 0.5 when the
+    // atmosphere has a `dim` flag. The bottom square has no atmosphere: not found.
+    let dir = common::scratch_dir("message-atmosphere");
+    std::fs::write(
+        dir.join("foglook.sl"),
+        "surface foglook() { float d = -1; float got = atmosphere(\"fogdist\", d); \
+         float nope = atmosphere(\"nosuch\", d); Oi = 1; Ci = 0; \
+         illuminance(P) { Ci += Cl; } \
+         if (got != 0) Ci *= color(d, d, 1); else Ci *= color(0, 1, 0); }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("dimlight.sl"),
+        "light dimlight() { float dim = 0; float got = atmosphere(\"dim\", dim); \
+         solar() { Cl = (got != 0 && dim > 0) ? 0.5 : 1; } }\n",
+    )
+    .unwrap();
+    // A volume shader that leaves the colour alone: only its parameters matter here.
+    std::fs::write(
+        dir.join("thinfog.sl"),
+        "volume thinfog(varying float fogdist = 1; float dim = 1) { }\n",
+    )
+    .unwrap();
+    let out = dir.join("a.png");
+    let rib = format!(
+        "Format 16 12 1\nPixelSamples 1 1\nDisplay \"{}\" \"file\" \"rgb\"\nProjection \"orthographic\"\n\
+         ScreenWindow -1 1 -0.75 0.75\nWorldBegin\nLightSource \"dimlight\" 1\nTranslate 0 0 5\n\
+         Surface \"foglook\"\n\
+         AttributeBegin\nAtmosphere \"thinfog\" \"fogdist\" [0.5]\n{}\nAttributeEnd\n\
+         AttributeBegin\nAtmosphere \"thinfog\" \"dim\" [0]\nDeclare \"fogdist\" \"varying float\"\n{} \"fogdist\" [0 1 0 1]\nAttributeEnd\n\
+         AttributeBegin\n{}\nAttributeEnd\nWorldEnd\n",
+        out.display(),
+        band(0.5),
+        band(0.0),
+        band(-0.5)
+    );
+    let (text, err) = common::render_scene_file(&dir, &rib);
+    assert!(!err && !text.contains("not supported"), "{text}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let px = |x: u32, y: u32| img.get_pixel(x, y).0;
+    // Top: fogdist 0.5 from the instance, the light dimmed to 0.5 by `dim` 1.
+    let top = px(8, 2);
+    assert!(
+        (top[0] as i32 - 64).abs() <= 2
+            && top[0].abs_diff(top[1]) <= 2
+            && (top[2] as i32 - 128).abs() <= 2,
+        "{top:?}"
+    );
+    // Middle: fogdist = s, a ramp left to right, the light undimmed (`dim` 0).
+    for x in 0..16 {
+        let p = px(x, 6);
+        let s = (x as f32 + 0.5) / 16.0;
+        assert!(
+            (p[0] as f32 - 255.0 * s).abs() <= 12.0 && p[2] == 255,
+            "x {x}: {p:?}"
+        );
+    }
+    // Bottom: no atmosphere, so neither call finds anything.
+    assert_eq!(px(8, 10), [0, 255, 0]);
+}
+
+#[test]
 fn illuminance_light_parameter_reads_each_lights_output() {
     // 3Delight's and PRMan's `illuminance(…, "light:__nondiffuse", nd)`: nd holds the
     // current light's output parameter inside the loop. Two lights of intensity 1 and 0.5;
@@ -967,4 +1071,14 @@ fn illuminance_light_parameter_reads_each_lights_output() {
     for ch in c {
         assert!((ch - 0.5).abs() < 1e-4, "{c:?}");
     }
+}
+
+/// A bilinear patch across the frame, half a unit tall, centred at height `y` (the message
+/// passing tests stack three of them).
+fn band(y: f32) -> String {
+    format!(
+        "Patch \"bilinear\" \"P\" [-1 {a} 0  1 {a} 0  -1 {b} 0  1 {b} 0]",
+        a = y + 0.25,
+        b = y - 0.25
+    )
 }

@@ -291,11 +291,12 @@ WorldEnd
     assert!(common::film_rgb(&plain) == common::film_rgb(&bucket));
 }
 
-/// A patch with a point at 1e38 (a stray number an exporter wrote) crosses the eye plane in
-/// every piece it splits into, and each eye split doubles those pieces. With the "unlimited"
-/// eye splits exporters write (Houdini: 1000) that was 2^33 splits; arbor stops at
-/// `MAX_EYE_SPLITS`, drops the crossing pieces with a warning naming both numbers, and
-/// renders the rest of the frame.
+/// A patch with a point at 1e38 (a stray number an exporter wrote): its pieces' trial dicing
+/// overflows, the pieces whose projection overflows count as crossing the eye plane, and
+/// either kind of split could double the pieces for 2^32 splits. With the "unlimited" eye
+/// splits exporters write (Houdini: 1000) arbor holds eye splits at `MAX_EYE_SPLITS` and all
+/// splits of one primitive at its split budget, drops what is left with warnings naming the
+/// numbers, and renders the rest of the frame.
 #[test]
 fn unlimited_eye_splits_are_held_so_a_stray_huge_point_cannot_split_for_hours() {
     let rib = r#"Option "limits" "eyesplits" [1000]
@@ -310,6 +311,44 @@ Polygon "P" [-3 -3 1  -1 -3 1  -1 -1 1  -3 -1 1]
 Patch "bilinear" "P" [-1 -1 0  1 -1 0  -1 1 0  1 -1e38 0]
 WorldEnd
 "#;
+    let (film, diags, splits) = render_counting_splits(rib);
+    let budget = arbor::render::driver::MIN_SPLIT_BUDGET;
+    assert!(splits <= budget + 16, "{splits} splits");
+    assert!(!find(&diags, "render::splits").is_empty(), "{diags:#?}");
+    let warns = find(&diags, "render::eyesplits");
+    assert!(!warns.is_empty(), "{diags:#?}");
+    let help = warns[0].help.as_deref().unwrap_or("");
+    assert!(help.contains("1000") && help.contains("16"), "{help}");
+    // The square beside it renders.
+    assert!(common::film_mean(&film)[0] > 0.01);
+}
+
+/// A stray far depth (a control point at z = 1e8) under an orthographic camera: the patch's
+/// pieces shrink on screen as they split, so it dices in a few grids. The bound's rounding
+/// pad was once taken from the largest coordinate on every axis (±1000 in x and y here), so
+/// no piece ever looked small enough and the splitting ran to 2^32 pieces.
+#[test]
+fn a_far_control_point_does_not_widen_a_patch_on_screen() {
+    let rib = r#"Format 32 24 1
+PixelSamples 1 1
+Projection "orthographic"
+Translate 0 0 5
+WorldBegin
+Surface "constant"
+Patch "bicubic" "P" [-1 -1 0  -0.3 -1 0  0.3 -1 0  1 -1 0
+  -1 -0.3 0  -0.3 -0.3 0  0.3 -0.3 1e8  1 -0.3 0
+  -1 0.3 0  -0.3 0.3 0  0.3 0.3 0  1 0.3 0
+  -1 1 0  -0.3 1 0  0.3 1 0  1 1 0]
+WorldEnd
+"#;
+    let (film, _, splits) = render_counting_splits(rib);
+    assert!(splits < 1000, "{splits} splits");
+    // The patch's corners still cover the middle of the frame.
+    assert!(common::film_mean(&film)[0] > 0.1);
+}
+
+/// Renders `rib` and counts the splits its surfaces made.
+fn render_counting_splits(rib: &str) -> (arbor::film::Film, Vec<(Diag, usize)>, u64) {
     let stats = arbor::render::Stats::new();
     let opts = arbor::render::RenderOptions {
         stats: Some(&stats),
@@ -317,16 +356,5 @@ WorldEnd
     };
     let (film, diags, _) = common::render_rib_with(rib, &[], &opts);
     let splits = stats.splits.load(std::sync::atomic::Ordering::Relaxed);
-    let max = arbor::render::limits::MAX_EYE_SPLITS;
-    assert!(splits < 1u64 << (max + 2), "{splits} splits");
-    assert!(
-        splits >= 1u64 << max,
-        "{splits} splits: the limit is not 16 any more?"
-    );
-    let warns = find(&diags, "render::eyesplits");
-    assert!(!warns.is_empty(), "{diags:#?}");
-    let help = warns[0].help.as_deref().unwrap_or("");
-    assert!(help.contains("1000") && help.contains("16"), "{help}");
-    // The square beside it renders.
-    assert!(common::film_mean(&film)[0] > 0.01);
+    (film, diags, splits)
 }

@@ -61,6 +61,7 @@ fn run_reporting(prog: &Program, n: usize, diags: &Diagnostics) -> (Vec<Vec3>, V
         cones: None,
         displacement_outputs: &[],
         surface_params: &[],
+        atmosphere_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

@@ -131,6 +131,7 @@ fn run(prog: &Program) -> (Vec<String>, Vec<Vec3>) {
         cones: None,
         displacement_outputs: &[],
         surface_params: &[],
+        atmosphere_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.run_init();

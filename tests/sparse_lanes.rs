@@ -61,6 +61,7 @@ fn run(prog: &Program, sparse: bool) -> (Vec<[u32; 6]>, u64, u64) {
         cones: None,
         displacement_outputs: &[],
         surface_params: &[],
+        atmosphere_params: &[],
     };
     let mut ex = Exec::new(prog, n, &env);
     ex.sparse = sparse;

@@ -45,6 +45,52 @@ fn render(dir: &Path, rib: &str) -> Diagnostics {
 }
 
 #[test]
+fn make_shadow_reads_a_float_depth_tiff() {
+    // Essential RenderMan's shadow chapter renders depth with `Display "z.tiff" "file" "z"`
+    // and then `MakeShadow "z.tiff" "map.shad"`: the depth TIFF is 32-bit float with the
+    // camera's matrices in PRMan's tags, and makes the same shadow a zfile does.
+    let dir = tmp("tiffshadow");
+    let z = dir.join("depth.tiff");
+    let tex = dir.join("depth.shad");
+    let png = dir.join("beauty.png");
+    let rib = format!(
+        "FrameBegin 1\nDisplay \"{z}\" \"file\" \"z\"\n\
+         Format 64 64 1\nPixelSamples 1 1\nPixelFilter \"box\" 1 1\n{cam}\
+         WorldBegin\nPolygon \"P\" [-0.5 1 -0.5  0.5 1 -0.5  0.5 1 0.5  -0.5 1 0.5]\n\
+         Polygon \"P\" [-2 0 -2  2 0 -2  2 0 2  -2 0 2]\nWorldEnd\nFrameEnd\n\
+         MakeShadow \"{z}\" \"{tex}\"\n\
+         FrameBegin 2\nDisplay \"{png}\" \"png\" \"rgb\"\nFormat 32 32 1\nPixelSamples 2 2\n{cam}\
+         WorldBegin\n\
+         LightSource \"shadowdistant\" 1 \"from\" [0 1 0] \"to\" [0 0 0] \"shadowname\" [\"{tex}\"] \"bias\" [0.02]\n\
+         Surface \"matte\"\nPolygon \"P\" [-2 0 -2  2 0 -2  2 0 2  -2 0 2]\nWorldEnd\nFrameEnd\n",
+        z = z.display(),
+        tex = tex.display(),
+        png = png.display(),
+        cam = down_camera(10.0),
+    );
+    let diags = render(&dir, &rib);
+    assert!(!diags.has_errors(), "{:?}", diags.snapshot());
+    let back = arbor::film::tiff::read_depth(&std::fs::read(&z).unwrap()).unwrap();
+    assert!(back.matrices.is_some());
+    let img = image::open(&png).unwrap().to_rgb8();
+    // Under the square (x, z in [-0.5, 0.5]) in shadow; outside it lit.
+    for (i, j) in [(16, 16), (14, 17), (17, 14)] {
+        assert!(
+            img.get_pixel(i, j)[0] < 30,
+            "({i},{j}) {:?}",
+            img.get_pixel(i, j)
+        );
+    }
+    for (i, j) in [(3, 3), (28, 4), (5, 27), (16, 3)] {
+        assert!(
+            img.get_pixel(i, j)[0] > 225,
+            "({i},{j}) {:?}",
+            img.get_pixel(i, j)
+        );
+    }
+}
+
+#[test]
 fn shadow_pass_then_beauty_pass_matches_the_geometry() {
     let dir = tmp("shadow");
     let z = dir.join("light.z");

@@ -704,6 +704,16 @@ fn write_target(
     }
     let depth_only = planes.len() == 1 && planes[0].depth;
     let mut q = if depth_only { qz } else { qc };
+    // Float depth alone in a TIFF (`Display "z.tif" "file" "z"`, Essential RenderMan's
+    // shadow chapter): a 32-bit float TIFF carrying the camera matrices in PRMan's tags, so
+    // `MakeShadow` can read it like a zfile.
+    if depth_only && t.format == Format::Tiff && is_float(&q) {
+        let z = ZFile::from_film(film, matrices);
+        return write_atomically(&t.path, |f| {
+            super::tiff::write_depth(f, &z.depths, w, h, z.matrices)
+        })
+        .map_err(|d| d.maybe_label(t.span, "this Display"));
+    }
     // Depth with a float quantizer in an integer-only image: normalise the finite range.
     let mut znorm = None;
     let float_out = is_float(&q);

@@ -141,6 +141,78 @@ where
     run().map_err(|e| e.to_string())
 }
 
+/// PRMan's private TIFF tags for the camera a depth picture was rendered from: world to
+/// screen and world to camera, 16 floats each (as `tiffinfo` shows them on PRMan's `z`
+/// TIFFs). arbor writes them in its zfile order (row-major) so `MakeShadow` can read a depth
+/// TIFF back into a shadow map.
+pub const TAG_WORLD_TO_SCREEN: u16 = 33305;
+pub const TAG_WORLD_TO_CAMERA: u16 = 33306;
+
+/// Writes a one-channel 32-bit float depth TIFF (`Display "x.tif" "file" "z"`), with the
+/// camera matrices `(camera_from_world, screen_from_world)` as PRMan's matrix tags.
+pub fn write_depth<W: Write + Seek>(
+    out: &mut W,
+    depths: &[f32],
+    w: usize,
+    h: usize,
+    matrices: Option<([f32; 16], [f32; 16])>,
+) -> Result<(), String> {
+    if depths.len() != w * h {
+        return Err(format!(
+            "depth tiff has {} values, {w}x{h} needs {}",
+            depths.len(),
+            w * h
+        ));
+    }
+    let (w, h) = (
+        u32::try_from(w).map_err(|e| e.to_string())?,
+        u32::try_from(h).map_err(|e| e.to_string())?,
+    );
+    let mut run = || -> tiff::TiffResult<()> {
+        let mut enc = TiffEncoder::new(&mut *out)?;
+        let mut img = enc.new_image::<colortype::Gray32Float>(w, h)?;
+        if let Some((camera, screen)) = matrices {
+            let dir = img.encoder();
+            dir.write_tag(tiff::tags::Tag::Unknown(TAG_WORLD_TO_CAMERA), &camera[..])?;
+            dir.write_tag(tiff::tags::Tag::Unknown(TAG_WORLD_TO_SCREEN), &screen[..])?;
+        }
+        img.write_data(depths)
+    };
+    run().map_err(|e| e.to_string())
+}
+
+/// Reads a one-channel float depth TIFF written by [`write_depth`] (or PRMan's `z` TIFFs
+/// with the same tags) as a zfile: depths and, when both tags are there, the matrices.
+pub fn read_depth(bytes: &[u8]) -> Result<super::zfile::ZFile, String> {
+    use tiff::decoder::{Decoder, DecodingResult};
+    let mut d = Decoder::new(std::io::Cursor::new(bytes)).map_err(|e| e.to_string())?;
+    let (width, height) = d.dimensions().map_err(|e| e.to_string())?;
+    let matrix = |d: &mut Decoder<_>, tag: u16| -> Option<[f32; 16]> {
+        let v = d
+            .get_tag_f32_vec(tiff::tags::Tag::Unknown(tag))
+            .ok()
+            .filter(|v| v.len() == 16)?;
+        let mut a = [0f32; 16];
+        a.copy_from_slice(&v);
+        Some(a)
+    };
+    let camera = matrix(&mut d, TAG_WORLD_TO_CAMERA);
+    let screen = matrix(&mut d, TAG_WORLD_TO_SCREEN);
+    let depths = match d.read_image().map_err(|e| e.to_string())? {
+        DecodingResult::F32(v) => v,
+        _ => return Err("not a float depth picture (32-bit float samples)".into()),
+    };
+    if depths.len() != width as usize * height as usize {
+        return Err("not a one-channel depth picture".into());
+    }
+    Ok(super::zfile::ZFile {
+        width,
+        height,
+        matrices: camera.zip(screen),
+        depths,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -193,6 +265,30 @@ mod tests {
         write(&mut buf, &bytes, 1, 1, 4, Sample::F32).unwrap();
         let img = image::load_from_memory(buf.get_ref()).unwrap().to_rgba32f();
         assert_eq!(img.get_pixel(0, 0).0, f);
+    }
+
+    #[test]
+    fn depth_tiff_keeps_floats_and_camera_matrices() {
+        let mut cam = [0f32; 16];
+        cam[0] = 1.0;
+        cam[3] = -2.5;
+        let mut scr = [0f32; 16];
+        scr[5] = 3.0;
+        let z = [1.5f32, f32::INFINITY, 4.25, 9.0, 0.125, 2.0];
+        let mut buf = std::io::Cursor::new(Vec::new());
+        write_depth(&mut buf, &z, 3, 2, Some((cam, scr))).unwrap();
+        let back = read_depth(buf.get_ref()).unwrap();
+        assert_eq!((back.width, back.height), (3, 2));
+        assert_eq!(back.depths, z.to_vec());
+        assert_eq!(back.matrices, Some((cam, scr)));
+        // Without matrices it still reads, and says it has none.
+        let mut buf = std::io::Cursor::new(Vec::new());
+        write_depth(&mut buf, &z, 3, 2, None).unwrap();
+        assert_eq!(read_depth(buf.get_ref()).unwrap().matrices, None);
+        // An 8-bit picture is not a depth picture.
+        let mut buf = std::io::Cursor::new(Vec::new());
+        write(&mut buf, &[0; 6], 3, 2, 1, Sample::U8).unwrap();
+        assert!(read_depth(buf.get_ref()).is_err());
     }
 
     #[test]

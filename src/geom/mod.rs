@@ -158,8 +158,24 @@ pub trait Surface: Send + Sync + std::fmt::Debug {
 
 /// Grows a bound by a small multiple of its coordinates' size so that floating-point rounding in
 /// children's bounds never pokes out of their parent's (children have smaller coordinates, so a
-/// smaller pad).
+/// smaller pad). Each axis by its own size: a surface's camera-space points are split and
+/// evaluated axis by axis, so rounding in x never involves z. (One pad from the largest
+/// coordinate widened a patch with a point at z = 1e8 by ±1000 in x and y, and under an
+/// orthographic camera its pieces never shrank: 2^32 splits.)
 pub(crate) fn pad(b: Bound) -> Bound {
+    if b.is_empty() {
+        return b;
+    }
+    let s = b.min.abs().max(b.max.abs()) * 1e-5 + Vec3::splat(1e-12);
+    Bound {
+        min: b.min - s,
+        max: b.max + s,
+    }
+}
+
+/// [`pad`] for a bound whose corners went through a matrix: rounding in each camera axis then
+/// involves every coordinate, so every axis is grown by the largest.
+pub(crate) fn pad_transformed(b: Bound) -> Bound {
     if b.is_empty() {
         return b;
     }

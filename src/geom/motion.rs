@@ -64,7 +64,7 @@ impl Surface for MovingSurface {
                         corners.iter().map(|&c| d.transform_point3(c)),
                     ));
                 }
-                super::pad(out)
+                super::pad_transformed(out)
             }
             Keys::Deforming(k) => k.iter().fold(Bound::EMPTY, |b, s| b.union(s.bound())),
         }

@@ -321,7 +321,7 @@ impl Quadric {
         let obj = sector_box(rlo, rhi, alo, ahi, zlo, zhi);
         let m = self.camera_from_object;
         let b = Bound::from_points(obj.corners().iter().map(|&p| m.transform_point3(p)));
-        super::pad(b)
+        super::pad_transformed(b)
     }
 }
 

@@ -29,6 +29,8 @@ use super::{memhint, qbox};
 
 mod interleave;
 
+pub use interleave::WalkStats;
+
 /// One micropolygon given to [`Bvh::build`], its corners in the shared vertex array:
 /// `v00 = verts[k]`, `v10 = verts[k + 1]`, `v01 = verts[k + row]`,
 /// `v11 = verts[k + row + 1]` (a grid's points are stored once, row by row). The tree keeps
@@ -628,9 +630,11 @@ impl Bvh {
         )
     }
 
-    /// Asks for the cache lines of a pushed child (an interior node's two, or the part of a
-    /// leaf's block its test reads): a later visit then finds them on the way. No effect on
-    /// results.
+    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's
+    /// block: the part its test reads and the ids, read on a hit, which otherwise were a
+    /// miss the walk waited for; rays bench, medians of 5 interleaved pairs: 2.41 → 2.46 M
+    /// shaded, 3.07 → 3.12 M shadow rays/s): a later visit then finds them on the way. No
+    /// effect on results.
     #[inline(always)]
     fn prefetch(&self, child: u32, count: u32) {
         if count == 0 {
@@ -639,7 +643,7 @@ impl Bvh {
             memhint::prefetch(p.cast::<u8>().wrapping_add(64));
         } else {
             let p = self.leaves.as_ptr().wrapping_add(child as usize);
-            memhint::prefetch_span(p, (count >> 8) as usize);
+            memhint::prefetch_span(p, (count >> 8) as usize + 2 * (count & 0xff) as usize);
         }
     }
 
@@ -835,6 +839,11 @@ impl Stack {
         } else {
             self.spill.push(e);
         }
+    }
+    /// Entries pending.
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.sp + self.spill.len()
     }
     #[inline(always)]
     fn pop(&mut self) -> Option<(u32, u32, f32)> {
@@ -1483,6 +1492,57 @@ mod tests {
             }
         }
         assert!(hits > 1000, "{hits} children in reach");
+    }
+
+    /// The counted interleaved walks give the uncounted ones' hits bit for bit, and their
+    /// counts add up: every walk visits the root; a ray that misses the whole tree visits
+    /// it alone; a leaf holds at most `MAX_LEAF` quads; only pushed entries are skipped.
+    #[test]
+    fn counted_walks_give_the_same_hits_and_consistent_counts() {
+        let mut rnd = signed_rng(77u32);
+        let (quads, verts) = random_soup(&mut rnd, 2000, 20.0, 3.0);
+        let bvh = Bvh::build(quads, verts);
+        assert!(bvh.nodes.len() > 30);
+        let n = 600;
+        let o: Vec<Vec3> = (0..n)
+            .map(|_| Vec3::new(rnd(), rnd(), rnd()) * 15.0)
+            .collect();
+        let d: Vec<Vec3> = (0..n)
+            .map(|_| Vec3::new(rnd(), rnd(), rnd()).normalize_or(Vec3::X))
+            .collect();
+        let tmin = vec![0.0; n];
+        let (mut plain, mut counted) = (vec![None; n], vec![None; n]);
+        bvh.closest_many(&o, &d, &tmin, f32::INFINITY, &mut plain);
+        let mut st = WalkStats::default();
+        bvh.closest_many_counted(&o, &d, &tmin, f32::INFINITY, &mut counted, &mut st);
+        assert_eq!(plain, counted);
+        let hits = plain.iter().filter(|h| h.is_some()).count();
+        assert!(hits > 100, "{hits} hits");
+        assert_eq!(st.rays, n as u64);
+        assert!(st.nodes >= st.rays && st.leaves > 0, "{st:?}");
+        assert!(st.quads >= st.leaves && st.quads <= MAX_LEAF as u64 * st.leaves);
+        assert!(st.leaf_bytes >= 4 * (st.quads + 1) && st.skipped <= st.pushes);
+        // Far outside, pointing away: the root's slab test alone.
+        let mut miss = WalkStats::default();
+        let mut out = [None];
+        let far = [Vec3::splat(1e4)];
+        bvh.closest_many_counted(
+            &far,
+            &[Vec3::ONE],
+            &[0.0],
+            f32::INFINITY,
+            &mut out,
+            &mut miss,
+        );
+        assert_eq!(out[0], None);
+        assert_eq!(
+            miss,
+            WalkStats {
+                rays: 1,
+                nodes: 1,
+                ..WalkStats::default()
+            }
+        );
     }
 
     #[test]

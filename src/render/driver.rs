@@ -58,6 +58,8 @@ pub const DEFAULT_GRID: usize = 1024;
 pub const DEFAULT_EYE_SPLITS: u32 = 10;
 /// Most splits of any kind along one path: a guard against surfaces that never shrink.
 pub const MAX_SPLIT_DEPTH: u32 = 32;
+/// Fewest splits one primitive may make before it is stopped (see [`Frame::split_budget`]).
+pub const MIN_SPLIT_BUDGET: u64 = 1 << 18;
 
 /// How to run a frame (command-line overrides and hooks).
 #[derive(Clone, Default)]
@@ -735,9 +737,22 @@ struct Frame<'a> {
     /// `Option "limits" "eyesplits"` when it asked for more than arbor does (see
     /// `limits::MAX_EYE_SPLITS`): named in the warning when a piece is dropped at the limit.
     eye_splits_asked: Option<f32>,
+    /// Splits made so far of each primitive's surfaces.
+    splits: Vec<std::sync::atomic::AtomicU64>,
 }
 
 impl Frame<'_> {
+    /// Most splits of one primitive's surfaces: sixteen times the grids that would tile the
+    /// sampled region at its shading rate, and at least [`MIN_SPLIT_BUDGET`]. The depth limit
+    /// alone allows 2^32 pieces; a surface whose pieces never get small on screen (a point at
+    /// 1e30 makes every piece's trial dicing overflow) would split for hours before reaching it.
+    fn split_budget(&self, rate: f32) -> u64 {
+        let r = &self.view.region;
+        let area = ((r[2] - r[0]) * (r[3] - r[1])).max(1.0) as f64;
+        let grids = area / (rate.max(1e-6) as f64 * self.view.max_grid as f64);
+        ((16.0 * grids) as u64).max(MIN_SPLIT_BUDGET)
+    }
+
     fn widened_bound(&self, w: &Work) -> Option<Bound> {
         let prim = w.surface.primitive();
         let info = self.prims.get(prim)?;
@@ -919,6 +934,21 @@ impl Frame<'_> {
                         )
                         .label(span, "this primitive"),
                     );
+                    return (Outcome::Nothing, Vec::new());
+                }
+                let made = self.splits[prim].fetch_add(1, Ordering::Relaxed);
+                let budget = self.split_budget(info.rate);
+                if made >= budget {
+                    if made == budget {
+                        self.diags.report(
+                            Diag::warning(
+                                "render::splits",
+                                format!("a surface was split {budget} times without its pieces becoming small enough to dice; the rest of it is dropped"),
+                            )
+                            .label(span, "this primitive")
+                            .help("a point of this primitive may be far outside the scene (a stray huge coordinate)"),
+                        );
+                    }
                     return (Outcome::Nothing, Vec::new());
                 }
                 Stats::add(&self.stats.splits, 1);
@@ -1377,6 +1407,9 @@ fn render_inner(
         aovs: opts.aovs.clone(),
         eye_split_limit,
         eye_splits_asked,
+        splits: (0..scene.primitives.len())
+            .map(|_| std::sync::atomic::AtomicU64::new(0))
+            .collect(),
     };
     let mut channel_names = Vec::new();
     for a in &opts.aovs {

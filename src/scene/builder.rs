@@ -240,6 +240,9 @@ pub struct Builder<'a> {
     /// While a deforming motion block runs its keys: the primitives they emit.
     pub(super) capture: Option<Vec<(Span, Arc<Geometry>, Arc<ParamList>)>>,
     pub(super) archives: HashMap<String, Arc<Vec<Request>>>,
+    /// `Resource … "attributes"` states by name: the first map outside any `ResourceBegin`
+    /// block, then one per open block (the names saved inside it).
+    pub(super) resource_scopes: Vec<HashMap<String, super::resources::SavedAttributes>>,
     /// Archives being read, outermost first, for cycle detection.
     pub(super) include: Vec<String>,
     pub(super) conds: Vec<Cond>,
@@ -300,6 +303,7 @@ impl<'a> Builder<'a> {
             world_count: 0,
             frame_active: true,
             light_handles: HashMap::new(),
+            resource_scopes: vec![HashMap::new()],
             objects: HashMap::new(),
             defining: None,
             motion_block: None,

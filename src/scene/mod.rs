@@ -21,6 +21,7 @@ mod motion;
 mod options;
 pub mod params;
 mod procedural;
+mod resources;
 pub mod ri_api;
 mod runprogram;
 pub mod table;

@@ -494,9 +494,9 @@ pub static TABLE: &[ReqSpec] = &[
     req!("ElseIf", ["condition": Str], ALL, false, "ext", B::nothing),
     req!("Else", [], ALL, false, "ext", B::nothing),
     req!("IfEnd", [], ALL, false, "ext", B::nothing),
-    req!("Resource", ["handle": Str, "type": Str], ALL, true, "ext", B::unimplemented),
-    req!("ResourceBegin", [], ALL, false, "ext", B::unimplemented),
-    req!("ResourceEnd", [], ALL, false, "ext", B::unimplemented),
+    req!("Resource", ["handle": Str, "type": Str], ALL, true, "ext", B::resource),
+    req!("ResourceBegin", [], ALL, false, "ext", B::resource_begin),
+    req!("ResourceEnd", [], ALL, false, "ext", B::resource_end),
     // Later PRMan / 3Delight shading requests seen in exported RIB: recognised so a scene
     // using them renders with a named warning instead of an unknown-request error.
     req!("ShaderLayer", ["type": Str, "name": Str, "layername": Str], ALL, true, "ext", B::unimplemented),

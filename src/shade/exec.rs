@@ -216,6 +216,9 @@ pub struct Env<'a> {
     /// The surface shader's parameters as bound for this grid (message passing:
     /// `surface("name", var)` in light and volume shaders).
     pub surface_params: &'a [crate::shade::GridVar],
+    /// The atmosphere shader's parameters as bound for this grid (message passing:
+    /// `atmosphere("name", var)` in surface and light shaders).
+    pub atmosphere_params: &'a [crate::shade::GridVar],
 }
 
 /// Ray queries from shaders, answered by the shading system over the frame's ray geometry.

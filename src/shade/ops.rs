@@ -2213,11 +2213,11 @@ fn message(ex: &mut Exec, f: Builtin, args: &[Reg]) -> bool {
             None => (ex.env.info)(&which, &name),
         },
         "attribute" | "option" | "rendererinfo" | "rayinfo" => (ex.env.info)(&which, &name),
-        "displacement" | "surface" => {
-            let vars = if &*which == "surface" {
-                ex.env.surface_params
-            } else {
-                ex.env.displacement_outputs
+        "displacement" | "surface" | "atmosphere" => {
+            let vars = match &*which {
+                "surface" => ex.env.surface_params,
+                "atmosphere" => ex.env.atmosphere_params,
+                _ => ex.env.displacement_outputs,
             };
             let Some((gv, &r)) = vars.iter().find(|v| v.name == name).zip(outs.first()) else {
                 return false;

@@ -220,6 +220,9 @@ struct RunCtx<'s> {
     /// The surface shader's parameters as bound on the grid, for light and volume shaders
     /// that ask for them (`surface("name", var)`); empty otherwise.
     surface_params: &'s [GridVar],
+    /// The atmosphere (volume) shader's parameters as bound on the grid, for surface and
+    /// light shaders that ask for them (`atmosphere("name", var)`); empty otherwise.
+    atmosphere_params: &'s [GridVar],
     /// Run only the program's parameter set-up (defaults, instance values, primitive
     /// variables), not its body.
     params_only: bool,
@@ -536,6 +539,7 @@ impl<'a> ShadeSystem<'a> {
             area_light: None,
             medium: Medium::Camera,
             surface_params: &[],
+            atmosphere_params: &[],
             params_only: false,
         }
     }
@@ -592,6 +596,7 @@ impl<'a> ShadeSystem<'a> {
                 area_light: None,
                 medium: Medium::Camera,
                 surface_params: &[],
+                atmosphere_params: &[],
                 params_only: false,
             };
             if let Some(mut regs) =
@@ -742,8 +747,19 @@ impl<'a> ShadeSystem<'a> {
         } else {
             Vec::new()
         };
+        // Surfaces and lights that read the atmosphere's parameters (`atmosphere("name",
+        // v)`) see them as bound on this grid: the volume shader runs after them.
+        let asks_atmosphere = asks_message(&prog, "atmosphere")
+            || grid_lights
+                .iter()
+                .any(|gl| asks_message(&gl.prog, "atmosphere"));
+        let atmosphere_params = match (&atmosphere, asks_atmosphere) {
+            (Some((aprog, aref)), true) => self.param_values(aprog, aref, grid, &ctx),
+            _ => Vec::new(),
+        };
         let ctx = RunCtx {
             surface_params: &surface_params,
+            atmosphere_params: &atmosphere_params,
             ..ctx
         };
         let lights: Vec<LightResult> = self
@@ -1106,6 +1122,8 @@ impl<'a> ShadeSystem<'a> {
                 // The surface's parameters at those points, for lights that read them.
                 let surface_params: Vec<GridVar> =
                     ctx.surface_params.iter().map(|v| v.pick(idx)).collect();
+                let atmosphere_params: Vec<GridVar> =
+                    ctx.atmosphere_params.iter().map(|v| v.pick(idx)).collect();
                 let sub_ctx = RunCtx {
                     alpha: None,
                     // Its neighbours are unrelated points: derivatives read zero.
@@ -1113,6 +1131,7 @@ impl<'a> ShadeSystem<'a> {
                     triples: false,
                     cones: None,
                     surface_params: &surface_params,
+                    atmosphere_params: &atmosphere_params,
                     ..*ctx
                 };
                 let out = self.eval_lights(&sub, &sub_ctx, lights, Some(ps), Some(want));
@@ -1395,6 +1414,7 @@ impl<'a> ShadeSystem<'a> {
             cones: ctx.cones,
             displacement_outputs: &grid.displacement_outputs,
             surface_params: ctx.surface_params,
+            atmosphere_params: ctx.atmosphere_params,
         };
         let mut ex = Exec::new(prog, n, &env);
         ex.loop_limit = loop_limit(scene);

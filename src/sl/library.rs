@@ -141,8 +141,9 @@ pub fn compile_with(
             Diag::warning(
                 "sl::rsl2",
                 format!(
-                    "RSL 2.0 class with a single `{kind}` method: compiled as a {kind} shader \
-                     with the class's parameters"
+                    "RSL 2.0 class with a single `{kind}` method: compiled as {} {kind} shader \
+                     with the class's parameters",
+                    if kind.starts_with('i') { "an" } else { "a" }
                 ),
             )
             .label(Span::new(file, *at, *at + kind.len()), "class"),

@@ -2,7 +2,7 @@
 //!
 //! Input: the raw text of a `.sl` file. Output: the text with such a class replaced by the
 //! shader it amounts to, or None. A class qualifies when its body holds exactly one member,
-//! a `surface`, `displacement` or `light` method: PRMan runs that method with the class's
+//! a `surface`, `displacement`, `light`, `volume` or `imager` method: PRMan runs that method with the class's
 //! parameters in scope, which is what an RSL 1 shader of that type with the same parameters
 //! and the method's body does (published light classes are often just `light()`).
 //! Classes with member variables, pipeline methods (`construct`, `begin`, `prelighting` …)
@@ -13,7 +13,7 @@
 use super::foreign::strip_comments;
 
 /// The shader kinds a lone method can stand for.
-const METHODS: [&str; 3] = ["surface", "displacement", "light"];
+const METHODS: [&str; 5] = ["surface", "displacement", "light", "volume", "imager"];
 
 /// The rewritten text, the shader kind and where its keyword now stands, when `text` holds
 /// a one-method class.
@@ -143,6 +143,26 @@ mod tests {
             "{out}"
         );
         assert_eq!(out.lines().nth(4), src.lines().nth(4));
+    }
+
+    #[test]
+    fn a_lone_imager_method_becomes_an_imager_shader() {
+        // A published vignette imager written as a PRMan class: its formals are the
+        // imager's globals, so they go and the body stays.
+        let src = "class vig(color background = (0,0,0))\n{\n  public void imager(\n    \
+                   output varying color Ci;\n    output varying color Oi;)\n  {\n    \
+                   Ci += (1 - Oi) * background;\n  }\n}\n";
+        let (out, kind, at) = single_method_class(src).expect("rewritten");
+        assert_eq!(kind, "imager");
+        assert_eq!(&out[at..at + 6], "imager");
+        assert_eq!(out.lines().count(), src.lines().count());
+        assert!(
+            out.contains("imager vig(color background = (0,0,0))"),
+            "{out}"
+        );
+        assert!(!out.contains("output varying color"), "{out}");
+        let vol = "class haze(float d = 1) { public void volume(output color Ci, Oi) { Oi = d; } }";
+        assert_eq!(single_method_class(vol).expect("rewritten").1, "volume");
     }
 
     #[test]

@@ -135,7 +135,14 @@ pub fn shadow_image(z: &ZFile) -> Result<(Image, ([f32; 16], [f32; 16])), String
 pub fn make_shadow(input: &Path, output: &Path) -> Result<(), String> {
     let bytes =
         std::fs::read(input).map_err(|e| format!("cannot read `{}`: {e}", input.display()))?;
-    let z = ZFile::from_bytes(&bytes).map_err(|e| format!("`{}`: {e}", input.display()))?;
+    // A zfile, or a float depth TIFF (`Display "z.tif" "file" "z"`) with its camera
+    // matrices in PRMan's tags.
+    let z = if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        crate::film::tiff::read_depth(&bytes)
+    } else {
+        ZFile::from_bytes(&bytes)
+    }
+    .map_err(|e| format!("`{}`: {e}", input.display()))?;
     let (im, m) = shadow_image(&z).map_err(|e| format!("`{}`: {e}", input.display()))?;
     format::write(
         output,

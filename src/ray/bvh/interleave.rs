@@ -37,14 +37,47 @@ impl Bvh {
         tmax: f32,
         out: &mut [Option<Hit>],
     ) {
+        self.closest_many_with::<false>(o, d, tmin, tmax, out, &mut WalkStats::default());
+    }
+
+    /// [`Bvh::closest_many`] (the same hits, bit for bit) that also counts what the walks
+    /// did into `stats` (added to what it holds): where a ray's time goes, for the rays
+    /// bench and for choosing between tree layouts. The uncounted walk compiles the
+    /// counting out.
+    pub fn closest_many_counted(
+        &self,
+        o: &[Vec3],
+        d: &[Vec3],
+        tmin: &[f32],
+        tmax: f32,
+        out: &mut [Option<Hit>],
+        stats: &mut WalkStats,
+    ) {
+        self.closest_many_with::<true>(o, d, tmin, tmax, out, stats);
+    }
+
+    /// The body of [`Bvh::closest_many`], counting into `stats` when `STATS`.
+    fn closest_many_with<const STATS: bool>(
+        &self,
+        o: &[Vec3],
+        d: &[Vec3],
+        tmin: &[f32],
+        tmax: f32,
+        out: &mut [Option<Hit>],
+        stats: &mut WalkStats,
+    ) {
         let n = o.len().min(d.len()).min(tmin.len()).min(out.len());
         if self.nodes.is_empty() {
+            // (One leaf: counted as rays alone.)
+            if STATS {
+                stats.rays += n as u64;
+            }
             for k in 0..n {
                 out[k] = self.closest(o[k], d[k], tmin[k], tmax);
             }
             return;
         }
-        self.interleave::<true>(
+        self.interleave::<true, STATS>(
             &o[..n],
             d,
             tmin,
@@ -61,6 +94,7 @@ impl Bvh {
                 false
             },
             &mut |k, best| out[k] = best,
+            stats,
         );
     }
 
@@ -97,7 +131,7 @@ impl Bvh {
         tmax: &[f32],
         f: &mut dyn FnMut(usize, Hit) -> bool,
     ) {
-        self.interleave::<false>(
+        self.interleave::<false, false>(
             o,
             d,
             tmin,
@@ -115,6 +149,7 @@ impl Bvh {
                 )
             },
             &mut |_, _| {},
+            &mut WalkStats::default(),
         );
     }
 
@@ -134,7 +169,7 @@ impl Bvh {
     /// memory (no FMA is enabled, so every result is bit for bit the portable one; the leaves
     /// do the same, see `quad4`).
     #[inline(always)]
-    fn interleave<const ORDERED: bool>(
+    fn interleave<const ORDERED: bool, const STATS: bool>(
         &self,
         o: &[Vec3],
         d: &[Vec3],
@@ -142,20 +177,23 @@ impl Bvh {
         tmax: impl Fn(usize) -> f32,
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
+        stats: &mut WalkStats,
     ) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 was detected just above.
-            unsafe { self.interleave_avx2::<ORDERED>(o, d, tmin, tmax, on_hit, done) };
+            unsafe {
+                self.interleave_avx2::<ORDERED, STATS>(o, d, tmin, tmax, on_hit, done, stats)
+            };
             return;
         }
-        self.interleave_lanes::<ORDERED, false>(o, d, tmin, tmax, on_hit, done);
+        self.interleave_lanes::<ORDERED, false, STATS>(o, d, tmin, tmax, on_hit, done, stats);
     }
 
     /// [`Bvh::interleave_lanes`] compiled for AVX2 (see [`Bvh::interleave`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn interleave_avx2<const ORDERED: bool>(
+    unsafe fn interleave_avx2<const ORDERED: bool, const STATS: bool>(
         &self,
         o: &[Vec3],
         d: &[Vec3],
@@ -163,13 +201,14 @@ impl Bvh {
         tmax: impl Fn(usize) -> f32,
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
+        stats: &mut WalkStats,
     ) {
-        self.interleave_lanes::<ORDERED, true>(o, d, tmin, tmax, on_hit, done);
+        self.interleave_lanes::<ORDERED, true, STATS>(o, d, tmin, tmax, on_hit, done, stats);
     }
 
     /// The body of [`Bvh::interleave`].
     #[inline(always)]
-    fn interleave_lanes<const ORDERED: bool, const AVX2: bool>(
+    fn interleave_lanes<const ORDERED: bool, const AVX2: bool, const STATS: bool>(
         &self,
         o: &[Vec3],
         d: &[Vec3],
@@ -177,8 +216,12 @@ impl Bvh {
         tmax: impl Fn(usize) -> f32,
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
         done: &mut impl FnMut(usize, Option<Hit>),
+        stats: &mut WalkStats,
     ) {
         let n = o.len();
+        if STATS {
+            stats.rays += n as u64;
+        }
         // 16 rays in flight: with the tree on huge pages (no page walk per prefetch) more
         // misses overlap; on the bench, 16 lanes beat 8 in 5 of 6 interleaved runs (median
         // 2.12 against 1.95 M rays/s; 32: 2.08). Before the huge pages 16 were no faster.
@@ -192,7 +235,7 @@ impl Bvh {
         while !lanes.is_empty() {
             let mut i = 0;
             while i < lanes.len() {
-                if self.step::<ORDERED, AVX2>(&mut lanes[i], on_hit) {
+                if self.step::<ORDERED, AVX2, STATS>(&mut lanes[i], on_hit, stats) {
                     i += 1;
                     continue;
                 }
@@ -212,15 +255,22 @@ impl Bvh {
     /// One step of a lane's walk (see [`Bvh::interleave`]); false when the walk is over.
     /// The steps in sequence are [`Bvh::walk`]'s loop for `ORDERED`.
     #[inline(always)]
-    fn step<const ORDERED: bool, const AVX2: bool>(
+    fn step<const ORDERED: bool, const AVX2: bool, const STATS: bool>(
         &self,
         l: &mut Lane,
         on_hit: &mut impl FnMut(usize, &mut Option<Hit>, QuadId, f32, f32, f32, &mut f32) -> bool,
+        stats: &mut WalkStats,
     ) -> bool {
         match l.step {
             Step::Node(c) => {
                 let n = &self.nodes[c as usize];
-                match self.visit::<ORDERED, AVX2>(n, &l.rb, l.tmin, l.tmax, &mut l.stack) {
+                let depth = l.stack.len();
+                let next = self.visit::<ORDERED, AVX2>(n, &l.rb, l.tmin, l.tmax, &mut l.stack);
+                if STATS {
+                    stats.nodes += 1;
+                    stats.pushes += (l.stack.len() - depth) as u64;
+                }
+                match next {
                     Some((c, 0)) => {
                         self.prefetch(c, 0);
                         l.step = Step::Node(c);
@@ -235,6 +285,11 @@ impl Bvh {
                 }
             }
             Step::Leaf(first, count) => {
+                if STATS {
+                    stats.leaves += 1;
+                    stats.quads += u64::from(count & 0xff);
+                    stats.leaf_bytes += 4 * u64::from(count >> 8);
+                }
                 let (ray, best) = (l.ray, &mut l.best);
                 let stop = self.leaf(
                     first,
@@ -255,6 +310,9 @@ impl Bvh {
                 return false;
             };
             if t > l.tmax {
+                if STATS {
+                    stats.skipped += 1;
+                }
                 continue;
             }
             // (A leaf's block was prefetched when it was pushed.)
@@ -266,6 +324,23 @@ impl Bvh {
             return true;
         }
     }
+}
+
+/// What interleaved walks did ([`Bvh::closest_many_counted`]): totals over their rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WalkStats {
+    /// Walks (rays).
+    pub rays: u64,
+    /// Interior nodes visited (their slab tests: two cache lines each).
+    pub nodes: u64,
+    /// Leaves tested, the quads in them, and the bytes of their blocks the tests read.
+    pub leaves: u64,
+    pub quads: u64,
+    pub leaf_bytes: u64,
+    /// Children pushed for later, and of those popped, the ones skipped (beyond a closer
+    /// hit found meanwhile).
+    pub pushes: u64,
+    pub skipped: u64,
 }
 
 /// What a lane of an interleaved walk does next.
