@@ -537,8 +537,11 @@ impl LazyGrid {
                 }
                 std::mem::replace(&mut *st, GridState::Released { shaded })
             };
-            // Freed outside the lock.
-            drop(gone);
+            // Freed outside the lock, into this thread's buffer pool (a shaded grid's buffers
+            // go there when its last holder lets go: `ShadedGrid`'s drop).
+            if let GridState::Pending(p) = gone {
+                p.grid.recycle();
+            }
         }
     }
 }
@@ -1149,6 +1152,9 @@ impl Frame<'_> {
             return None;
         }
         let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+        // Its columns go to this thread's buffer pool, not back to the dicing thread's
+        // allocator arena (see `crate::pool`).
+        grid.recycle();
         done(t2);
         self.check_displacement_bound(prim, &sg, &info.clip);
         if !sg.is_empty() && sg.zmin < zmin {
@@ -2067,6 +2073,8 @@ impl<'a, 'o> Flow<'a, 'o> {
                     .filter_map(|c| locked(&self.cell(c, f).tile).take())
                     .collect();
                 lane.film.put_tiles(&tiles);
+                // Into this thread's buffer pool, not the filtering threads' arenas.
+                tiles.into_iter().for_each(|t| crate::pool::give(t.data));
                 self.stats.time(Stage::Filter, t);
                 lane.finished = self.buckets.rect(0, f).y1.max(0) as usize;
                 lane.next = f + 1;

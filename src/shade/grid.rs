@@ -100,28 +100,30 @@ impl Grid {
         self.len() == 0
     }
     /// A grid of `nu × nv` points with every per-point field sized and zeroed
-    /// (Cs and Os white, Oi opaque).
+    /// (Cs and Os white, Oi opaque). Its columns come from this thread's buffer pool
+    /// ([`crate::pool`]); [`Grid::recycle`] gives them back.
     pub fn with_size(nu: usize, nv: usize) -> Grid {
+        use crate::pool::filled;
         let n = nu * nv;
         Grid {
             nu,
             nv,
-            p: vec![Vec3::ZERO; n],
-            n: vec![Vec3::ZERO; n],
-            ng: vec![Vec3::ZERO; n],
-            dpdu: vec![Vec3::ZERO; n],
-            dpdv: vec![Vec3::ZERO; n],
-            u: vec![0.0; n],
-            v: vec![0.0; n],
-            s: vec![0.0; n],
-            t: vec![0.0; n],
+            p: filled(n, Vec3::ZERO),
+            n: filled(n, Vec3::ZERO),
+            ng: filled(n, Vec3::ZERO),
+            dpdu: filled(n, Vec3::ZERO),
+            dpdv: filled(n, Vec3::ZERO),
+            u: filled(n, 0.0),
+            v: filled(n, 0.0),
+            s: filled(n, 0.0),
+            t: filled(n, 0.0),
             du: 0.0,
             dv: 0.0,
-            cs: vec![Vec3::ONE; n],
-            os: vec![Vec3::ONE; n],
-            i: vec![Vec3::ZERO; n],
-            ci: vec![Vec3::ZERO; n],
-            oi: vec![Vec3::ONE; n],
+            cs: filled(n, Vec3::ONE),
+            os: filled(n, Vec3::ONE),
+            i: filled(n, Vec3::ZERO),
+            ci: filled(n, Vec3::ZERO),
+            oi: filled(n, Vec3::ONE),
             primvars: Vec::new(),
             outputs: Vec::new(),
             displacement_outputs: Vec::new(),
@@ -175,12 +177,18 @@ impl Grid {
         }
     }
     /// Gives the per-point columns back to this thread's buffer pool (a [`Grid::subset`]
-    /// made for one run).
+    /// made for one run, a diced grid once shaded).
     pub fn recycle(self) {
-        use crate::shade::value::{recycle, Slot};
-        recycle([self.p, self.n, self.ng, self.dpdu, self.dpdv].map(Slot::VT));
-        recycle([self.u, self.v, self.s, self.t].map(Slot::VF));
-        recycle([self.cs, self.os, self.i, self.ci, self.oi].map(Slot::VT));
+        use crate::pool::give;
+        for v in [self.p, self.n, self.ng, self.dpdu, self.dpdv] {
+            give(v);
+        }
+        for v in [self.u, self.v, self.s, self.t] {
+            give(v);
+        }
+        for v in [self.cs, self.os, self.i, self.ci, self.oi] {
+            give(v);
+        }
     }
     pub fn primvar(&self, name: &str) -> Option<&GridVar> {
         self.primvars.iter().find(|v| v.name == name)
