@@ -197,3 +197,30 @@ impl Grid {
         self.outputs.iter().find(|v| v.name == name)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_recycled_grids_columns_serve_the_next_grid_freshly_filled() {
+        let mut g = Grid::with_size(20, 20);
+        let old: Vec<*const Vec3> = [&g.p, &g.n, &g.cs, &g.oi].map(|c| c.as_ptr()).to_vec();
+        for c in [&mut g.p, &mut g.n, &mut g.cs, &mut g.oi] {
+            c.fill(Vec3::splat(7.0));
+        }
+        g.u.fill(7.0);
+        g.recycle();
+        let h = Grid::with_size(19, 21);
+        // The same memory (this thread's pool), none of the old values.
+        let new = [
+            &h.p, &h.n, &h.ng, &h.dpdu, &h.dpdv, &h.cs, &h.os, &h.i, &h.ci, &h.oi,
+        ];
+        assert!(old.iter().all(|p| new.iter().any(|c| c.as_ptr() == *p)));
+        for (c, want) in new.iter().zip([0., 0., 0., 0., 0., 1., 1., 0., 0., 1.]) {
+            assert_eq!(c.len(), 19 * 21);
+            assert!(c.iter().all(|v| *v == Vec3::splat(want)));
+        }
+        assert!(h.u.iter().all(|v| *v == 0.0));
+    }
+}

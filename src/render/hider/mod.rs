@@ -1094,3 +1094,31 @@ mod lens_bound_tests {
         assert!(LensBound::from_corners(nan, [0.2; 4], &d).is_none());
     }
 }
+
+#[cfg(test)]
+mod pool_tests {
+    use super::*;
+
+    #[test]
+    fn a_shaded_grid_let_go_on_another_thread_leaves_its_buffers_there() {
+        let mut g = ShadedGrid::default();
+        g.xy = pool::filled(300, [0.0, 0.0]);
+        g.ci = pool::filled(300, [0.0; 3]);
+        g.mp_bounds = pool::filled(250, [0.0; 4]);
+        g.live = pool::filled(250, true);
+        let here = pool::pooled_count::<[f32; 2]>();
+        let there = std::thread::spawn(move || {
+            drop(g);
+            (
+                pool::pooled_count::<[f32; 2]>(),
+                pool::pooled_count::<[f32; 3]>(),
+                pool::pooled_count::<[f32; 4]>(),
+                pool::pooled_count::<bool>(),
+            )
+        })
+        .join()
+        .unwrap();
+        assert_eq!(there, (1, 1, 1, 1));
+        assert_eq!(pool::pooled_count::<[f32; 2]>(), here);
+    }
+}
