@@ -15,6 +15,7 @@ pub mod num;
 pub mod pathcase;
 pub mod pattern;
 pub mod pipeline;
+pub mod pool;
 pub mod ray;
 pub mod render;
 pub mod rib;

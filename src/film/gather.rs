@@ -25,6 +25,7 @@
 use super::filter::{Filter, FilterTables, Table1d};
 use super::resolve::{DepthFilter, Film, Tile};
 use super::SampleBuffer;
+use crate::pool;
 
 /// Samples processed together: one AVX register of f32.
 pub const LANES: usize = 8;
@@ -217,9 +218,15 @@ impl<'a> PrepareCtx<'a> {
         if let Ok(mut pool) = self.px_pool.lock() {
             pool.push(p.px);
         }
-        // The few blocks a ring keeps are not worth keeping.
-        if p.ring.is_none() {
-            self.recycle_rgba(p.rgba);
+        // The few blocks a ring keeps, its index and the weight scratch go to this thread's
+        // buffer pool (freed, they would go back to the arena of the hiding thread).
+        pool::give(p.w);
+        match p.ring {
+            None => self.recycle_rgba(p.rgba),
+            Some(at) => {
+                pool::give(at);
+                pool::give(p.rgba);
+            }
         }
     }
 
@@ -269,7 +276,7 @@ impl Prepared {
             lanes,
             rgba,
             px,
-            w: vec![0.0; 2 * TAPS * lanes],
+            w: pool::filled(2 * TAPS * lanes, 0.0),
             ring: None,
         }
     }
@@ -295,8 +302,8 @@ impl Prepared {
         };
         let inner = overlap(self.x0, self.width, ix0, ix1).max(0) as usize
             * overlap(self.y0, self.height, iy0, iy1).max(0) as usize;
-        let mut at = vec![NOT_KEPT; npix];
-        let mut kept = Vec::with_capacity((npix - inner.min(npix)) * n);
+        let mut at = pool::filled(npix, NOT_KEPT);
+        let mut kept = pool::take((npix - inner.min(npix)) * n);
         for j in 0..self.height {
             let y = self.y0 + j as i32;
             let row_inner = y >= iy0 as i32 && y < iy1 as i32;
@@ -770,7 +777,7 @@ pub fn gather_tile(
     let (w, h) = (x1 - x0, y1 - y0);
     tile.w = w;
     tile.h = h;
-    tile.data = vec![0f32; w * h * 5];
+    tile.data = pool::filled(w * h * 5, 0.0);
     // Each pixel of the region grown by one: its contributions, ABSENT outside the image
     // (filled a row of a part at a time: no per-pixel lookup of which part holds it).
     let gw = w + 2;
@@ -953,7 +960,7 @@ impl Partial {
                 y0,
                 w,
                 h,
-                data: vec![0f32; w * h * 5],
+                data: pool::filled(w * h * 5, 0.0),
             },
             inner: [0; 4],
         }
@@ -971,7 +978,7 @@ pub fn start_tile(film: &Film, p: &Prepared, x0: usize, y0: usize, w: usize, h: 
         y0,
         w: x1 - x0c,
         h: y1 - y0c,
-        data: vec![0f32; (x1 - x0c) * (y1 - y0c) * 5],
+        data: pool::filled((x1 - x0c) * (y1 - y0c) * 5, 0.0),
     };
     // Pixels whose 3 × 3 neighbours inside the image are all in `p`.
     let (px0, py0) = (p.x0.max(0) as usize, p.y0.max(0) as usize);
@@ -997,6 +1004,7 @@ pub fn start_tile(film: &Film, p: &Prepared, x0: usize, y0: usize, w: usize, h: 
             inner[3] - inner[1],
         );
         copy_into(&mut tile, &part);
+        pool::give(part.data);
     }
     Partial { tile, inner }
 }
@@ -1022,6 +1030,7 @@ pub fn finish_tile(film: &Film, parts: &[&Prepared], partial: Partial) -> Tile {
         if a < c && b < d {
             let part = gather_tile(film, parts, a, b, c - a, d - b);
             copy_into(&mut tile, &part);
+            pool::give(part.data);
         }
     }
     tile

@@ -102,6 +102,27 @@ impl Film {
         }
     }
 
+    /// The size and channels of a film without its pixels: tiles can be filtered against it
+    /// while the film itself is being written ([`filter_tile`] reads its region as
+    /// [`Film::new`] leaves it: black, depth +∞).
+    pub fn shape(&self) -> Film {
+        Film {
+            width: self.width,
+            height: self.height,
+            channel_names: self.channel_names.clone(),
+            data: Vec::new(),
+        }
+    }
+
+    /// A pixel as [`Film::new`] leaves it: zeros, depth (`z`) +∞.
+    pub fn blank_pixel(&self) -> Vec<f32> {
+        let mut px = vec![0.0; self.channels()];
+        if let Some(z) = self.channel("z") {
+            px[z] = f32::INFINITY;
+        }
+        px
+    }
+
     /// The standard channels `r g b a z` followed by `aovs`.
     pub fn standard_channels(aovs: &[String]) -> Vec<String> {
         let mut v: Vec<String> = ["r", "g", "b", "a", "z"]
@@ -292,7 +313,14 @@ pub fn filter_tile(
     tile.w = w;
     tile.h = h;
     tile.data.reserve(w * h * nch_film);
-    for y in y0..y1 {
+    if film.data.is_empty() {
+        // A film's shape (see [`Film::shape`]): the region as `Film::new` leaves it.
+        let blank = film.blank_pixel();
+        for _ in 0..w * h {
+            tile.data.extend_from_slice(&blank);
+        }
+    }
+    for y in (y0..y1).filter(|_| !film.data.is_empty()) {
         let row = (y * film.width + x0) * nch_film;
         tile.data
             .extend_from_slice(&film.data[row..row + w * nch_film]);

@@ -10,6 +10,7 @@
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::geom::{Bound, Surface};
+use crate::shade::Grid;
 
 use super::camera::{Camera, Dof, PixelRect};
 
@@ -197,8 +198,17 @@ pub fn decide(surface: &dyn Surface, bound: &Bound, shading_rate: f32, view: &Vi
     }
     // Trial dice: the longest u-line and v-line on screen set the dicing rates. (Once the
     // geometry's `Surface::raster_lengths` hook is available it can replace this when Some.)
+    let grid = surface.dice(TEST_DICE, TEST_DICE);
+    let d = decide_from_trial(surface, &grid, edge, view);
+    // Its buffers came from this thread's pool: back there (freed, they would drain it).
+    grid.recycle();
+    d
+}
+
+/// [`decide`] once `grid`, the surface diced `TEST_DICE × TEST_DICE`, has shown how long its
+/// lines are on screen (`edge`: a micropolygon's side in pixels).
+fn decide_from_trial(surface: &dyn Surface, grid: &Grid, edge: f32, view: &View) -> Decision {
     let n = TEST_DICE;
-    let grid = surface.dice(n, n);
     if grid.p.len() < n * n {
         return Decision::Split { eye: false };
     }

@@ -5,18 +5,19 @@
 //! * every surface is bounded, culled, split or diced with decisions that depend only on the
 //!   surface and the camera; split children get keys derived from their parent's, so every
 //!   grid has the same identity whatever the bucket layout;
-//! * buckets are processed row by row: first every surface whose bound first reaches the row
-//!   is split/diced/displaced (in parallel over surfaces), then the row's buckets are hidden
-//!   (in parallel over buckets) from the grids overlapping them, then grids no later row
-//!   needs are freed — memory holds only the grids overlapping the open rows. A grid's
+//! * buckets are processed row by row, as a dataflow without a barrier between rows
+//!   ([`Flow`]): every surface whose bound first reaches row r is split/diced/displaced (in
+//!   parallel over surfaces) once row r − 1's are and row r − 2 is hidden; row r's buckets
+//!   are hidden (in parallel over buckets) as soon as its grids are made, while row r − 1's
+//!   last buckets may still run; grids no later row needs are freed — memory holds only the
+//!   grids overlapping the open rows. A grid's
 //!   surface is shaded when the first bucket hiding it asks for it (a [`LazyGrid`]): a grid
 //!   behind every opaque sample of each bucket it overlaps is never shaded, and a grid's
 //!   points (diced or shaded) are dropped as soon as the last bucket it overlaps is hidden
-//!   (only its small record waits for the end of its last row). The surfaces
-//!   of row r + 1 are split, diced and displaced alongside the hiding of row r; the tile of a
-//!   bucket of row r − 1 is filtered during the hiding of row r, by the thread that hides the
-//!   last bucket of row r within its reach, and the row's tiles go into the film (one
-//!   writer) after it;
+//!   (only its small record waits for the end of its last row). The tile of a bucket is
+//!   filtered by the thread that hides the last bucket within its reach, and a bucket's
+//!   samples are dropped once the last tile reading them is filtered; finished rows go into
+//!   the film, and their scanlines to the output, in order, by one thread at a time;
 //! * surfaces are made from the scene's primitives in parallel before the first row; those
 //!   cheap to make again (polygons, quadrics, patches, points, curves) are then dropped and
 //!   made again when their first row opens, so memory holds the scene and the open rows'
@@ -25,9 +26,8 @@
 //!   covers it, so the image is identical for any bucket size or thread count.
 
 use std::cell::Cell;
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, RwLock};
 use std::time::Instant;
 
 use glam::Vec3;
@@ -479,33 +479,82 @@ impl LazyGrid {
     fn state(&self) -> MutexGuard<'_, GridState> {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }
+    /// The state, for a bucket about to shade or read the grid. While another thread holds
+    /// it (shading the grid: on a heavy shader, long), this thread does other pending work of
+    /// the frame (other buckets, the next row's making) instead of waiting idle, and waits
+    /// only when there is none. Nothing is held across that work but this bucket's own hiding
+    /// state (the hider's scratch is per bucket), and the holder shades without waiting on
+    /// anything, so every wait ends.
+    fn state_for_bucket(&self, stats: &Stats) -> MutexGuard<'_, GridState> {
+        let mut counted = false;
+        loop {
+            match self.state.try_lock() {
+                Ok(g) => return g,
+                Err(std::sync::TryLockError::Poisoned(e)) => return e.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => {}
+            }
+            if !counted {
+                Stats::add(&stats.grid_waits, 1);
+                counted = true;
+            }
+            let t = Instant::now();
+            let before = SHADING_NS.with(Cell::get);
+            // Work done meanwhile runs on this thread's stack, above this bucket: a few
+            // levels at most (shading and tracing need stack of their own).
+            let depth = WAITS_NESTED.with(Cell::get);
+            let worked = depth < MAX_WAITS_NESTED && {
+                WAITS_NESTED.with(|d| d.set(depth + 1));
+                let y = rayon::yield_now();
+                WAITS_NESTED.with(|d| d.set(depth));
+                matches!(y, Some(rayon::Yield::Executed))
+            };
+            // The other work is not this bucket's hiding (its own shading counted inside).
+            let ns = t.elapsed().as_nanos() as u64;
+            SHADING_NS.with(|c| c.set(before + ns));
+            if !worked {
+                let t = Instant::now();
+                let st = self.state();
+                Stats::add(&stats.grid_wait_ns, t.elapsed().as_nanos() as u64);
+                return st;
+            }
+        }
+    }
     /// Bytes held (see [`GridState::bytes`]).
     fn bytes(&self) -> usize {
         self.state().bytes()
     }
-    /// Whether the surface shader ran on the grid.
-    fn was_shaded(&self) -> bool {
-        self.state().shaded()
-    }
     /// One more bucket overlapping the grid is hidden; after the last, its points are
-    /// dropped (a bucket still holding the shaded grid keeps it until it lets go).
+    /// dropped (a bucket still holding the shaded grid keeps it until it lets go), and a
+    /// grid never shaded is counted.
     fn bucket_done(&self, stats: &Stats) {
         if self.left.fetch_sub(1, Ordering::AcqRel) == 1 {
             let gone = {
                 let mut st = self.state();
                 stats.free(st.bytes());
                 let shaded = st.shaded();
+                if !shaded {
+                    Stats::add(&stats.grids_unshaded, 1);
+                }
                 std::mem::replace(&mut *st, GridState::Released { shaded })
             };
-            // Freed outside the lock.
-            drop(gone);
+            // Freed outside the lock, into this thread's buffer pool (a shaded grid's buffers
+            // go there when its last holder lets go: `ShadedGrid`'s drop).
+            if let GridState::Pending(p) = gone {
+                p.grid.recycle();
+            }
         }
     }
 }
 
+/// Most bucket waits for a grid (see [`LazyGrid::state_for_bucket`]) one thread does other
+/// work inside at once; a deeper one waits.
+const MAX_WAITS_NESTED: u32 = 3;
+
 thread_local! {
-    /// Nanoseconds this thread spent shading grids asked for by a hider: the bucket's hiding
-    /// time leaves them out (they count as shading).
+    /// Bucket waits for a grid this thread is doing other work inside.
+    static WAITS_NESTED: Cell<u32> = const { Cell::new(0) };
+    /// Nanoseconds this thread spent shading grids asked for by a hider, or on other work
+    /// while a bucket waited for a grid: the bucket's hiding time leaves them out.
     static SHADING_NS: Cell<u64> = const { Cell::new(0) };
 }
 
@@ -533,7 +582,7 @@ impl GridSource for Source<'_, '_> {
     fn shaded(&self) -> Option<&ShadedGrid> {
         self.got
             .get_or_init(|| {
-                let mut st = self.grid.state();
+                let mut st = self.grid.state_for_bucket(self.frame.stats);
                 match std::mem::replace(&mut *st, GridState::Shaded(None)) {
                     GridState::Pending(p) => {
                         let g = self.frame.shade(p, self.grid.zmin).map(Arc::from);
@@ -560,47 +609,18 @@ impl GridSource for Source<'_, '_> {
 /// samples, or their filter-ready form.
 enum Hidden {
     Samples(SampleBuffer),
-    /// Prepared for the gather, and the bucket's tile with the pixels that need no
-    /// neighbour already filtered.
-    Prepared(
-        crate::film::gather::Prepared,
-        Option<crate::film::gather::Partial>,
-    ),
+    /// Prepared for the gather (the bucket's own tile, started by its hiding, waits beside
+    /// it: see [`BucketCell`]).
+    Prepared(crate::film::gather::Prepared),
 }
 
 impl Hidden {
     fn bytes(&self) -> usize {
         match self {
             Hidden::Samples(b) => b.positions.len() * 8 + b.values.len() * 4,
-            Hidden::Prepared(p, _) => p.bytes(),
+            Hidden::Prepared(p) => p.bytes(),
         }
     }
-}
-
-/// The hidden buckets the filter of bucket (col, row) reads — rows `row − ky ..= row + ky`,
-/// columns `col − kx ..= col + kx` — row-major (the order the tile's result depends on):
-/// from `rows` (finished rows, oldest first), then from `open`, the row being hidden (its
-/// buckets within reach must all be hidden).
-fn within_reach<'h>(
-    rows: &'h VecDeque<(usize, Vec<Hidden>)>,
-    open: Option<(usize, &'h [OnceLock<Hidden>])>,
-    col: usize,
-    row: usize,
-    kx: usize,
-    ky: usize,
-) -> Vec<&'h Hidden> {
-    let near = |r: usize| r + ky >= row && r <= row + ky;
-    let lo = col.saturating_sub(kx);
-    let mut parts = Vec::new();
-    for (r, hs) in rows.iter().filter(|(r, _)| near(*r)) {
-        debug_assert!(open.is_none_or(|(o, _)| *r < o));
-        parts.extend(hs[lo.min(hs.len())..(col + kx + 1).min(hs.len())].iter());
-    }
-    if let Some((_, slots)) = open.filter(|(r, _)| near(*r)) {
-        let hi = (col + kx + 1).min(slots.len());
-        parts.extend(slots[lo.min(hi)..hi].iter().filter_map(OnceLock::get));
-    }
-    parts
 }
 
 /// The samples of `parts` (buffers of whole pixels, same samples per pixel and channels)
@@ -1132,6 +1152,9 @@ impl Frame<'_> {
             return None;
         }
         let sg = ShadedGrid::new(&grid, &self.view, &info, &self.aovs);
+        // Its columns go to this thread's buffer pool, not back to the dicing thread's
+        // allocator arena (see `crate::pool`).
+        grid.recycle();
         done(t2);
         self.check_displacement_bound(prim, &sg, &info.clip);
         if !sg.is_empty() && sg.zmin < zmin {
@@ -1270,7 +1293,7 @@ fn render_inner(
     surfaces: Surfaces,
     shader: &dyn GridShader,
     opts: &RenderOptions,
-    mut rows_out: Option<&mut (dyn RowSink + Send)>,
+    rows_out: Option<&mut (dyn RowSink + Send)>,
     diags: &Diagnostics,
 ) -> Film {
     let wall = Instant::now();
@@ -1504,7 +1527,7 @@ fn render_inner(
         let prepared: Option<Vec<&crate::film::gather::Prepared>> = parts
             .iter()
             .map(|h| match h {
-                Hidden::Prepared(p, _) => Some(p),
+                Hidden::Prepared(p) => Some(p),
                 Hidden::Samples(_) => None,
             })
             .collect();
@@ -1543,39 +1566,6 @@ fn render_inner(
             p(d, total);
         }
         tile
-    };
-    // Takes the partial tiles the hiding of `row` started (None where there are none).
-    let take_partials = |row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
-        rows.iter_mut()
-            .find(|(r, _)| *r == row)
-            .map(|(_, hs)| {
-                hs.iter_mut()
-                    .map(|h| match h {
-                        Hidden::Prepared(_, partial) => partial.take(),
-                        Hidden::Samples(_) => None,
-                    })
-                    .collect()
-            })
-            .unwrap_or_else(|| (0..buckets.cols).map(|_| None).collect::<Vec<_>>())
-    };
-    // Filters row `row` once every row within reach is hidden (the rows at the end of the
-    // frame; the others are filtered bucket by bucket inside the hiding of the row below),
-    // in parallel into tiles, then written into the film.
-    let filter_row = |film: &mut Film, row: usize, rows: &mut VecDeque<(usize, Vec<Hidden>)>| {
-        let partials = take_partials(row, rows);
-        let rows: &VecDeque<(usize, Vec<Hidden>)> = rows;
-        let shared: &Film = film;
-        let tiles: Vec<crate::film::Tile> = partials
-            .into_par_iter()
-            .enumerate()
-            .map(|(col, partial)| {
-                let parts = within_reach(rows, None, col, row, kx, ky);
-                filter_one(shared, col, row, &parts, partial)
-            })
-            .collect();
-        let t = Instant::now();
-        film.put_tiles(&tiles);
-        stats.time(Stage::Filter, t);
     };
     // Splits, dices and displaces everything that starts in `row`: the surfaces of the
     // primitives first reaching it are made again (diagnostics were reported the first
@@ -1646,7 +1636,7 @@ fn render_inner(
     clock = stats.phase(Phase::Setup, clock);
     // The film is made (its pages first touched: ~10 ms at 1280 × 960) while the first row's
     // surfaces are split, diced and shaded — before, it ran alone, the other thread idle.
-    let (mut film, mut kept): (Film, Vec<Kept>) = rayon::join(
+    let (film, first): (Film, Vec<Kept>) = rayon::join(
         || Film::new(xres as usize, yres as usize, film_channels),
         || {
             if buckets.rows > 0 {
@@ -1657,198 +1647,125 @@ fn render_inner(
         },
     );
     clock = stats.phase(Phase::FirstRow, clock);
-    // Hidden rows still needed by a row to filter, oldest first.
-    let mut hidden: VecDeque<(usize, Vec<Hidden>)> = VecDeque::new();
-    let mut next_filter = 0usize;
-    // Scanlines handed to `rows_out`, and scanlines final in the film.
-    let first_line = buckets.crop.y0.max(0) as usize;
-    let (mut sent, mut finished) = (first_line, first_line);
-    // Grids no row needs any more, freed alongside the next row's hiding.
-    let mut dead: Vec<Kept> = Vec::new();
-    for row in 0..buckets.rows {
-        // The row whose tiles this row's hiding completes: a tile is filtered as soon as the
-        // buckets of this row within its reach are hidden, by the thread that hid the last
-        // of them (no barrier between hiding and filtering; the samples still in cache).
-        let frow = row.checked_sub(ky);
-        let partials: Vec<std::sync::Mutex<Option<crate::film::gather::Partial>>> = frow
-            .map(|f| take_partials(f, &mut hidden))
-            .unwrap_or_default()
-            .into_iter()
-            .map(std::sync::Mutex::new)
+    // Tiles are filtered against the film's shape while the film itself takes finished rows.
+    let shape = film.shape();
+    // Hides bucket (col, row) from the grids of `list` overlapping it, prepared for the filter
+    // at once, with the pixels needing no other bucket already filtered (while hot).
+    let hide_one = |col: usize, row: usize, list: &[Arc<Kept>]| -> (Hidden, Option<Partial>) {
+        let t = Instant::now();
+        let sources: Vec<Source> = list
+            .iter()
+            .filter(|k| k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1)
+            .map(|k| Source {
+                frame: &frame,
+                grid: &k.grid,
+                got: OnceLock::new(),
+            })
             .collect();
-        let slots: Vec<OnceLock<Hidden>> = (0..buckets.cols).map(|_| OnceLock::new()).collect();
-        let waiting: Vec<AtomicUsize> = (0..buckets.cols).map(|_| AtomicUsize::new(0)).collect();
-        let tiles: Vec<OnceLock<crate::film::Tile>> =
-            (0..buckets.cols).map(|_| OnceLock::new()).collect();
-        let film_ref: &Film = &film;
-        let hidden_ref = &hidden;
-        // Hide this row's buckets in parallel (each prepared for the filter at once).
-        let hide_row = || {
-            (0..buckets.cols).into_par_iter().for_each(|col| {
-                let t = Instant::now();
-                let sources: Vec<Source> = kept
-                    .iter()
-                    .filter(|k| {
-                        k.rows.0 <= row && row <= k.rows.1 && k.cols.0 <= col && col <= k.cols.1
-                    })
-                    .map(|k| Source {
-                        frame: &frame,
-                        grid: &k.grid,
-                        got: OnceLock::new(),
-                    })
-                    .collect();
-                let grids: Vec<&dyn GridSource> =
-                    sources.iter().map(|s| s as &dyn GridSource).collect();
-                // Shading asked for by the hider counts as shading, not hiding.
-                let shading_before = SHADING_NS.with(Cell::get);
-                let hide_time = |t: Instant| {
-                    let shading = SHADING_NS.with(Cell::get) - shading_before;
-                    let ns = (t.elapsed().as_nanos() as u64).saturating_sub(shading);
-                    stats.add_time(Stage::Hide, ns);
-                };
-                let rect = buckets.sample_rect(col, row);
-                let h = match &gather {
-                    Some(ctx) => {
-                        let mut p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
-                            Some(p) => {
-                                hide_time(t);
-                                p
-                            }
-                            None => {
-                                let buf = frame.hider.hide(rect, &grids, stats);
-                                hide_time(t);
-                                let t = Instant::now();
-                                let p = crate::film::gather::prepare(&buf, ctx);
-                                stats.time(Stage::Filter, t);
-                                p
-                            }
-                        };
-                        // The pixels needing no other bucket, filtered while hot.
-                        let t = Instant::now();
-                        let out = buckets.rect(col, row);
-                        let partial = crate::film::gather::start_tile(
-                            film_ref,
-                            &p,
-                            out.x0 as usize,
-                            out.y0 as usize,
-                            out.width(),
-                            out.height(),
-                        );
-                        p.keep_ring(&partial, ctx);
-                        stats.time(Stage::Filter, t);
-                        Hidden::Prepared(p, Some(partial))
+        let grids: Vec<&dyn GridSource> = sources.iter().map(|s| s as &dyn GridSource).collect();
+        // Shading asked for by the hider counts as shading, not hiding.
+        let shading_before = SHADING_NS.with(Cell::get);
+        let hide_time = |t: Instant| {
+            let shading = SHADING_NS.with(Cell::get) - shading_before;
+            let ns = (t.elapsed().as_nanos() as u64).saturating_sub(shading);
+            stats.add_time(Stage::Hide, ns);
+        };
+        let rect = buckets.sample_rect(col, row);
+        let h = match &gather {
+            Some(ctx) => {
+                let mut p = match frame.hider.hide_prepared(rect, &grids, stats, ctx) {
+                    Some(p) => {
+                        hide_time(t);
+                        p
                     }
                     None => {
                         let buf = frame.hider.hide(rect, &grids, stats);
                         hide_time(t);
-                        Hidden::Samples(buf)
+                        let t = Instant::now();
+                        let p = crate::film::gather::prepare(&buf, ctx);
+                        stats.time(Stage::Filter, t);
+                        p
                     }
                 };
-                // This bucket is done with its grids: the last bucket of each drops it.
-                drop(grids);
-                for src in sources {
-                    let grid = src.grid;
-                    drop(src);
-                    grid.bucket_done(stats);
-                }
-                stats.alloc(h.bytes());
-                let _ = slots[col].set(h);
-                let Some(f) = frow else {
-                    return;
-                };
-                // The tiles of row `f` this bucket was the last one missing for.
-                let cols = buckets.cols;
-                for c in col.saturating_sub(kx)..(col + kx + 1).min(cols) {
-                    let needs = (c + kx + 1).min(cols) - c.saturating_sub(kx);
-                    // AcqRel: the thread completing the count sees every bucket it counts.
-                    if waiting[c].fetch_add(1, Ordering::AcqRel) + 1 == needs {
-                        let parts = within_reach(hidden_ref, Some((row, &slots)), c, f, kx, ky);
-                        let partial = partials[c].lock().ok().and_then(|mut p| p.take());
-                        let _ = tiles[c].set(filter_one(film_ref, c, f, &parts, partial));
-                    }
-                }
-            })
-        };
-        // The next row's surfaces are split, diced and shaded alongside (they only add
-        // grids, which no bucket of this row needs), so neither runs alone on a few items;
-        // so are the scanlines filtered last time encoded for output (a serial task, which
-        // the other thread takes when it has nothing else); the last row's dead grids are
-        // freed first.
-        let rows_out = &mut rows_out;
-        let gone = std::mem::take(&mut dead);
-        let encode = || {
-            if let Some(out) = rows_out.as_deref_mut() {
-                out.rows(film_ref, sent, finished);
+                let t = Instant::now();
+                let out = buckets.rect(col, row);
+                let partial = crate::film::gather::start_tile(
+                    &shape,
+                    &p,
+                    out.x0 as usize,
+                    out.y0 as usize,
+                    out.width(),
+                    out.height(),
+                );
+                p.keep_ring(&partial, ctx);
+                stats.time(Stage::Filter, t);
+                (Hidden::Prepared(p), Some(partial))
+            }
+            None => {
+                let buf = frame.hider.hide(rect, &grids, stats);
+                hide_time(t);
+                (Hidden::Samples(buf), None)
             }
         };
-        let ((), (next, ())) = rayon::join(hide_row, || {
-            rayon::join(
-                || {
-                    // Before the next row's grids are made, so the two are not held at once.
-                    drop(gone);
-                    if row + 1 < buckets.rows {
-                        process(row + 1, &mut pending, &mut pending_prims)
-                    } else {
-                        Vec::new()
-                    }
-                },
-                encode,
-            )
-        });
-        sent = finished;
-        clock = stats.phase(Phase::Rows, clock);
-        let bufs: Vec<Hidden> = slots.into_iter().filter_map(OnceLock::into_inner).collect();
-        debug_assert_eq!(bufs.len(), buckets.cols);
-        hidden.push_back((row, bufs));
-        kept.extend(next);
-        if let Some(f) = frow {
-            let t = Instant::now();
-            let tiles: Vec<crate::film::Tile> =
-                tiles.into_iter().filter_map(OnceLock::into_inner).collect();
-            film.put_tiles(&tiles);
-            stats.time(Stage::Filter, t);
-            finished = buckets.rect(0, f).y1.max(0) as usize;
-            next_filter = f + 1;
+        // This bucket is done with its grids: the last bucket of each drops it.
+        drop(grids);
+        for src in sources {
+            let grid = src.grid;
+            drop(src);
+            grid.bucket_done(stats);
         }
-        clock = stats.phase(Phase::Filter, clock);
-        // Drop the rows no row left to filter needs (their storage kept for the next rows).
-        while hidden.front().is_some_and(|(r, _)| r + ky < next_filter) {
-            if let Some((_, hs)) = hidden.pop_front() {
-                for h in hs {
-                    stats.free(h.bytes());
-                    if let (Hidden::Prepared(p, _), Some(ctx)) = (h, &gather) {
-                        ctx.recycle(p);
-                    }
-                }
-            }
+        stats.alloc(h.0.bytes());
+        h
+    };
+    let filter = |col: usize, row: usize, parts: &[&Hidden], partial: Option<Partial>| {
+        filter_one(&shape, col, row, parts, partial)
+    };
+    let retire = |h: Hidden| {
+        stats.free(h.bytes());
+        if let (Hidden::Prepared(p), Some(ctx)) = (h, &gather) {
+            ctx.recycle(p);
         }
-        // The grids no later row needs are freed during the next row.
-        let (live, gone): (Vec<Kept>, Vec<Kept>) = kept.into_iter().partition(|k| k.rows.1 > row);
-        kept = live;
-        for k in &gone {
-            // Released by their last bucket already, unless a bucket never came (none
-            // should): 0 bytes then.
-            stats.free(k.grid.bytes());
-            if !k.grid.was_shaded() {
-                Stats::add(&stats.grids_unshaded, 1);
-            }
-        }
-        dead = gone;
-        clock = stats.phase(Phase::Other, clock);
+    };
+    // Scanlines handed to `rows_out`, and scanlines final in the film.
+    let first_line = buckets.crop.y0.max(0) as usize;
+    let flow = Flow::new(
+        buckets,
+        [kx, ky],
+        Lane {
+            film,
+            rows_out,
+            next: 0,
+            sent: first_line,
+            finished: first_line,
+        },
+        Chain {
+            pending,
+            prims: pending_prims,
+            live: Vec::new(),
+        },
+        Steps {
+            process: &process,
+            hide: &hide_one,
+            filter: &filter,
+            retire: &retire,
+        },
+        stats,
+    );
+    if buckets.rows > 0 && buckets.cols > 0 {
+        rayon::scope(|s| flow.start(s, first));
     }
-    drop(dead);
-    while next_filter < buckets.rows {
-        filter_row(&mut film, next_filter, &mut hidden);
-        finished = buckets.rect(0, next_filter).y1.max(0) as usize;
-        next_filter += 1;
-    }
+    clock = stats.phase(Phase::Rows, clock);
+    let Lane {
+        film,
+        rows_out,
+        sent,
+        finished,
+        ..
+    } = flow.finish();
     clock = stats.phase(Phase::Filter, clock);
-    // The last rows' scanlines (the frame's only serial encoding).
+    // Whatever scanlines are left (none: each row is handed out as it is put in the film).
     if let Some(out) = rows_out {
         out.rows(&film, sent, finished);
-    }
-    for (_, hs) in hidden.drain(..) {
-        hs.iter().for_each(|h| stats.free(h.bytes()));
     }
     frame.hider.finish(diags);
     stats.phase(Phase::Other, clock);
@@ -1860,6 +1777,336 @@ fn render_inner(
         .wall_ns
         .fetch_add(wall.elapsed().as_nanos() as u64, Ordering::Relaxed);
     film
+}
+
+type Partial = crate::film::gather::Partial;
+type Tile = crate::film::Tile;
+
+/// The film and where its output stands: written by one thread at a time (the lane).
+struct Lane<'o> {
+    film: Film,
+    rows_out: Option<&'o mut (dyn RowSink + Send)>,
+    /// The next bucket row whose tiles go into the film.
+    next: usize,
+    /// Scanlines handed to `rows_out`, and scanlines final in the film.
+    sent: usize,
+    finished: usize,
+}
+
+/// What the making of bucket rows hands from one row to the next (one row is made at a time).
+struct Chain {
+    /// Work waiting for its first bucket row, and primitives to make again there.
+    pending: Vec<Vec<Work>>,
+    prims: Vec<Vec<u32>>,
+    /// The grids reaching the row last made, in the order its buckets take them.
+    live: Vec<Arc<Kept>>,
+}
+
+/// The frame's steps, as the driver defines them.
+type Process<'a> = dyn Fn(usize, &mut [Vec<Work>], &mut [Vec<u32>]) -> Vec<Kept> + Sync + 'a;
+type HideOne<'a> = dyn Fn(usize, usize, &[Arc<Kept>]) -> (Hidden, Option<Partial>) + Sync + 'a;
+type FilterOne<'a> = dyn Fn(usize, usize, &[&Hidden], Option<Partial>) -> Tile + Sync + 'a;
+struct Steps<'a> {
+    /// Splits, dices and displaces what starts in a row (see `process` in `render_inner`).
+    process: &'a Process<'a>,
+    /// Hides bucket (col, row) from the grids of its row.
+    hide: &'a HideOne<'a>,
+    /// Filters tile (col, row) from the hidden buckets within reach, row-major.
+    filter: &'a FilterOne<'a>,
+    /// Gives back a hidden bucket no tile needs any more.
+    retire: &'a (dyn Fn(Hidden) + Sync + 'a),
+}
+
+/// A bucket's state between its hiding and the filtering of the last tile reading it (alone
+/// in its cache lines: neighbouring buckets are written by different threads).
+#[repr(align(128))]
+#[derive(Default)]
+struct BucketCell {
+    /// Set once hidden; taken when the last tile reading it is filtered.
+    hidden: RwLock<Option<Hidden>>,
+    /// The bucket's own tile, started by its hiding.
+    partial: Mutex<Option<Partial>>,
+    /// The tile of this bucket: buckets within reach hidden so far, and the tile once
+    /// filtered (until it goes into the film).
+    waiting: AtomicUsize,
+    tile: Mutex<Option<Tile>>,
+    /// Tiles within reach that have read this bucket.
+    readers: AtomicUsize,
+}
+
+/// A bucket row's progress.
+#[derive(Default)]
+struct RowCell {
+    /// What the making of this row still waits for: the row above made, and every row up
+    /// to two above hidden (so only the grids of the open rows are held).
+    deps: AtomicUsize,
+    hidden: AtomicUsize,
+    /// What this row waits for to count as hidden in order: its own buckets, and the rows
+    /// above it hidden in order (rows may finish out of order).
+    settle: AtomicUsize,
+    filtered: AtomicUsize,
+}
+
+/// The frame as a dataflow over bucket rows, without a barrier between rows: row r's
+/// surfaces are made (split, diced, displaced) once row r − 1 is made and row r − 2 is
+/// hidden; row r's buckets are hidden, in parallel, as soon as its surfaces are made (a
+/// thread done with row r − 1 starts on row r while the other finishes its last bucket);
+/// a tile is filtered by the thread hiding the last bucket within its reach; a row's tiles
+/// go into the film, and its scanlines to the output, in row order, by whichever thread
+/// finds the lane free. Every step reads only what its dependencies finished, so the
+/// picture is the same for any thread count and order.
+struct Flow<'a, 'o> {
+    buckets: Buckets,
+    /// Filter reach in buckets, x and y.
+    reach: [usize; 2],
+    cells: Vec<BucketCell>,
+    rows: Vec<RowCell>,
+    chain: Mutex<Chain>,
+    lane: Mutex<Lane<'o>>,
+    /// `lane.next`, readable without the lane.
+    lane_next: AtomicUsize,
+    steps: Steps<'a>,
+    stats: &'a Stats,
+}
+
+/// A lock's guard even after a panic elsewhere while it was held (the panic is re-raised by
+/// the scope; nothing here is left half updated).
+fn locked<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl<'a, 'o> Flow<'a, 'o> {
+    fn new(
+        buckets: Buckets,
+        reach: [usize; 2],
+        lane: Lane<'o>,
+        chain: Chain,
+        steps: Steps<'a>,
+        stats: &'a Stats,
+    ) -> Self {
+        let rows = (0..buckets.rows)
+            .map(|r| RowCell {
+                deps: AtomicUsize::new(r.min(2)),
+                settle: AtomicUsize::new(r.min(1) + 1),
+                ..RowCell::default()
+            })
+            .collect();
+        Flow {
+            buckets,
+            reach,
+            cells: (0..buckets.rows * buckets.cols)
+                .map(|_| BucketCell::default())
+                .collect(),
+            rows,
+            chain: Mutex::new(chain),
+            lane: Mutex::new(lane),
+            lane_next: AtomicUsize::new(0),
+            steps,
+            stats,
+        }
+    }
+
+    fn cell(&self, col: usize, row: usize) -> &BucketCell {
+        &self.cells[row * self.buckets.cols + col]
+    }
+
+    /// The rows and columns of buckets within filter reach of (col, row): those its tile
+    /// reads, and (the same) those whose tiles read it.
+    fn near(&self, col: usize, row: usize) -> [std::ops::RangeInclusive<usize>; 2] {
+        let [kx, ky] = self.reach;
+        [
+            row.saturating_sub(ky)..=(row + ky).min(self.buckets.rows - 1),
+            col.saturating_sub(kx)..=(col + kx).min(self.buckets.cols - 1),
+        ]
+    }
+
+    fn count_near(&self, col: usize, row: usize) -> usize {
+        let [rs, cs] = self.near(col, row);
+        rs.count() * cs.count()
+    }
+
+    /// Row 0 is made (`first`): everything else follows from there.
+    fn start<'s>(&'s self, s: &rayon::Scope<'s>, first: Vec<Kept>) {
+        let list: Vec<Arc<Kept>> = first.into_iter().map(Arc::new).collect();
+        locked(&self.chain).live = list.clone();
+        self.made(s, 0, list);
+    }
+
+    /// Row `row`'s surfaces are made: its buckets can be hidden, the next row made.
+    fn made<'s>(&'s self, s: &rayon::Scope<'s>, row: usize, list: Vec<Arc<Kept>>) {
+        self.release(s, row + 1);
+        // Spawned last, so this thread takes it first (the next row's making is the older
+        // job, the one another thread steals).
+        s.spawn(move |s| {
+            (0..self.buckets.cols)
+                .into_par_iter()
+                .for_each(|col| self.bucket(s, col, row, &list));
+        });
+    }
+
+    /// One of the things the making of `row` waits for is done.
+    fn release<'s>(&'s self, s: &rayon::Scope<'s>, row: usize) {
+        if row < self.buckets.rows && self.rows[row].deps.fetch_sub(1, Ordering::AcqRel) == 1 {
+            s.spawn(move |s| self.make(s, row));
+        }
+    }
+
+    /// Splits, dices and displaces what starts in `row`.
+    fn make<'s>(&'s self, s: &rayon::Scope<'s>, row: usize) {
+        // Taken out of the lock for the work (rows are made one at a time).
+        let (mut pending, mut prims, live) = {
+            let mut c = locked(&self.chain);
+            (
+                std::mem::take(&mut c.pending),
+                std::mem::take(&mut c.prims),
+                std::mem::take(&mut c.live),
+            )
+        };
+        let next = (self.steps.process)(row, &mut pending, &mut prims);
+        let list: Vec<Arc<Kept>> = live
+            .into_iter()
+            .filter(|k| k.rows.1 >= row)
+            .chain(next.into_iter().map(Arc::new))
+            .collect();
+        {
+            let mut c = locked(&self.chain);
+            c.pending = pending;
+            c.prims = prims;
+            c.live = list.clone();
+        }
+        self.made(s, row, list);
+    }
+
+    /// Hides bucket (col, row), then filters the tiles it was the last one missing for.
+    fn bucket<'s>(&'s self, s: &rayon::Scope<'s>, col: usize, row: usize, list: &[Arc<Kept>]) {
+        let (h, partial) = (self.steps.hide)(col, row, list);
+        let cell = self.cell(col, row);
+        *locked(&cell.partial) = partial;
+        *cell.hidden.write().unwrap_or_else(|e| e.into_inner()) = Some(h);
+        // AcqRel: the thread completing a count sees everything it counts.
+        if self.rows[row].hidden.fetch_add(1, Ordering::AcqRel) + 1 == self.buckets.cols {
+            self.settle(s, row);
+        }
+        let [rs, cs] = self.near(col, row);
+        for f in rs {
+            for c in cs.clone() {
+                let t = self.cell(c, f);
+                if t.waiting.fetch_add(1, Ordering::AcqRel) + 1 == self.count_near(c, f) {
+                    self.filter(c, f);
+                }
+            }
+        }
+    }
+
+    /// Row `row`'s buckets, or the rows above it, are all hidden: once both, the row after
+    /// next may be made (every grid of the rows above it is then released), and the row
+    /// below may settle in turn.
+    fn settle<'s>(&'s self, s: &rayon::Scope<'s>, row: usize) {
+        let mut r = row;
+        while r < self.buckets.rows && self.rows[r].settle.fetch_sub(1, Ordering::AcqRel) == 1 {
+            self.release(s, r + 2);
+            r += 1;
+        }
+    }
+
+    /// Filters tile (col, row), whose buckets within reach are all hidden.
+    fn filter(&self, col: usize, row: usize) {
+        let [rs, cs] = self.near(col, row);
+        let tile = {
+            // Row-major, the order the tile's result depends on.
+            let guards: Vec<_> = rs
+                .clone()
+                .flat_map(|r| cs.clone().map(move |c| (c, r)))
+                .map(|(c, r)| {
+                    self.cell(c, r)
+                        .hidden
+                        .read()
+                        .unwrap_or_else(|e| e.into_inner())
+                })
+                .collect();
+            let parts: Vec<&Hidden> = guards.iter().filter_map(|g| g.as_ref()).collect();
+            let partial = locked(&self.cell(col, row).partial).take();
+            (self.steps.filter)(col, row, &parts, partial)
+        };
+        *locked(&self.cell(col, row).tile) = Some(tile);
+        // The buckets this was the last reader of are given back.
+        for r in rs {
+            for c in cs.clone() {
+                let b = self.cell(c, r);
+                if b.readers.fetch_add(1, Ordering::AcqRel) + 1 == self.count_near(c, r) {
+                    let h = b.hidden.write().unwrap_or_else(|e| e.into_inner()).take();
+                    if let Some(h) = h {
+                        (self.steps.retire)(h);
+                    }
+                }
+            }
+        }
+        if self.rows[row].filtered.fetch_add(1, Ordering::AcqRel) + 1 == self.buckets.cols {
+            self.drain();
+        }
+    }
+
+    /// Whether the next row for the film has all its tiles.
+    fn row_ready(&self) -> bool {
+        let n = self.lane_next.load(Ordering::Acquire);
+        n < self.buckets.rows && self.rows[n].filtered.load(Ordering::Acquire) == self.buckets.cols
+    }
+
+    /// Puts the filtered rows into the film in order and hands their scanlines out, unless
+    /// another thread holds the lane (it then takes these rows too). Never waits: the
+    /// holder may be inside a parallel loop, running this very task.
+    fn drain(&self) {
+        while self.row_ready() {
+            let mut lane = match self.lane.try_lock() {
+                Ok(l) => l,
+                Err(std::sync::TryLockError::Poisoned(e)) => e.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => return,
+            };
+            let lane = &mut *lane;
+            let first = lane.next;
+            while lane.next < self.buckets.rows
+                && self.rows[lane.next].filtered.load(Ordering::Acquire) == self.buckets.cols
+            {
+                let f = lane.next;
+                let t = Instant::now();
+                let tiles: Vec<Tile> = (0..self.buckets.cols)
+                    .filter_map(|c| locked(&self.cell(c, f).tile).take())
+                    .collect();
+                lane.film.put_tiles(&tiles);
+                // Into this thread's buffer pool, not the filtering threads' arenas.
+                tiles.into_iter().for_each(|t| crate::pool::give(t.data));
+                self.stats.time(Stage::Filter, t);
+                lane.finished = self.buckets.rect(0, f).y1.max(0) as usize;
+                lane.next = f + 1;
+            }
+            if lane.next > first {
+                if let Some(out) = lane.rows_out.as_deref_mut() {
+                    out.rows(&lane.film, lane.sent, lane.finished);
+                }
+                lane.sent = lane.finished;
+            }
+            self.lane_next.store(lane.next, Ordering::Release);
+            // Unlocked here; a row finished meanwhile (its filterer found the lane taken)
+            // is taken by the next round.
+        }
+    }
+
+    /// After the scope: the film and where its output stands.
+    fn finish(self) -> Lane<'o> {
+        self.drain();
+        debug_assert_eq!(self.lane_next.load(Ordering::Relaxed), self.buckets.rows);
+        for c in &self.cells {
+            // Every bucket is read by its own tile, so none is left (bytes counted anyway).
+            if let Some(h) = c.hidden.write().unwrap_or_else(|e| e.into_inner()).take() {
+                (self.steps.retire)(h);
+            }
+        }
+        for k in &locked(&self.chain).live {
+            // The last row's grids are counted when it is hidden; none is left.
+            debug_assert!(k.rows.1 + 1 >= self.buckets.rows);
+        }
+        self.lane.into_inner().unwrap_or_else(|e| e.into_inner())
+    }
 }
 
 #[cfg(test)]
@@ -2108,6 +2355,85 @@ mod tests {
         }
     }
 
+    /// Bucket rows overlap (a thread done with row r starts row r + 1, tiles are filtered and
+    /// rows go into the film whenever their buckets are ready), so the order of everything
+    /// varies from run to run: many threads over tiny buckets, again and again, must give
+    /// the same bits every time (and finish: no step waits on a lock held across a parallel
+    /// loop).
+    #[test]
+    fn overlapping_rows_give_the_same_bits_in_any_order() {
+        let (mut s, quads) = busy_scene();
+        s.options.pixel_filter = PixelFilter {
+            name: "gaussian".into(),
+            xwidth: 2.0,
+            ywidth: 2.0,
+        };
+        let run = |threads, size| {
+            let stats = Stats::new();
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                stats: Some(&stats),
+                ..Default::default()
+            };
+            let film = render(&s, &quads, &DefaultShader, &opts).0;
+            assert_eq!(Stats::get(&stats.live_bytes), 0, "everything was freed");
+            film.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>()
+        };
+        let a = run(1, [16, 16]);
+        for round in 0..6 {
+            for (threads, size) in [(2, [1, 1]), (3, [3, 2]), (4, [5, 7]), (8, [2, 9])] {
+                assert!(
+                    a == run(threads, size),
+                    "round {round}: threads {threads}, bucket {size:?} differ"
+                );
+            }
+        }
+    }
+
+    /// Constant shading that takes a while per grid: buckets then ask for grids other
+    /// threads are still shading.
+    struct Slow;
+    impl GridShader for Slow {
+        fn displace(&self, _: &Scene, _: &Camera, _: usize, _: &mut Grid) {}
+        fn shade(&self, scene: &Scene, camera: &Camera, prim: usize, g: &mut Grid) {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            Constant.shade(scene, camera, prim, g);
+        }
+    }
+
+    #[test]
+    fn buckets_waiting_for_a_grid_being_shaded_hide_others_meanwhile_with_the_same_bits() {
+        // Small buckets: each grid spans many, so a bucket often asks for a grid another
+        // thread is shading; its thread then hides other buckets (nested on its stack, each
+        // with its own hider scratch) before taking the grid. The bits must not change.
+        let (s, quads) = busy_scene();
+        let run = |threads, size| {
+            let stats = Stats::new();
+            let opts = RenderOptions {
+                threads,
+                bucket_size: Some(size),
+                stats: Some(&stats),
+                ..Default::default()
+            };
+            let film = render(&s, &quads, &Slow, &opts).0;
+            assert_eq!(Stats::get(&stats.live_bytes), 0, "everything was freed");
+            let bits: Vec<u32> = film.data.iter().map(|v| v.to_bits()).collect();
+            (bits, Stats::get(&stats.grid_waits))
+        };
+        let (a, none) = run(1, [16, 16]);
+        assert_eq!(none, 0, "one thread never finds a grid being shaded");
+        let mut waits = 0;
+        for (threads, size) in [(2, [2, 2]), (4, [1, 1]), (3, [3, 2]), (8, [2, 3])] {
+            let (b, w) = run(threads, size);
+            assert!(a == b, "threads {threads}, bucket {size:?} differ");
+            waits += w;
+        }
+        // Not asserted above 0 (scheduling decides), but shown when the test is run with
+        // --nocapture.
+        println!("buckets found a grid being shaded {waits} times");
+    }
+
     /// An opaque wall at depth 2 over the whole frame, and `n` rows of quads behind it (some
     /// transparent), each primitive with `Attribute "cull" "hidden" [!cull]`.
     fn walled_scene(cull: bool) -> (Scene, Vec<Quad>) {
@@ -2302,11 +2628,16 @@ mod tests {
                 next = *y1;
             }
             assert_eq!(next, 36, "every scanline handed out");
-            // Rows are handed out as they finish, not all at the end: a band per bucket row
-            // but the last two (filtered together, the filter reaching one row down).
+            // Rows are handed out as they finish, not all at the end: on one thread a band
+            // per bucket row; on more, rows finished while another thread was handing rows
+            // out go together.
             let bands = copies.0.iter().filter(|(a, b, _)| b > a).count();
             let rows = 36usize.div_ceil(size[1] as usize);
-            assert_eq!(bands, rows.max(2) - 1, "{size:?}");
+            if threads == 1 {
+                assert_eq!(bands, rows, "{size:?}");
+            } else {
+                assert!((1..=rows).contains(&bands), "{bands} bands, {size:?}");
+            }
         }
     }
 

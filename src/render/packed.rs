@@ -12,6 +12,7 @@
 
 use glam::Vec3;
 
+use crate::pool::{self, Pooled};
 use crate::shade::Grid;
 
 /// One per-point column of a waiting grid (`nu` points a row).
@@ -62,10 +63,12 @@ fn same_bits<T: Bits>(a: &[T], b: &[T]) -> bool {
     words(a) == words(b)
 }
 
-impl<T: Bits> Col<T> {
+impl<T: Bits + Pooled> Col<T> {
     /// `v`, as a reference when it has the bits of `like`, else as [`Col::pack`] does.
+    /// (Columns not kept as they are go back to this thread's buffer pool.)
     fn pack_like(v: Vec<T>, like: &[T], nu: usize, nv: usize) -> Col<T> {
         if !v.is_empty() && same_bits(&v, like) {
+            pool::give(v);
             Col::Like
         } else {
             Col::pack(v, nu, nv)
@@ -81,7 +84,9 @@ impl<T: Bits> Col<T> {
             return Col::Each(v);
         }
         if same_bits(&v[1..], &v[..n - 1]) {
-            return Col::Same(v[0], n);
+            let x = v[0];
+            pool::give(v);
+            return Col::Same(x, n);
         }
         // The row and column forms rebuild `nu × nv` points: only for columns of that size.
         if nu == 0 || n != nu * nv {
@@ -89,35 +94,50 @@ impl<T: Bits> Col<T> {
         }
         // Every row equal to the one before it: the first row, repeated.
         if n > nu && same_bits(&v[nu..], &v[..n - nu]) {
-            return Col::PerColumn(v[..nu].to_vec());
+            let row = pool::copied(&v[..nu]);
+            pool::give(v);
+            return Col::PerColumn(row);
         }
         if nu > 1 && v.chunks_exact(nu).all(|r| same_bits(&r[1..], &r[..nu - 1])) {
-            return Col::PerRow(v.iter().step_by(nu).copied().collect());
+            let mut rows = pool::take(n / nu);
+            rows.extend(v.iter().step_by(nu).copied());
+            pool::give(v);
+            return Col::PerRow(rows);
         }
         Col::Each(v)
     }
 
     /// The column again (`n` = `nu × nv` points in the row and column forms); `like` is the
-    /// unpacked column it was packed against.
+    /// unpacked column it was packed against. Rebuilt columns come from this thread's buffer
+    /// pool, and the packed rows go back to it.
     fn unpack(self, like: &[T], nu: usize, n: usize) -> Vec<T> {
         match self {
             Col::Each(v) => v,
-            Col::Same(x, n) => vec![x; n],
+            Col::Same(x, n) => pool::filled(n, x),
             Col::PerRow(rows) => {
-                let mut out = Vec::with_capacity(n);
-                for x in rows {
+                let mut out = pool::take(n);
+                for &x in &rows {
                     out.resize(out.len() + nu, x);
                 }
+                pool::give(rows);
                 out
             }
             Col::PerColumn(row) => {
-                let mut out = Vec::with_capacity(n);
+                let mut out = pool::take(n);
                 while out.len() < n {
                     out.extend_from_slice(&row);
                 }
+                pool::give(row);
                 out
             }
-            Col::Like => like.to_vec(),
+            Col::Like => pool::copied(like),
+        }
+    }
+
+    /// Gives a column's buffer back to this thread's pool (a grid dropped unshaded).
+    fn recycle(self) {
+        if let Col::Each(v) | Col::PerRow(v) | Col::PerColumn(v) = self {
+            pool::give(v);
         }
     }
 
@@ -201,6 +221,21 @@ impl PackedGrid {
         g.dpdu = self.dpdu.unpack(&[], nu, n);
         g.dpdv = self.dpdv.unpack(&[], nu, n);
         g
+    }
+
+    /// Gives the buffers back to this thread's pool (a grid never shaded: every bucket that
+    /// could see it found it hidden).
+    pub fn recycle(self) {
+        for c in [
+            self.p, self.ng, self.n, self.dpdu, self.dpdv, self.cs, self.os, self.i, self.ci,
+            self.oi,
+        ] {
+            c.recycle();
+        }
+        for c in [self.u, self.v, self.s, self.t] {
+            c.recycle();
+        }
+        self.rest.recycle();
     }
 
     /// Approximate heap size, for the memory statistic.

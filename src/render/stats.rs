@@ -55,6 +55,10 @@ pub struct Stats {
     pub samples_hit: Counter,
     /// Grids a bucket skipped whole: behind every sample's opaque front.
     pub grids_occluded: Counter,
+    /// Times a bucket asked for a grid another thread was shading, and the nanoseconds
+    /// buckets then waited with no other work to do meanwhile (see `driver::LazyGrid`).
+    pub grid_waits: Counter,
+    pub grid_wait_ns: Counter,
     pub buckets: Counter,
     /// Nanoseconds per [`Stage`].
     pub stage_ns: [Counter; 5],
@@ -83,12 +87,13 @@ pub enum Phase {
     Setup = 0,
     /// The film's allocation alongside the first bucket row's surfaces.
     FirstRow = 1,
-    /// Hiding a bucket row (filtering the row above's tiles as their neighbours are hidden)
-    /// alongside the next row's splitting, dicing and shading.
+    /// Every bucket row after the first row's surfaces: making rows, hiding buckets,
+    /// filtering tiles and putting finished rows into the film, overlapped without a barrier
+    /// between rows (`driver::Flow`).
     Rows = 2,
-    /// Putting the filtered tiles into the film; at the end, filtering the last rows.
+    /// What is left of the film's rows after the rows' dataflow (nothing, normally).
     Filter = 3,
-    /// Freeing rows and grids no longer needed, and the end of the frame.
+    /// The end of the frame.
     Other = 4,
     /// Imager, quantising and writing the displays (after the render; the thread that
     /// writes).
@@ -253,6 +258,12 @@ impl fmt::Display for Stats {
         writeln!(f, "  samples hit      {:>12}", g(&self.samples_hit))?;
         writeln!(f, "  grids occluded   {:>12}", g(&self.grids_occluded))?;
         writeln!(f, "  grids unshaded   {:>12}", g(&self.grids_unshaded))?;
+        writeln!(
+            f,
+            "  grid waits       {:>12} ({:.3} s idle: no other work meanwhile)",
+            g(&self.grid_waits),
+            g(&self.grid_wait_ns) as f64 * 1e-9
+        )?;
         writeln!(f, "  buckets          {:>12}", g(&self.buckets))?;
         writeln!(
             f,

@@ -100,28 +100,30 @@ impl Grid {
         self.len() == 0
     }
     /// A grid of `nu × nv` points with every per-point field sized and zeroed
-    /// (Cs and Os white, Oi opaque).
+    /// (Cs and Os white, Oi opaque). Its columns come from this thread's buffer pool
+    /// ([`crate::pool`]); [`Grid::recycle`] gives them back.
     pub fn with_size(nu: usize, nv: usize) -> Grid {
+        use crate::pool::filled;
         let n = nu * nv;
         Grid {
             nu,
             nv,
-            p: vec![Vec3::ZERO; n],
-            n: vec![Vec3::ZERO; n],
-            ng: vec![Vec3::ZERO; n],
-            dpdu: vec![Vec3::ZERO; n],
-            dpdv: vec![Vec3::ZERO; n],
-            u: vec![0.0; n],
-            v: vec![0.0; n],
-            s: vec![0.0; n],
-            t: vec![0.0; n],
+            p: filled(n, Vec3::ZERO),
+            n: filled(n, Vec3::ZERO),
+            ng: filled(n, Vec3::ZERO),
+            dpdu: filled(n, Vec3::ZERO),
+            dpdv: filled(n, Vec3::ZERO),
+            u: filled(n, 0.0),
+            v: filled(n, 0.0),
+            s: filled(n, 0.0),
+            t: filled(n, 0.0),
             du: 0.0,
             dv: 0.0,
-            cs: vec![Vec3::ONE; n],
-            os: vec![Vec3::ONE; n],
-            i: vec![Vec3::ZERO; n],
-            ci: vec![Vec3::ZERO; n],
-            oi: vec![Vec3::ONE; n],
+            cs: filled(n, Vec3::ONE),
+            os: filled(n, Vec3::ONE),
+            i: filled(n, Vec3::ZERO),
+            ci: filled(n, Vec3::ZERO),
+            oi: filled(n, Vec3::ONE),
             primvars: Vec::new(),
             outputs: Vec::new(),
             displacement_outputs: Vec::new(),
@@ -175,17 +177,50 @@ impl Grid {
         }
     }
     /// Gives the per-point columns back to this thread's buffer pool (a [`Grid::subset`]
-    /// made for one run).
+    /// made for one run, a diced grid once shaded).
     pub fn recycle(self) {
-        use crate::shade::value::{recycle, Slot};
-        recycle([self.p, self.n, self.ng, self.dpdu, self.dpdv].map(Slot::VT));
-        recycle([self.u, self.v, self.s, self.t].map(Slot::VF));
-        recycle([self.cs, self.os, self.i, self.ci, self.oi].map(Slot::VT));
+        use crate::pool::give;
+        for v in [self.p, self.n, self.ng, self.dpdu, self.dpdv] {
+            give(v);
+        }
+        for v in [self.u, self.v, self.s, self.t] {
+            give(v);
+        }
+        for v in [self.cs, self.os, self.i, self.ci, self.oi] {
+            give(v);
+        }
     }
     pub fn primvar(&self, name: &str) -> Option<&GridVar> {
         self.primvars.iter().find(|v| v.name == name)
     }
     pub fn output(&self, name: &str) -> Option<&GridVar> {
         self.outputs.iter().find(|v| v.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_recycled_grids_columns_serve_the_next_grid_freshly_filled() {
+        let mut g = Grid::with_size(20, 20);
+        let old: Vec<*const Vec3> = [&g.p, &g.n, &g.cs, &g.oi].map(|c| c.as_ptr()).to_vec();
+        for c in [&mut g.p, &mut g.n, &mut g.cs, &mut g.oi] {
+            c.fill(Vec3::splat(7.0));
+        }
+        g.u.fill(7.0);
+        g.recycle();
+        let h = Grid::with_size(19, 21);
+        // The same memory (this thread's pool), none of the old values.
+        let new = [
+            &h.p, &h.n, &h.ng, &h.dpdu, &h.dpdv, &h.cs, &h.os, &h.i, &h.ci, &h.oi,
+        ];
+        assert!(old.iter().all(|p| new.iter().any(|c| c.as_ptr() == *p)));
+        for (c, want) in new.iter().zip([0., 0., 0., 0., 0., 1., 1., 0., 0., 1.]) {
+            assert_eq!(c.len(), 19 * 21);
+            assert!(c.iter().all(|v| *v == Vec3::splat(want)));
+        }
+        assert!(h.u.iter().all(|v| *v == 0.0));
     }
 }

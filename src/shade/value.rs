@@ -8,6 +8,8 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
 
+use crate::pool;
+
 #[derive(Clone, Debug)]
 pub enum Slot {
     F(f32),
@@ -168,57 +170,21 @@ pub fn empty_str() -> Arc<str> {
     EMPTY.with(Arc::clone)
 }
 
-/// Per-thread free lists of grid buffers, so the temporaries of one grid's run reuse the
-/// buffers of the previous run (no allocation or zero-fill per register per run, and the
-/// memory stays warm in cache). Bounded: beyond `POOL_MAX` buffers per kind they are freed.
-mod pool {
-    use glam::Vec3;
-    use std::cell::RefCell;
-
-    pub const POOL_MAX: usize = 512;
-
-    thread_local! {
-        pub static FLOATS: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
-        pub static TRIPLES: RefCell<Vec<Vec<Vec3>>> = const { RefCell::new(Vec::new()) };
-    }
-
-    /// How many of the most recently recycled buffers [`take`] looks through.
-    const SCAN: usize = 8;
-
-    /// A buffer from `pool` with room for `n` elements, or a new one. Growing a pooled buffer
-    /// that is too small would `realloc` and copy contents nobody reads (compacted loops
-    /// recycle buffers of a few points that full grids then pick up), so a buffer is taken
-    /// only if it already fits; one that does not is left for a smaller grid.
-    pub fn take<T>(pool: &mut Vec<Vec<T>>, n: usize) -> Vec<T> {
-        let len = pool.len();
-        for i in (len.saturating_sub(SCAN)..len).rev() {
-            if pool[i].capacity() >= n {
-                return pool.swap_remove(i);
-            }
-        }
-        Vec::with_capacity(n)
-    }
-}
-
-/// A float buffer of length `n` with unspecified (initialised) contents.
+/// A float buffer of length `n` with unspecified (initialised) contents, from this thread's
+/// buffer pool ([`crate::pool`]: the temporaries of one grid's run reuse the buffers
+/// of the previous run, with no allocation or zero-fill per register per run).
 pub fn grid_vf(n: usize) -> Vec<f32> {
-    let mut v = pool::FLOATS.with(|p| pool::take(&mut p.borrow_mut(), n));
-    v.resize(n, 0.0);
-    v
+    pool::unfilled(n, 0.0)
 }
 
 /// A triple buffer of length `n` with unspecified (initialised) contents.
 pub fn grid_vt(n: usize) -> Vec<Vec3> {
-    let mut v = pool::TRIPLES.with(|p| pool::take(&mut p.borrow_mut(), n));
-    v.resize(n, Vec3::ZERO);
-    v
+    pool::unfilled(n, Vec3::ZERO)
 }
 
 /// A triple buffer of length `n` filled with `x`.
 pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
-    let mut v = grid_vt(n);
-    v.fill(x);
-    v
+    pool::filled(n, x)
 }
 
 /// A pooled copy of `src` (empty stays empty: no pooled buffer held for nothing). Buffers
@@ -226,42 +192,23 @@ pub fn grid_vt_filled(n: usize, x: Vec3) -> Vec<Vec3> {
 /// register file is recycled, and fresh buffers recycled into a full pool are freed, so the
 /// pool would turn over through `malloc`/`free` at every run.
 pub fn pooled_vt(src: &[Vec3]) -> Vec<Vec3> {
-    pooled_copy(&pool::TRIPLES, src)
+    pool::copied(src)
 }
 
 /// [`pooled_vt`] for floats.
 pub fn pooled_vf(src: &[f32]) -> Vec<f32> {
-    pooled_copy(&pool::FLOATS, src)
-}
-
-fn pooled_copy<T: Copy>(
-    pool: &'static std::thread::LocalKey<std::cell::RefCell<Vec<Vec<T>>>>,
-    src: &[T],
-) -> Vec<T> {
-    if src.is_empty() {
-        return Vec::new();
-    }
-    let mut v = pool.with(|p| pool::take(&mut p.borrow_mut(), src.len()));
-    v.clear();
-    v.extend_from_slice(src);
-    v
+    pool::copied(src)
 }
 
 /// Gives the grid buffers of finished registers back to this thread's pool.
 pub fn recycle(slots: impl IntoIterator<Item = Slot>) {
-    pool::FLOATS.with(|fp| {
-        pool::TRIPLES.with(|tp| {
-            let (mut fp, mut tp) = (fp.borrow_mut(), tp.borrow_mut());
-            for s in slots {
-                match s {
-                    // (An empty buffer would only take a place in the pool.)
-                    Slot::VF(v) if fp.len() < pool::POOL_MAX && v.capacity() > 0 => fp.push(v),
-                    Slot::VT(v) if tp.len() < pool::POOL_MAX && v.capacity() > 0 => tp.push(v),
-                    _ => {}
-                }
-            }
-        })
-    })
+    for s in slots {
+        match s {
+            Slot::VF(v) => pool::give(v),
+            Slot::VT(v) => pool::give(v),
+            _ => {}
+        }
+    }
 }
 
 /// `v` resized to `n` values with unspecified contents: in place when it has the room,

@@ -19,6 +19,7 @@ use glam::{Mat4, Vec3, Vec4};
 
 use crate::diag::{Diag, Diagnostics};
 use crate::film::SampleBuffer;
+use crate::pool;
 use crate::scene::{Options, ParamType};
 use crate::shade::Grid;
 
@@ -497,12 +498,16 @@ fn micro_normal(p: &[Vec3], k: usize, nu: usize) -> Vec3 {
 impl ShadedGrid {
     /// Projects a shaded grid. `aovs` names the output variables to carry (zeros where the
     /// grid has no such variable).
+    ///
+    /// Its per-point and per-micropolygon buffers come from this thread's buffer pool
+    /// ([`pool`]) and go back to the pool of the thread that drops it: the bucket that
+    /// hides it last, often on another thread, frees nothing into this thread's arena.
     pub fn new(grid: &Grid, view: &View, info: &GridInfo, aovs: &[Aov]) -> ShadedGrid {
         let (nu, nv) = (grid.nu, grid.nv);
         let n = nu * nv;
-        let mut xy = Vec::with_capacity(n);
-        let mut depth = Vec::with_capacity(n);
-        let mut ok = Vec::with_capacity(n);
+        let mut xy = pool::take(n);
+        let mut depth = pool::take(n);
+        let mut ok = pool::take(n);
         for p in &grid.p {
             let front = !view.perspective || p.z >= view.eye_epsilon;
             ok.push(front && p.is_finite());
@@ -525,12 +530,12 @@ impl ShadedGrid {
             .map(|m| {
                 let mut mp = MovingPoints {
                     times: m.times.clone(),
-                    xy: vec![xy.clone()],
-                    depth: vec![depth.clone()],
+                    xy: vec![pool::copied(&xy)],
+                    depth: vec![pool::copied(&depth)],
                 };
                 for key in &m.p[1..] {
-                    let mut kx = Vec::with_capacity(n);
-                    let mut kd = Vec::with_capacity(n);
+                    let mut kx = pool::take(n);
+                    let mut kd = pool::take(n);
                     for (i, p) in key.iter().enumerate() {
                         let front = !view.perspective || p.z >= view.eye_epsilon;
                         if front && p.is_finite() {
@@ -550,18 +555,20 @@ impl ShadedGrid {
         let dof = view.dof.filter(|_| view.perspective);
         let blurred = motion.is_some() || dof.is_some();
         let c3 = |v: &Vec3| [v.x, v.y, v.z];
-        let ci: Vec<[f32; 3]> = grid.ci.iter().map(c3).collect();
-        let oi: Vec<[f32; 3]> = grid.oi.iter().map(c3).collect();
+        let mut ci: Vec<[f32; 3]> = pool::take(n);
+        ci.extend(grid.ci.iter().map(c3));
+        let mut oi: Vec<[f32; 3]> = pool::take(n);
+        oi.extend(grid.oi.iter().map(c3));
         let aov_width: usize = aovs.iter().map(|a| a.width()).sum();
-        let mut aov = vec![0f32; aov_width * n];
+        let mut aov = pool::filled(aov_width * n, 0f32);
         let mut off = 0;
         for a in aovs {
             fill_aov(grid, a, off, aov_width, &mut aov);
             off += a.width();
         }
         let nmp = (nu.max(1) - 1) * (nv.max(1) - 1);
-        let mut live = Vec::with_capacity(nmp);
-        let mut mp_bounds = Vec::with_capacity(nmp);
+        let mut live = pool::take(nmp);
+        let mut mp_bounds = pool::take(nmp);
         let mut row_bounds = Vec::with_capacity(nv.saturating_sub(1));
         const EMPTY: [f32; 4] = [
             f32::INFINITY,
@@ -669,6 +676,7 @@ impl ShadedGrid {
         } else {
             0.0
         };
+        pool::give(ok);
         let bound = [
             b[0].max(info.clip[0]),
             b[1].max(info.clip[1]),
@@ -751,6 +759,25 @@ impl ShadedGrid {
                 .motion
                 .as_ref()
                 .map_or(0, |m| m.xy.len() * self.xy.len() * 12)
+    }
+}
+
+impl Drop for ShadedGrid {
+    /// The buffers go to the dropping thread's pool (see [`ShadedGrid::new`]).
+    fn drop(&mut self) {
+        use std::mem::take;
+        pool::give(take(&mut self.xy));
+        pool::give(take(&mut self.depth));
+        pool::give(take(&mut self.ci));
+        pool::give(take(&mut self.oi));
+        pool::give(take(&mut self.aov));
+        pool::give(take(&mut self.live));
+        pool::give(take(&mut self.mp_bounds));
+        if let Some(m) = self.motion.take() {
+            let m = *m;
+            m.xy.into_iter().for_each(pool::give);
+            m.depth.into_iter().for_each(pool::give);
+        }
     }
 }
 
@@ -1156,5 +1183,33 @@ mod lens_bound_tests {
         }
         let nan = [[0.0, 0.0], [1.0, 0.0], [f32::NAN, 1.0], [0.0, 1.0]];
         assert!(LensBound::from_corners(nan, [0.2; 4], &d).is_none());
+    }
+}
+
+#[cfg(test)]
+mod pool_tests {
+    use super::*;
+
+    #[test]
+    fn a_shaded_grid_let_go_on_another_thread_leaves_its_buffers_there() {
+        let mut g = ShadedGrid::default();
+        g.xy = pool::filled(300, [0.0, 0.0]);
+        g.ci = pool::filled(300, [0.0; 3]);
+        g.mp_bounds = pool::filled(250, [0.0; 4]);
+        g.live = pool::filled(250, true);
+        let here = pool::pooled_count::<[f32; 2]>();
+        let there = std::thread::spawn(move || {
+            drop(g);
+            (
+                pool::pooled_count::<[f32; 2]>(),
+                pool::pooled_count::<[f32; 3]>(),
+                pool::pooled_count::<[f32; 4]>(),
+                pool::pooled_count::<bool>(),
+            )
+        })
+        .join()
+        .unwrap();
+        assert_eq!(there, (1, 1, 1, 1));
+        assert_eq!(pool::pooled_count::<[f32; 2]>(), here);
     }
 }

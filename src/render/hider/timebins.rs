@@ -455,18 +455,18 @@ mod tests {
     fn grid(times: &[f32], keys: &[[[f32; 2]; 4]]) -> ShadedGrid {
         let xy: Vec<Vec<[f32; 2]>> = keys.iter().map(|k| k.to_vec()).collect();
         let depth = vec![vec![0.2f32; 4]; keys.len()];
-        ShadedGrid {
-            nu: 2,
-            nv: 2,
-            xy: xy[0].clone(),
-            depth: depth[0].clone(),
-            motion: Some(Box::new(MovingPoints {
-                times: times.to_vec(),
-                xy,
-                depth,
-            })),
-            ..Default::default()
-        }
+        // (Field by field: a shaded grid's drop gives its buffers back, so no `..Default`.)
+        let mut g = ShadedGrid::default();
+        g.nu = 2;
+        g.nv = 2;
+        g.xy = xy[0].clone();
+        g.depth = depth[0].clone();
+        g.motion = Some(Box::new(MovingPoints {
+            times: times.to_vec(),
+            xy,
+            depth,
+        }));
+        g
     }
 
     #[test]

@@ -197,7 +197,27 @@ struct Scratch {
 }
 
 thread_local! {
-    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+    /// Spare scratch per thread. A stack, not one: while a bucket waits for a grid another
+    /// thread is shading, its thread hides other buckets meanwhile (see the driver's
+    /// `LazyGrid`), each taking scratch of its own.
+    static SCRATCH: RefCell<Vec<Scratch>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Most spare scratches a thread keeps (one per bucket it hides at once).
+const SCRATCH_KEPT: usize = 4;
+
+/// Runs `f` with this thread's spare scratch (a new one when all are in use), keeping it
+/// for the next bucket. No borrow is held while `f` runs, so `f` may hide another bucket.
+fn with_scratch<T>(f: impl FnOnce(&mut Scratch) -> T) -> T {
+    let mut scratch = SCRATCH.with(|c| c.borrow_mut().pop()).unwrap_or_default();
+    let out = f(&mut scratch);
+    SCRATCH.with(|c| {
+        let mut kept = c.borrow_mut();
+        if kept.len() < SCRATCH_KEPT {
+            kept.push(scratch);
+        }
+    });
+    out
 }
 
 /// Per-bucket hiding state.
@@ -469,13 +489,12 @@ impl Hider for ZBuffer {
     }
 
     fn hide(&self, rect: PixelRect, grids: &[&dyn GridSource], stats: &Stats) -> SampleBuffer {
-        SCRATCH.with(|cell| {
-            let mut scratch = cell.borrow_mut();
-            match self.hide_with(&mut scratch, rect, grids, stats, None) {
+        with_scratch(
+            |scratch| match self.hide_with(scratch, rect, grids, stats, None) {
                 Output::Samples(buf) => buf,
                 Output::Prepared(_) => unreachable!("asked for samples"),
-            }
-        })
+            },
+        )
     }
 
     fn hide_prepared(
@@ -488,13 +507,12 @@ impl Hider for ZBuffer {
         if self.config.channels() != 5 || self.config.spp[0] * self.config.spp[1] > MAX_SPP {
             return None;
         }
-        SCRATCH.with(|cell| {
-            let mut scratch = cell.borrow_mut();
-            match self.hide_with(&mut scratch, rect, grids, stats, Some(ctx)) {
+        with_scratch(
+            |scratch| match self.hide_with(scratch, rect, grids, stats, Some(ctx)) {
                 Output::Prepared(p) => Some(p),
                 Output::Samples(_) => None,
-            }
-        })
+            },
+        )
     }
 }
 
