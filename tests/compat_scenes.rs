@@ -1082,3 +1082,47 @@ fn band(y: f32) -> String {
         b = y - 0.25
     )
 }
+
+/// PRMan 16's `HierarchicalSubdivisionMesh` (a `SubdivisionMesh` whose nargs are triples,
+/// with string arguments for its edit tags) builds the same mesh as the plain request, and
+/// PRMan's and 3Delight's further filter names (`separable-catmull-rom`, written by Ayam's
+/// and K-3D's exporters, `blackman-harris`, `lanczos`) are filters, not errors.
+#[test]
+fn hierarchical_subdivision_meshes_and_prman_filter_names() {
+    const CUBE: &str = r#"[4 4 4 4 4 4] [0 1 3 2 2 3 5 4 4 5 7 6 6 7 1 0 1 7 5 3 6 0 2 4]"#;
+    const P: &str = r#""P" [-1 -1 1 1 -1 1 -1 1 1 1 1 1 -1 1 -1 1 1 -1 -1 -1 -1 1 -1 -1]"#;
+    for filter in ["separable-catmull-rom", "blackman-harris", "lanczos"] {
+        let b = build(&format!(
+            "PixelFilter \"{filter}\" 4 4\nWorldBegin\n\
+             HierarchicalSubdivisionMesh \"catmull-clark\" {CUBE} [\"interpolateboundary\" \"crease\"] \
+             [1 0 0 2 1 0] [2 0 1] [10] [] {P}\n\
+             SubdivisionMesh \"catmull-clark\" {CUBE} [\"interpolateboundary\" \"crease\"] \
+             [1 0 2 1] [2 0 1] [10] {P}\nWorldEnd\n"
+        ));
+        assert!(
+            b.of(Severity::Error).is_empty(),
+            "{:#?}",
+            b.of(Severity::Error)
+        );
+        let w = b.of(Severity::Warning);
+        assert!(w.is_empty(), "{w:#?}");
+        let s = &b.scenes[0];
+        assert_eq!(s.options.pixel_filter.name, filter);
+        assert_eq!(s.primitives.len(), 2);
+        assert_eq!(
+            format!("{:?}", s.primitives[0].geometry),
+            format!("{:?}", s.primitives[1].geometry)
+        );
+    }
+    // A triple count that does not match the tags is an error naming the request.
+    let b = build(&format!(
+        "WorldBegin\nHierarchicalSubdivisionMesh \"catmull-clark\" {CUBE} [\"crease\"] \
+         [2 1] [0 1] [10] [] {P}\nWorldEnd\n"
+    ));
+    let e = b.of(Severity::Error);
+    assert!(
+        e.iter()
+            .any(|m| m.contains("HierarchicalSubdivisionMesh") && m.contains("string counts")),
+        "{e:#?}"
+    );
+}

@@ -515,7 +515,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("VPAtmosphere", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("VPInterior", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("VPSurface", ["name": Str], ALL, true, "ext", B::unimplemented),
-    req!("HierarchicalSubdivisionMesh", ["scheme": Str, "nvertices": Ints, "vertices": Ints, "tags": Strs, "nargs": Ints, "intargs": Ints, "floatargs": Floats, "stringargs": Strs], 3, true, "ext", B::unimplemented),
+    req!("HierarchicalSubdivisionMesh", ["scheme": Str, "nvertices": Ints, "vertices": Ints, "tags": Strs, "nargs": Ints, "intargs": Ints, "floatargs": Floats, "stringargs": Strs], 3, true, "ext", B::subdivision_mesh),
     req!("EditBegin", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("EditEnd", [], ALL, false, "ext", B::unimplemented),
     req!("EditAttributeBegin", ["name": Str], ALL, false, "ext", B::unimplemented),
