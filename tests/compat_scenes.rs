@@ -1126,3 +1126,48 @@ fn hierarchical_subdivision_meshes_and_prman_filter_names() {
         "{e:#?}"
     );
 }
+
+/// Parameter values written without brackets (`"from" 0 0 -1`, as RIBMosaic exported before
+/// 2011): a run of numbers after a name is that parameter's array, with one warning each,
+/// instead of one error per extra number and a value one number short (the light lost).
+#[test]
+fn unbracketed_parameter_values_are_read_as_arrays() {
+    let b = build(
+        "WorldBegin\n\
+         LightSource \"distantlight\" 1 \"from\" 0 0 -1 \"to\" 0 0 0 \"intensity\" 2\n\
+         Surface \"plastic\" \"color specularcolor\" 1 0.5 0 \"Kd\" 1\n\
+         Sphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let w = b.of(Severity::Warning);
+    assert_eq!(
+        w.iter().filter(|m| m.contains("not in brackets")).count(),
+        3,
+        "{w:#?}"
+    );
+    let s = &b.scenes[0];
+    let light = &s.lights[0].shader.params;
+    assert_eq!(light.floats("from"), Some(&[0.0, 0.0, -1.0][..]));
+    assert_eq!(light.floats("to"), Some(&[0.0, 0.0, 0.0][..]));
+    assert_eq!(light.float("intensity"), Some(2.0));
+    let surface = s.primitives[0].attributes.surface.as_ref().unwrap();
+    assert_eq!(
+        surface.params.floats("specularcolor"),
+        Some(&[1.0, 0.5, 0.0][..])
+    );
+    assert_eq!(surface.params.float("Kd"), Some(1.0));
+}
+
+/// Pixie's default hider name, "stochastic", is the stochastic Z-buffer arbor calls "hidden":
+/// no "not implemented" warning, and the hider is "hidden".
+#[test]
+fn pixies_stochastic_hider_is_hidden() {
+    let b = build("Hider \"stochastic\"\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\n");
+    let w = b.of(Severity::Warning);
+    assert!(w.is_empty(), "{w:#?}");
+    assert_eq!(b.scenes[0].options.hider.name, "hidden");
+}

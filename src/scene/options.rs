@@ -453,7 +453,12 @@ impl Builder<'_> {
             return;
         }
         let params = self.params(call, ParamUse::Shader);
-        let name = call.pos[0].str();
+        // Pixie's default hider "stochastic" is the same stochastic Z-buffer as "hidden"
+        // (Pixie reads either name so).
+        let name = match call.pos[0].str() {
+            "stochastic" => "hidden",
+            n => n,
+        };
         if !matches!(name, "hidden" | "null" | "abuffer" | "zbuffer") {
             let d = Diag::warning(
                 "scene::unimplemented",
