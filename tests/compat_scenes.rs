@@ -1082,3 +1082,92 @@ fn band(y: f32) -> String {
         b = y - 0.25
     )
 }
+
+/// PRMan 16's `HierarchicalSubdivisionMesh` (a `SubdivisionMesh` whose nargs are triples,
+/// with string arguments for its edit tags) builds the same mesh as the plain request, and
+/// PRMan's and 3Delight's further filter names (`separable-catmull-rom`, written by Ayam's
+/// and K-3D's exporters, `blackman-harris`, `lanczos`) are filters, not errors.
+#[test]
+fn hierarchical_subdivision_meshes_and_prman_filter_names() {
+    const CUBE: &str = r#"[4 4 4 4 4 4] [0 1 3 2 2 3 5 4 4 5 7 6 6 7 1 0 1 7 5 3 6 0 2 4]"#;
+    const P: &str = r#""P" [-1 -1 1 1 -1 1 -1 1 1 1 1 1 -1 1 -1 1 1 -1 -1 -1 -1 1 -1 -1]"#;
+    for filter in ["separable-catmull-rom", "blackman-harris", "lanczos"] {
+        let b = build(&format!(
+            "PixelFilter \"{filter}\" 4 4\nWorldBegin\n\
+             HierarchicalSubdivisionMesh \"catmull-clark\" {CUBE} [\"interpolateboundary\" \"crease\"] \
+             [1 0 0 2 1 0] [2 0 1] [10] [] {P}\n\
+             SubdivisionMesh \"catmull-clark\" {CUBE} [\"interpolateboundary\" \"crease\"] \
+             [1 0 2 1] [2 0 1] [10] {P}\nWorldEnd\n"
+        ));
+        assert!(
+            b.of(Severity::Error).is_empty(),
+            "{:#?}",
+            b.of(Severity::Error)
+        );
+        let w = b.of(Severity::Warning);
+        assert!(w.is_empty(), "{w:#?}");
+        let s = &b.scenes[0];
+        assert_eq!(s.options.pixel_filter.name, filter);
+        assert_eq!(s.primitives.len(), 2);
+        assert_eq!(
+            format!("{:?}", s.primitives[0].geometry),
+            format!("{:?}", s.primitives[1].geometry)
+        );
+    }
+    // A triple count that does not match the tags is an error naming the request.
+    let b = build(&format!(
+        "WorldBegin\nHierarchicalSubdivisionMesh \"catmull-clark\" {CUBE} [\"crease\"] \
+         [2 1] [0 1] [10] [] {P}\nWorldEnd\n"
+    ));
+    let e = b.of(Severity::Error);
+    assert!(
+        e.iter()
+            .any(|m| m.contains("HierarchicalSubdivisionMesh") && m.contains("string counts")),
+        "{e:#?}"
+    );
+}
+
+/// Parameter values written without brackets (`"from" 0 0 -1`, as RIBMosaic exported before
+/// 2011): a run of numbers after a name is that parameter's array, with one warning each,
+/// instead of one error per extra number and a value one number short (the light lost).
+#[test]
+fn unbracketed_parameter_values_are_read_as_arrays() {
+    let b = build(
+        "WorldBegin\n\
+         LightSource \"distantlight\" 1 \"from\" 0 0 -1 \"to\" 0 0 0 \"intensity\" 2\n\
+         Surface \"plastic\" \"color specularcolor\" 1 0.5 0 \"Kd\" 1\n\
+         Sphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(
+        b.of(Severity::Error).is_empty(),
+        "{:#?}",
+        b.of(Severity::Error)
+    );
+    let w = b.of(Severity::Warning);
+    assert_eq!(
+        w.iter().filter(|m| m.contains("not in brackets")).count(),
+        3,
+        "{w:#?}"
+    );
+    let s = &b.scenes[0];
+    let light = &s.lights[0].shader.params;
+    assert_eq!(light.floats("from"), Some(&[0.0, 0.0, -1.0][..]));
+    assert_eq!(light.floats("to"), Some(&[0.0, 0.0, 0.0][..]));
+    assert_eq!(light.float("intensity"), Some(2.0));
+    let surface = s.primitives[0].attributes.surface.as_ref().unwrap();
+    assert_eq!(
+        surface.params.floats("specularcolor"),
+        Some(&[1.0, 0.5, 0.0][..])
+    );
+    assert_eq!(surface.params.float("Kd"), Some(1.0));
+}
+
+/// Pixie's default hider name, "stochastic", is the stochastic Z-buffer arbor calls "hidden":
+/// no "not implemented" warning, and the hider is "hidden".
+#[test]
+fn pixies_stochastic_hider_is_hidden() {
+    let b = build("Hider \"stochastic\"\nWorldBegin\nSphere 1 -1 1 360\nWorldEnd\n");
+    let w = b.of(Severity::Warning);
+    assert!(w.is_empty(), "{w:#?}");
+    assert_eq!(b.scenes[0].options.hider.name, "hidden");
+}

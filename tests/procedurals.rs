@@ -447,3 +447,34 @@ fn the_sphereflake_example_renders_from_another_folder() {
     let lit = img.pixels().filter(|p| p[0] > 20).count();
     assert!(lit > 80 * 60 / 8, "only {lit} lit pixels");
 }
+
+/// PRMan 19's `Procedural2 "DelayedReadArchive2" "SimpleBound"` (RenderMan for Blender and
+/// Maya write each mesh so) reads its `"string filename"` archive like
+/// `Procedural "DelayedReadArchive"`, culled by its `"float[6] bound"`; any other Procedural2
+/// plug-in is compiled code and is skipped with a warning, not an unknown-request error.
+#[test]
+fn procedural2_delayed_read_archive_reads_its_archive() {
+    let dir = scratch("procedural2");
+    std::fs::write(dir.join("ball.rib"), "Sphere 1 -1 1 360\n").unwrap();
+    let world = "Surface \"constant\"\n\
+        Procedural2 \"DelayedReadArchive2\" \"SimpleBound\" \"string filename\" [\"ball.rib\"] \
+        \"float[6] bound\" [-1 1 -1 1 -1 1]\n\
+        AttributeBegin\n  Translate 10 0 0\n  \
+        Procedural2 \"DelayedReadArchive2\" \"SimpleBound\" \"string filename\" [\"missing.rib\"] \
+        \"float[6] bound\" [-1 1 -1 1 -1 1]\nAttributeEnd\n\
+        Procedural2 \"DynamicLoad\" \"SimpleBound\" \"string dsoname\" [\"hair.so\"]\n";
+    let r = render(&dir, world, false, None);
+    // The archive off the image is culled by its bound: no error for its missing file.
+    assert_eq!(r.errors, 0, "{}", r.report);
+    let cov = coverage(r.film.as_ref().unwrap());
+    assert!(
+        (cov - UNIT_DISC).abs() < 0.01 * UNIT_DISC,
+        "coverage {cov} (want {UNIT_DISC})"
+    );
+    assert!(
+        r.codes.contains(&"scene::procedural-not-allowed"),
+        "{}",
+        r.report
+    );
+    assert!(r.report.contains("DynamicLoad"), "{}", r.report);
+}

@@ -16,6 +16,12 @@
 //!   the filter width (as pbrt does; Aqsis maps only the central lobe onto the width);
 //! * `disk` 1 inside the ellipse of the widths;
 //! * `bessel` 2·J₁(πr)/r inside the ellipse, with a half-cosine window (Aqsis).
+//!
+//! PRMan's and 3Delight's further names, which exporters write (Ayam, K-3D, RfM scripts):
+//! * `separable-catmull-rom` the cubic Catmull–Rom kernel per axis in absolute units (zero
+//!   from |x| = 2: natural width 4), RenderMan's `RiSeparableCatmullRomFilter`;
+//! * `blackman-harris` the four-term Blackman–Harris window per axis, spread over the width;
+//! * `lanczos` sinc(x)·sinc(x/a) per axis with a = width/2 lobes (width 4 is Lanczos-2).
 
 use crate::diag::{did_you_mean, Diag, Diagnostics};
 use crate::scene::PixelFilter;
@@ -31,10 +37,13 @@ pub enum FilterKind {
     Mitchell,
     Disk,
     Bessel,
+    SeparableCatmullRom,
+    BlackmanHarris,
+    Lanczos,
 }
 
 /// RenderMan names of the filters, in [`FilterKind`] order.
-pub const FILTER_NAMES: [&str; 8] = [
+pub const FILTER_NAMES: [&str; 11] = [
     "box",
     "triangle",
     "catmull-rom",
@@ -43,6 +52,9 @@ pub const FILTER_NAMES: [&str; 8] = [
     "mitchell",
     "disk",
     "bessel",
+    "separable-catmull-rom",
+    "blackman-harris",
+    "lanczos",
 ];
 
 impl FilterKind {
@@ -63,6 +75,11 @@ impl FilterKind {
             "mitchell" => FilterKind::Mitchell,
             "disk" => FilterKind::Disk,
             "bessel" => FilterKind::Bessel,
+            "separable-catmull-rom" | "separablecatmullrom" | "separable_catmull_rom" => {
+                FilterKind::SeparableCatmullRom
+            }
+            "blackman-harris" | "blackmanharris" | "blackman_harris" => FilterKind::BlackmanHarris,
+            "lanczos" => FilterKind::Lanczos,
             _ => return None,
         })
     }
@@ -149,6 +166,9 @@ impl Filter {
                 | FilterKind::Gaussian
                 | FilterKind::Sinc
                 | FilterKind::Mitchell
+                | FilterKind::SeparableCatmullRom
+                | FilterKind::BlackmanHarris
+                | FilterKind::Lanczos
         )
     }
 
@@ -318,8 +338,36 @@ fn eval_1d(kind: FilterKind, x: f32, width: f32, h: f32) -> f32 {
             }
         }
         FilterKind::Mitchell => mitchell_1d(2.0 * ax / h),
+        FilterKind::SeparableCatmullRom => {
+            if ax < 1.0 {
+                (1.5 * ax - 2.5) * ax * ax + 1.0
+            } else if ax < 2.0 {
+                ((-0.5 * ax + 2.5) * ax - 4.0) * ax + 2.0
+            } else {
+                0.0
+            }
+        }
+        FilterKind::BlackmanHarris => {
+            // Centred on the pixel: the window's odd terms change sign, and it falls to
+            // 6e-5 at the support's edge.
+            let u = 2.0 * std::f64::consts::PI * (ax / width) as f64;
+            (0.35875 + 0.48829 * u.cos() + 0.14128 * (2.0 * u).cos() + 0.01168 * (3.0 * u).cos())
+                as f32
+        }
+        FilterKind::Lanczos => sinc(ax) * sinc(ax / h),
         // Box, and the support indicator of the radial filters.
         _ => 1.0,
+    }
+}
+
+/// sin(πx)/(πx), 1 at 0.
+#[inline]
+fn sinc(x: f32) -> f32 {
+    if x.abs() < 1e-6 {
+        1.0
+    } else {
+        let px = std::f32::consts::PI * x;
+        px.sin() / px
     }
 }
 
@@ -385,7 +433,7 @@ pub fn bessel_j1(x: f64) -> f64 {
 mod tests {
     use super::*;
 
-    const ALL: [FilterKind; 8] = [
+    const ALL: [FilterKind; 11] = [
         FilterKind::Box,
         FilterKind::Triangle,
         FilterKind::CatmullRom,
@@ -394,6 +442,9 @@ mod tests {
         FilterKind::Mitchell,
         FilterKind::Disk,
         FilterKind::Bessel,
+        FilterKind::SeparableCatmullRom,
+        FilterKind::BlackmanHarris,
+        FilterKind::Lanczos,
     ];
 
     /// Midpoint-rule integral over the support.
@@ -420,7 +471,7 @@ mod tests {
             FilterKind::from_name("RiCatmullRomFilter"),
             Some(FilterKind::CatmullRom)
         );
-        assert_eq!(FilterKind::from_name("lanczos"), None);
+        assert_eq!(FilterKind::from_name("zmin"), None);
     }
 
     #[test]
@@ -512,6 +563,20 @@ mod tests {
         assert!((b.eval(0.0, 0.0) - std::f32::consts::PI).abs() < 1e-6);
         // continuity at the centre: 2·J1(πd)/d → π
         assert!((b.eval(1e-3, 0.0) - std::f32::consts::PI).abs() < 1e-3);
+        // PRMan's separable Catmull-Rom: 1 at the centre, 0 at ±1, −1/16 at ±1.5 per axis
+        let sc = Filter::new(FilterKind::SeparableCatmullRom, 4.0, 4.0);
+        assert_eq!(sc.eval(0.0, 0.0), 1.0);
+        assert!(sc.eval(1.0, 0.3).abs() < 1e-6);
+        assert!((sc.eval_x(1.5) + 0.0625).abs() < 1e-6);
+        // Blackman-Harris: 1 at the centre (the coefficients sum to 1), ~0 at the edge
+        let bh = Filter::new(FilterKind::BlackmanHarris, 3.0, 3.0);
+        assert!((bh.eval(0.0, 0.0) - 1.0).abs() < 1e-6);
+        assert!(bh.eval_x(1.5) < 1e-4);
+        // Lanczos at width 4 (two lobes): zero at the integers, 1 at the centre
+        let l = Filter::new(FilterKind::Lanczos, 4.0, 4.0);
+        assert_eq!(l.eval(0.0, 0.0), 1.0);
+        assert!(l.eval_x(1.0).abs() < 1e-6);
+        assert!(l.eval_x(1.5) < 0.0, "negative lobe");
     }
 
     #[test]

@@ -856,9 +856,13 @@ impl Builder<'_> {
             return;
         };
         let tags = call.pos[3].strs().to_vec();
-        let nargs = call.pos[4].ints();
         let intargs = call.pos[5].ints().to_vec();
         let floatargs = call.pos[6].floats().to_vec();
+        let hierarchical = call.name() == "HierarchicalSubdivisionMesh";
+        let Some(nargs) = self.subdivision_nargs(call, tags.len(), hierarchical) else {
+            return;
+        };
+        let nargs = &nargs[..];
         if nargs.len() != 2 * tags.len() || nargs.iter().any(|&n| n < 0) {
             return self.geom_error(
                 call,
@@ -939,6 +943,55 @@ impl Builder<'_> {
             floatargs,
         };
         self.finish_prim(call, g, pv, c);
+    }
+
+    /// The (int count, float count) pair of each tag. `HierarchicalSubdivisionMesh` (PRMan 16
+    /// and later; RenderMan for Maya writes it for every mesh) gives a triple per tag — the
+    /// third counts string arguments, which only its hierarchical edit tags (`vertexedit`,
+    /// `edgeedit`, `faceedit`) use and the tesselator warns about anyway — so the triples
+    /// become pairs and the strings are left out; otherwise the mesh is a `SubdivisionMesh`.
+    fn subdivision_nargs(
+        &mut self,
+        call: &Call<'_>,
+        ntags: usize,
+        hierarchical: bool,
+    ) -> Option<Vec<i64>> {
+        let nargs = call.pos[4].ints();
+        if !hierarchical {
+            return Some(nargs.to_vec());
+        }
+        if nargs.len() != 3 * ntags || nargs.iter().any(|&n| n < 0) {
+            self.geom_error(
+                call,
+                call.pos_spans[4],
+                format!(
+                    "{ntags} tags need {} nargs (int, float and string counts per tag), found {}",
+                    3 * ntags,
+                    nargs.len()
+                ),
+                call.spec.describe(),
+            );
+            return None;
+        }
+        let nstrings: i64 = nargs.iter().skip(2).step_by(3).sum();
+        if nstrings != call.pos[7].strs().len() as i64 {
+            self.geom_error(
+                call,
+                call.pos_spans[7],
+                format!(
+                    "nargs asks for {nstrings} strings; found {}",
+                    call.pos[7].strs().len()
+                ),
+                call.spec.describe(),
+            );
+            return None;
+        }
+        Some(
+            nargs
+                .chunks(3)
+                .flat_map(|c| [c[0], c[1]])
+                .collect::<Vec<i64>>(),
+        )
     }
 
     pub(super) fn points(&mut self, call: &Call<'_>) {

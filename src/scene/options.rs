@@ -16,17 +16,9 @@ use super::params::{validate_single, ColorMap, ParamUse};
 use super::table::Call;
 use super::types::*;
 
-const FILTERS: &[&str] = &[
-    "box",
-    "triangle",
-    "catmull-rom",
-    "gaussian",
-    "sinc",
-    "mitchell",
-    "disk",
-    "bessel",
-    "blackman-harris",
-];
+/// The filter names the film knows (one list, so a name the builder accepts is never
+/// unknown to the film).
+const FILTERS: &[&str] = &crate::film::filter::FILTER_NAMES;
 
 impl Builder<'_> {
     /// False (with a warning) inside the world block, where options are frozen.
@@ -306,6 +298,7 @@ impl Builder<'_> {
         let canonical = match name {
             "catmullrom" | "catmull_rom" => "catmull-rom",
             "blackmanharris" => "blackman-harris",
+            "separablecatmullrom" => "separable-catmull-rom",
             n => n,
         };
         if !FILTERS.contains(&canonical) {
@@ -460,7 +453,12 @@ impl Builder<'_> {
             return;
         }
         let params = self.params(call, ParamUse::Shader);
-        let name = call.pos[0].str();
+        // Pixie's default hider "stochastic" is the same stochastic Z-buffer as "hidden"
+        // (Pixie reads either name so).
+        let name = match call.pos[0].str() {
+            "stochastic" => "hidden",
+            n => n,
+        };
         if !matches!(name, "hidden" | "null" | "abuffer" | "zbuffer") {
             let d = Diag::warning(
                 "scene::unimplemented",

@@ -296,7 +296,7 @@ pub fn parse_params(
             i += 1;
             continue;
         };
-        let Some(val) = rest.get(i + 1) else {
+        let Some(first) = rest.get(i + 1) else {
             report(
                 Diag::error(
                     "scene::paramlist",
@@ -307,7 +307,25 @@ pub fn parse_params(
             );
             break;
         };
-        i += 2;
+        let run = unbracketed_run(&rest[i + 1..]);
+        let gathered;
+        let val = if run > 1 {
+            gathered = gather_numbers(&rest[i + 1..i + 1 + run]);
+            report(
+                Diag::warning(
+                    "scene::paramlist",
+                    format!(
+                        "`{request}`: the {run} values of \"{token}\" are not in brackets; read as one array"
+                    ),
+                )
+                .label(gathered.span, "unbracketed values")
+                .help("write an array in brackets: \"from\" [0 0 -1]"),
+            );
+            &gathered
+        } else {
+            first
+        };
+        i += 1 + run.max(1);
         let (inline, name) = match split_token(token) {
             Ok(x) => x,
             Err(e) => {
@@ -438,6 +456,34 @@ pub fn parse_params(
         });
     }
     ParamList(out)
+}
+
+/// How many single numbers open `vals` (an array or a string ends the run). Early exporters
+/// (RIBMosaic before 2011) wrote `"from" 0 0 -1` for `"from" [0 0 -1]`: a run of two or more
+/// is read as that parameter's array, where every later number would otherwise be an error
+/// and the value one number short (the request's light or colour lost).
+fn unbracketed_run(vals: &[Arg]) -> usize {
+    vals.iter()
+        .take_while(|a| matches!(a.value, Value::Int(_) | Value::Float(_)))
+        .count()
+}
+
+/// One array argument holding the numbers of `run` (ints stay ints when all are).
+fn gather_numbers(run: &[Arg]) -> Arg {
+    let span = run[0].span.to(run[run.len() - 1].span);
+    let value = if run.iter().all(|a| matches!(a.value, Value::Int(_))) {
+        Value::IntArray(
+            run.iter()
+                .map(|a| match a.value {
+                    Value::Int(v) => v,
+                    _ => 0,
+                })
+                .collect(),
+        )
+    } else {
+        Value::FloatArray(run.iter().filter_map(|a| a.value.as_f32()).collect())
+    };
+    Arg { value, span }
 }
 
 fn type_mismatch(request: &str, name: &str, decl: &Decl, val: &Arg, tok: Span) -> Diag {

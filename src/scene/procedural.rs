@@ -25,6 +25,7 @@ use crate::diag::{Diag, Span};
 use crate::render::Camera;
 
 use super::builder::{BlockKind, Builder};
+use super::params::ParamUse;
 use super::runprogram::format_detail;
 use super::table::Call;
 
@@ -114,6 +115,54 @@ impl Builder<'_> {
             "RunProgram" => self.expand_program(&first, &data, detail, span, call.pos_spans[1]),
             _ => self.expand_dynamic_load(&first, &data, detail, span, call.pos_spans[1]),
         }
+    }
+
+    /// `Procedural2 "DelayedReadArchive2" "SimpleBound" "string filename" [f] "float[6] bound"
+    /// [b]` (PRMan 19 and later; RenderMan for Blender and Maya write every mesh so): the
+    /// archive is read as `Procedural "DelayedReadArchive"` would, culled by its bound when one
+    /// is given. Other Procedural2 plug-ins are compiled C++ and are skipped with a warning.
+    pub(super) fn procedural2(&mut self, call: &Call<'_>) {
+        let kind = call.pos[0].str();
+        let params = self.params(call, ParamUse::Shader);
+        if kind != "DelayedReadArchive2" {
+            let d = Diag::warning(
+                "scene::procedural-not-allowed",
+                format!(
+                    "`Procedural2 \"{kind}\"` is a compiled RenderMan plug-in arbor cannot run; it is skipped"
+                ),
+            )
+            .label(call.pos_spans[0], "not run")
+            .help("only \"DelayedReadArchive2\" (a RIB archive) is read");
+            return self.report(d);
+        }
+        let Some(file) = params
+            .string("filename")
+            .filter(|f| !f.trim().is_empty())
+            .map(str::to_string)
+        else {
+            let d = Diag::error(
+                "scene::geometry",
+                "`Procedural2 \"DelayedReadArchive2\"` needs a \"string filename\"".to_string(),
+            )
+            .label(call.req.span, "here")
+            .help("Procedural2 \"DelayedReadArchive2\" \"SimpleBound\" \"string filename\" [\"file.rib\"] \"float[6] bound\" [x0 x1 y0 y1 z0 z1]");
+            return self.report(d);
+        };
+        if !self.geometry_wanted(call) {
+            return;
+        }
+        if let Some(b) = params.floats("bound").filter(|b| b.len() == 6) {
+            let bound = [b[0], b[1], b[2], b[3], b[4], b[5]];
+            if self.procedural_detail(&bound).is_none() {
+                return; // out of view
+            }
+        }
+        let span = call.full_span();
+        let at = call.rest.first().map_or(call.req.span, |a| a.span);
+        let what = format!("Procedural2 \"DelayedReadArchive2\" \"{file}\"");
+        self.expand(what, span, |b| {
+            b.read_archive_named(&file, at, call.req.span)
+        });
     }
 
     /// The raster area of an object-space bound `[x0 x1 y0 y1 z0 z1]` under the current

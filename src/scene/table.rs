@@ -515,7 +515,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("VPAtmosphere", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("VPInterior", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("VPSurface", ["name": Str], ALL, true, "ext", B::unimplemented),
-    req!("HierarchicalSubdivisionMesh", ["scheme": Str, "nvertices": Ints, "vertices": Ints, "tags": Strs, "nargs": Ints, "intargs": Ints, "floatargs": Floats, "stringargs": Strs], 3, true, "ext", B::unimplemented),
+    req!("HierarchicalSubdivisionMesh", ["scheme": Str, "nvertices": Ints, "vertices": Ints, "tags": Strs, "nargs": Ints, "intargs": Ints, "floatargs": Floats, "stringargs": Strs], 3, true, "ext", B::subdivision_mesh),
     req!("EditBegin", ["name": Str], ALL, true, "ext", B::unimplemented),
     req!("EditEnd", [], ALL, false, "ext", B::unimplemented),
     req!("EditAttributeBegin", ["name": Str], ALL, false, "ext", B::unimplemented),
@@ -617,6 +617,7 @@ pub static TABLE: &[ReqSpec] = &[
     req!("Curves", ["type": Str, "nvertices": Ints, "wrap": Str], ALL, true, "5.5", B::curves),
     req!("Blobby", ["nleaf": Int, "code": Ints, "floats": Floats, "strings": Strs], ALL, true, "5.7", B::blobby),
     req!("Procedural", ["procname": Str, "args": Strs, "bound": Floats], ALL, false, "5.6", B::procedural),
+    req!("Procedural2", ["procname": Str, "boundfunc": Str], ALL, true, "ext", B::procedural2),
     req!("Geometry", ["type": Str], ALL, true, "5.5", B::geometry_named),
     // ---- texture-making utilities (§8) ----
     req!("MakeTexture", ["picturename": Str, "texturename": Str, "swrap": Str, "twrap": Str, "filter": Str, "swidth": Num, "twidth": Num], ALL, true, "8.1", B::make_texture),

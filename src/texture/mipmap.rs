@@ -70,6 +70,9 @@ pub enum Downsample {
     Mitchell,
     Disk,
     Bessel,
+    SeparableCatmullRom,
+    BlackmanHarris,
+    Lanczos,
     /// Cubic B-spline on [−2, 2] stretched to the width.
     BSpline,
 }
@@ -90,6 +93,9 @@ impl Downsample {
                 PixelKind::Mitchell => Downsample::Mitchell,
                 PixelKind::Disk => Downsample::Disk,
                 PixelKind::Bessel => Downsample::Bessel,
+                PixelKind::SeparableCatmullRom => Downsample::SeparableCatmullRom,
+                PixelKind::BlackmanHarris => Downsample::BlackmanHarris,
+                PixelKind::Lanczos => Downsample::Lanczos,
             },
         })
     }
@@ -99,8 +105,12 @@ impl Downsample {
         match self {
             Downsample::Box | Downsample::Disk => 1.0,
             Downsample::Triangle | Downsample::Gaussian => 2.0,
-            Downsample::Bessel => 3.0,
-            Downsample::CatmullRom | Downsample::Sinc | Downsample::Mitchell => 4.0,
+            Downsample::Bessel | Downsample::BlackmanHarris => 3.0,
+            Downsample::CatmullRom
+            | Downsample::SeparableCatmullRom
+            | Downsample::Sinc
+            | Downsample::Mitchell
+            | Downsample::Lanczos => 4.0,
             Downsample::BSpline => 4.0,
         }
     }
@@ -117,6 +127,9 @@ impl Downsample {
             Downsample::Mitchell => pixel(PixelKind::Mitchell),
             Downsample::Disk => pixel(PixelKind::Disk),
             Downsample::Bessel => pixel(PixelKind::Bessel),
+            Downsample::SeparableCatmullRom => pixel(PixelKind::SeparableCatmullRom),
+            Downsample::BlackmanHarris => pixel(PixelKind::BlackmanHarris),
+            Downsample::Lanczos => pixel(PixelKind::Lanczos),
             Downsample::BSpline => bspline(4.0 * x / sw) * bspline(4.0 * y / tw),
         }
     }
@@ -336,6 +349,9 @@ mod tests {
             "mitchell",
             "disk",
             "bessel",
+            "separable-catmull-rom",
+            "blackman-harris",
+            "lanczos",
             "b-spline",
         ];
         let ramp: Vec<f32> = (0..16).map(|i| (i % 8) as f32).collect();
@@ -350,7 +366,7 @@ mod tests {
                 assert!((mean - 3.5).abs() < 1e-4, "{n} {w}: mean {mean}");
             }
         }
-        assert_eq!(Downsample::parse("lanczos"), None);
+        assert_eq!(Downsample::parse("zmin"), None);
         // Smoother kernels blur an impulse more than the box.
         let imp = [0.0, 0.0, 0.0, 0.0, 8.0, 0.0, 0.0, 0.0];
         let b = reduce_row(&imp, Downsample::BSpline, 4.0);
