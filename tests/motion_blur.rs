@@ -471,6 +471,30 @@ fn binning_skips_only_misses<const N: usize>(off: &str, cases: [(&str, String, f
     }
 }
 
+/// The A-buffer visits a moving micropolygon's pixels only across the region it sweeps, and
+/// tests a pixel's cells only at the times it can be there: on the diagonal, shrinking
+/// sphere about 0.76 M micropolygon-pixel visits (7.1 M over the whole-shutter boxes, 33×
+/// the time), and the picture stays close to the Z-buffer's at as many samples a pixel
+/// (mean difference 0.0006).
+#[test]
+fn the_abuffer_tests_a_moving_micropolygon_only_where_and_when_it_can_be() {
+    let ab = DIAGONAL.replacen("WorldBegin", "Hider \"abuffer\"\nWorldBegin", 1);
+    let (a, [_, visits, _]) = render_stats(&ab);
+    assert!(visits < 1_500_000, "{visits} pixel visits");
+    let (z, _) = render_stats(&DIAGONAL.replacen("PixelSamples 3 3", "PixelSamples 8 8", 1));
+    // Colour and alpha (depth is infinite where nothing is).
+    let nch = a.channels();
+    let (mut sum, mut n) = (0f64, 0f64);
+    for (p, q) in a.data.chunks(nch).zip(z.data.chunks(nch)) {
+        for c in 0..4 {
+            sum += (p[c] - q[c]).abs() as f64;
+            n += 1.0;
+        }
+    }
+    let mean = sum / n;
+    assert!(mean < 0.003, "mean difference {mean}");
+}
+
 /// Time slots (the Z-buffer tests a fast micropolygon slot by slot, each against its bound
 /// over the slot's times) skip only samples that cannot be hit: the same hits and the same
 /// bits as testing every sample under the whole-shutter bound (`"timeslots" [1]`), with

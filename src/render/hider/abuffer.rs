@@ -916,8 +916,39 @@ fn fragment_grid_blurred(
         // Constant shading: the mean of the corners (see zbuffer::flat_shade).
         let (flat_c, flat_o) = super::zbuffer::flat_shade(g, &corner, &mut flat_aov);
         let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
+        let keys = super::KeyCorners::new(g, &corner);
+        // A moving micropolygon: each pixel row only across the region it sweeps over the
+        // shutter, and (without a lens) each pixel's cells only at the times it can be
+        // there — both conservative, as the Z-buffer's time slots (see `timebins`).
+        let sweep = g.motion.as_ref().and_then(|_| {
+            let ends = [
+                super::timebins::corners(g, &corner, 0.0),
+                super::timebins::corners(g, &corner, 1.0),
+            ];
+            let (_, pad) =
+                super::timebins::bound_and_pad(g, &corner, &ends, 0.0, 1.0, dof.as_ref())?;
+            super::timebins::sweep_between(g, &corner, &ends, 0.0, 1.0, pad)
+        });
         for py in py0..=py1 {
-            for px in px0..=px1 {
+            let (mut qx0, mut qx1) = (px0, px1);
+            if let Some(sw) = &sweep {
+                let Some((lo, hi)) = sw.x_range(py as f32, py as f32 + 1.0) else {
+                    continue;
+                };
+                qx0 = qx0.max(floor_i32(lo));
+                qx1 = qx1.min(floor_i32(hi));
+            }
+            for px in qx0..=qx1 {
+                let (ta, tb) = match (&g.motion, &dof) {
+                    (Some(_), None) => {
+                        let pixel = [px as f32, py as f32, px as f32 + 1.0, py as f32 + 1.0];
+                        match super::timebins::time_window(g, &corner, pixel) {
+                            Some(w) => w,
+                            None => continue,
+                        }
+                    }
+                    _ => (f32::NEG_INFINITY, f32::INFINITY),
+                };
                 b.micro_pixels += 1;
                 let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;
                 let mut mask = [0u64; 4];
@@ -944,7 +975,17 @@ fn fragment_grid_blurred(
                         {
                             continue;
                         }
-                        let (p, q) = super::corners_at(g, &corner, times[s], lens[s], dof.as_ref());
+                        // (NaN times are never skipped.)
+                        if times.get(s).is_some_and(|&t| t < ta || t > tb) {
+                            continue;
+                        }
+                        let (p, q) = match &keys {
+                            Some(k) => k.at(times[s], lens[s], dof.as_ref()),
+                            None => super::corners_at(g, &corner, times[s], lens[s], dof.as_ref()),
+                        };
+                        if super::zbuffer::far_from(&p, pos) {
+                            continue;
+                        }
                         for tri in [[0usize, 1, 2], [0, 2, 3]] {
                             let Some((v, idx, dq, area)) =
                                 super::ccw_triangle(&p, &q, &corner, tri)

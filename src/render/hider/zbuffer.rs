@@ -1623,7 +1623,7 @@ type GroupBox = ([f32; 4], usize, usize, Option<Sweep>);
 /// Whether `pos` lies outside the box of corners `p` by more than 10⁻³ pixel plus 10⁻⁵ of
 /// the coordinates: outside both triangles whatever the rounding of their edge functions.
 #[inline]
-fn far_from(p: &[[f32; 2]; 4], pos: [f32; 2]) -> bool {
+pub(super) fn far_from(p: &[[f32; 2]; 4], pos: [f32; 2]) -> bool {
     let (mut x0, mut y0, mut x1, mut y1) = (p[0][0], p[0][1], p[0][0], p[0][1]);
     for c in &p[1..] {
         x0 = x0.min(c[0]);
