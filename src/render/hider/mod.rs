@@ -186,6 +186,19 @@ fn lens_shift(
     }
 }
 
+/// The box `[x0, y0, x1, y1]` of four corners (a NaN corner is passed over unless all are).
+#[inline]
+pub fn corner_box(p: &[[f32; 2]; 4]) -> [f32; 4] {
+    let (mut x0, mut y0, mut x1, mut y1) = (p[0][0], p[0][1], p[0][0], p[0][1]);
+    for c in &p[1..] {
+        x0 = x0.min(c[0]);
+        y0 = y0.min(c[1]);
+        x1 = x1.max(c[0]);
+        y1 = y1.max(c[1]);
+    }
+    [x0, y0, x1, y1]
+}
+
 /// Motion keys a [`KeyCorners`] holds on the stack.
 const MAX_KEYS: usize = 4;
 

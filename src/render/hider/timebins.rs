@@ -238,14 +238,7 @@ pub fn groups(
     slots: usize,
     spp: usize,
 ) -> usize {
-    let p = corner.map(|c| g.xy[c]);
-    let (mut x0, mut y0, mut x1, mut y1) = (p[0][0], p[0][1], p[0][0], p[0][1]);
-    for c in &p[1..] {
-        x0 = x0.min(c[0]);
-        y0 = y0.min(c[1]);
-        x1 = x1.max(c[0]);
-        y1 = y1.max(c[1]);
-    }
+    let [x0, y0, x1, y1] = super::corner_box(&corner.map(|c| g.xy[c]));
     let (w, h) = (x1 - x0, y1 - y0);
     let travel = (mb[2] - mb[0] - w).max(mb[3] - mb[1] - h);
     let size = w.max(h);
@@ -469,16 +462,18 @@ mod tests {
         g
     }
 
+    /// A unit square's corners at (dx, dy).
+    fn sq(dx: f32, dy: f32) -> [[f32; 2]; 4] {
+        [
+            [dx, dy],
+            [dx + 1.0, dy],
+            [dx + 1.0, dy + 1.0],
+            [dx, dy + 1.0],
+        ]
+    }
+
     #[test]
     fn the_time_window_holds_every_time_a_micropolygon_meets_the_window() {
-        let sq = |dx: f32, dy: f32| {
-            [
-                [dx, dy],
-                [dx + 1.0, dy],
-                [dx + 1.0, dy + 1.0],
-                [dx, dy + 1.0],
-            ]
-        };
         // Right 100 pixels and down 50 over the shutter.
         let g = grid(&[0.0, 1.0], &[sq(0.0, 0.0), sq(100.0, 50.0)]);
         let c = [0, 1, 3, 2];
@@ -536,14 +531,6 @@ mod tests {
     #[test]
     fn the_slot_bound_holds_every_position_of_its_times() {
         // A unit square sliding 100 pixels right and 7 down, then back 30 (two segments).
-        let sq = |dx: f32, dy: f32| {
-            [
-                [dx, dy],
-                [dx + 1.0, dy],
-                [dx + 1.0, dy + 1.0],
-                [dx, dy + 1.0],
-            ]
-        };
         let g = grid(
             &[0.0, 0.6, 1.0],
             &[sq(3.0, 2.0), sq(103.0, 9.0), sq(73.0, 9.0)],

@@ -1624,13 +1624,7 @@ type GroupBox = ([f32; 4], usize, usize, Option<Sweep>);
 /// the coordinates: outside both triangles whatever the rounding of their edge functions.
 #[inline]
 pub(super) fn far_from(p: &[[f32; 2]; 4], pos: [f32; 2]) -> bool {
-    let (mut x0, mut y0, mut x1, mut y1) = (p[0][0], p[0][1], p[0][0], p[0][1]);
-    for c in &p[1..] {
-        x0 = x0.min(c[0]);
-        y0 = y0.min(c[1]);
-        x1 = x1.max(c[0]);
-        y1 = y1.max(c[1]);
-    }
+    let [x0, y0, x1, y1] = super::corner_box(p);
     let m = 1e-3 + 1e-5 * (pos[0].abs() + pos[1].abs() + x1.abs() + y1.abs() + x0.abs() + y0.abs());
     // False for NaN corners: the triangles decide.
     pos[0] < x0 - m || pos[0] > x1 + m || pos[1] < y0 - m || pos[1] > y1 + m
