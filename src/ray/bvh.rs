@@ -767,7 +767,7 @@ impl Bvh {
         if self.leaves.is_empty() {
             return;
         }
-        let wt = LeafRay::new(o, d);
+        let wt = LeafRay::new_known::<AVX2>(o, d);
         if self.nodes.is_empty() {
             self.leaf(0, self.root_leaf, &wt, tmin, tmax, on_hit);
             return;
@@ -834,7 +834,8 @@ impl Stack {
     #[inline(always)]
     fn push(&mut self, e: (u32, u32, f32)) {
         if self.sp < self.items.len() {
-            self.items[self.sp].write(e);
+            // SAFETY: `sp` is in bounds (just checked).
+            unsafe { self.items.get_unchecked_mut(self.sp).write(e) };
             self.sp += 1;
         } else {
             self.spill.push(e);
@@ -845,17 +846,21 @@ impl Stack {
     fn len(&self) -> usize {
         self.sp + self.spill.len()
     }
+    /// The spill holds entries only while the array is full, so a stack below that (all
+    /// walks but a degenerate tree's) never looks at it.
     #[inline(always)]
     fn pop(&mut self) -> Option<(u32, u32, f32)> {
-        if let Some(e) = self.spill.pop() {
-            Some(e)
-        } else if self.sp > 0 {
-            self.sp -= 1;
-            // SAFETY: entries below `sp` were written by `push`.
-            Some(unsafe { self.items[self.sp].assume_init() })
-        } else {
-            None
+        if self.sp == self.items.len() {
+            if let Some(e) = self.spill.pop() {
+                return Some(e);
+            }
         }
+        if self.sp == 0 {
+            return None;
+        }
+        self.sp -= 1;
+        // SAFETY: `sp` is in bounds and entries below it were written by `push`.
+        Some(unsafe { self.items.get_unchecked(self.sp).assume_init() })
     }
 }
 
@@ -873,6 +878,22 @@ impl LeafRay {
         LeafRay {
             #[cfg(target_arch = "x86_64")]
             w4: super::quad4::WtRay4::new(&wt),
+            wt,
+        }
+    }
+
+    /// [`LeafRay::new`] where the caller knows whether the CPU has AVX2 (`AVX2`: it runs
+    /// code compiled for it), sparing the run-time check at every ray's start.
+    #[inline(always)]
+    fn new_known<const AVX2: bool>(o: Vec3, d: Vec3) -> LeafRay {
+        let wt = WtRay::new(o, d);
+        LeafRay {
+            #[cfg(target_arch = "x86_64")]
+            w4: if AVX2 {
+                super::quad4::WtRay4::with_avx(&wt, true)
+            } else {
+                super::quad4::WtRay4::new(&wt)
+            },
             wt,
         }
     }
@@ -1025,8 +1046,9 @@ impl WtRay {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
+        // (kz + 1) % 3 and (kz + 2) % 3, without the divisions' remainders.
+        let mut kx = [1, 2, 0][kz];
+        let mut ky = [2, 0, 1][kz];
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
@@ -1563,6 +1585,60 @@ mod tests {
             }
             let got = bvh.closest(o, d, 0.0, 1e30).map(|h| (h.t, h.grid));
             assert_eq!(got.map(|g| g.1), best.map(|b| b.1));
+        }
+    }
+
+    #[test]
+    fn stack_pops_last_in_first_out_across_its_spill() {
+        // Deeper than the array (a degenerate tree): the spill's entries come back first,
+        // then the array's, each stack in reverse order of pushing.
+        let mut s = Stack::new();
+        for round in 0..2 {
+            for k in 0..150u32 {
+                s.push((k, round, k as f32));
+            }
+            assert_eq!(s.len(), 150);
+            for k in (0..150u32).rev() {
+                assert_eq!(s.pop(), Some((k, round, k as f32)));
+            }
+            assert_eq!(s.pop(), None);
+            assert_eq!(s.len(), 0);
+        }
+        // Filled to exactly the array and past it, popped partly, pushed again.
+        for k in 0..70u32 {
+            s.push((k, 0, 0.0));
+        }
+        for k in (60..70u32).rev() {
+            assert_eq!(s.pop(), Some((k, 0, 0.0)));
+        }
+        s.push((99, 0, 0.0));
+        assert_eq!(s.pop(), Some((99, 0, 0.0)));
+        for k in (0..60u32).rev() {
+            assert_eq!(s.pop(), Some((k, 0, 0.0)));
+        }
+        assert_eq!(s.pop(), None);
+    }
+
+    #[test]
+    fn watertight_frame_axes_are_the_cyclic_ones() {
+        // The table lookups give (kz + 1) % 3 and (kz + 2) % 3, swapped for a negative
+        // dominant component.
+        for d in [
+            Vec3::new(3.0, 1.0, -2.0),
+            Vec3::new(-3.0, 1.0, 2.0),
+            Vec3::new(1.0, 3.0, 2.0),
+            Vec3::new(1.0, -3.0, 2.0),
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(1.0, 2.0, -3.0),
+        ] {
+            let w = WtRay::new(Vec3::ZERO, d);
+            let kz = w.k[2];
+            let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+            if d[kz] < 0.0 {
+                std::mem::swap(&mut kx, &mut ky);
+            }
+            assert_eq!(d.abs().max_element(), d[kz].abs());
+            assert_eq!(w.k, [kx, ky, kz]);
         }
     }
 }

@@ -30,12 +30,18 @@ pub(crate) struct WtRay4 {
 impl WtRay4 {
     #[inline(always)]
     pub(crate) fn new(w: &WtRay) -> WtRay4 {
+        WtRay4::with_avx(w, std::arch::is_x86_feature_detected!("avx"))
+    }
+
+    /// [`WtRay4::new`] with the CPU's AVX already known (true only where it has it).
+    #[inline(always)]
+    pub(crate) fn with_avx(w: &WtRay, avx: bool) -> WtRay4 {
         // SAFETY: SSE is part of the x86-64 baseline.
         unsafe {
             WtRay4 {
                 o: [_mm_set1_ps(w.o.x), _mm_set1_ps(w.o.y), _mm_set1_ps(w.o.z)],
                 s: w.s.map(|x| _mm_set1_ps(x)),
-                avx: std::arch::is_x86_feature_detected!("avx"),
+                avx,
             }
         }
     }

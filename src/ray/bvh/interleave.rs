@@ -228,7 +228,7 @@ impl Bvh {
         const LANES: usize = 16;
         let mut lanes: Vec<Lane> = (0..LANES.min(n)).map(|_| Lane::new()).collect();
         for (k, l) in lanes.iter_mut().enumerate() {
-            l.start(k, o[k], d[k], tmin[k], tmax(k));
+            l.start::<AVX2>(k, o[k], d[k], tmin[k], tmax(k));
         }
         let mut next_ray = lanes.len();
         self.prefetch(0, 0);
@@ -242,7 +242,7 @@ impl Bvh {
                 done(lanes[i].ray, lanes[i].best);
                 if next_ray < n {
                     let k = next_ray;
-                    lanes[i].start(k, o[k], d[k], tmin[k], tmax(k));
+                    lanes[i].start::<AVX2>(k, o[k], d[k], tmin[k], tmax(k));
                     next_ray += 1;
                     i += 1;
                 } else {
@@ -380,9 +380,9 @@ impl Lane {
 
     /// Starts the walk of ray `ray` from the root, in place.
     #[inline(always)]
-    fn start(&mut self, ray: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) {
+    fn start<const AVX2: bool>(&mut self, ray: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) {
         self.ray = ray;
-        self.wt = LeafRay::new(o, d);
+        self.wt = LeafRay::new_known::<AVX2>(o, d);
         self.rb = SlabRay::new(o, d);
         self.tmin = tmin;
         self.tmax = tmax;
