@@ -526,6 +526,26 @@ WorldBegin WorldEnd
 }
 
 #[test]
+fn search_paths_expand_environment_variables() {
+    // PRMan/3Delight/Aqsis scenes name their installations: `${VAR}` and `$VAR` expand; an
+    // entry naming an unset variable is skipped with one warning naming it.
+    let b = build_with(
+        r#"Option "searchpath" "shader" "${ARBOR_TEST_SURELY_UNSET}/shaders:$ARBOR_TEST_SURELY_UNSET2:/plain:&"
+WorldBegin WorldEnd
+"#,
+        |c| c.shader_paths = vec![],
+    );
+    assert_eq!(b.one().options.search_paths.shader, vec!["/plain"]);
+    let w = b.warnings();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].0
+            .contains("ARBOR_TEST_SURELY_UNSET, ARBOR_TEST_SURELY_UNSET2"),
+        "{w:?}"
+    );
+}
+
+#[test]
 fn lights_outside_the_world_and_illuminate_by_name() {
     // RenderMan Companion / Aqsis scenes declare lights before WorldBegin: they live in
     // camera space and shine in the world (PRMan and Aqsis accept this).

@@ -568,15 +568,31 @@ impl Builder<'_> {
         };
         let previous = std::mem::take(slot);
         let mut out = Vec::new();
+        let mut unset = Vec::new();
         for part in split_path(value) {
             match part {
                 "&" => out.extend(previous.iter().cloned()),
                 "@" => out.extend(default.iter().cloned()),
                 "" => {}
-                s => out.push(s.to_string()),
+                s => match expand_env(s, |v| std::env::var(v).ok()) {
+                    Ok(e) => out.push(e),
+                    Err(v) => unset.push(v),
+                },
             }
         }
         *slot = out;
+        if !unset.is_empty() {
+            let d = Diag::warning(
+                "scene::searchpath-env",
+                format!(
+                    "search path entries naming unset environment variables are skipped: {}",
+                    unset.join(", ")
+                ),
+            )
+            .label(p.span, "in this search path")
+            .help("set the variables before rendering, or give the directories");
+            self.report(d);
+        }
         if let Some(scene) = self.world.as_mut() {
             let cli = |c: &Vec<String>, o: &Vec<String>| c.iter().chain(o).cloned().collect();
             scene.options.search_paths = SearchPaths {
@@ -587,6 +603,41 @@ impl Builder<'_> {
             };
         }
     }
+}
+
+/// Expands `$NAME` and `${NAME}` in a search path entry (PRMan, 3Delight and Aqsis scenes
+/// write `${RMANTREE}/lib/shaders` and the like); `Err(NAME)` when a named variable is unset
+/// (the entry is then skipped). `$` followed by anything else stays as it is.
+pub fn expand_env(s: &str, var: impl Fn(&str) -> Option<String>) -> Result<String, String> {
+    let mut out = String::with_capacity(s.len());
+    let mut rest = s;
+    while let Some(i) = rest.find('$') {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + 1..];
+        let (name, tail) = if let Some(body) = after.strip_prefix('{') {
+            match body.find('}') {
+                Some(j) => (&body[..j], &body[j + 1..]),
+                None => ("", after),
+            }
+        } else {
+            let n = after
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(after.len());
+            (&after[..n], &after[n..])
+        };
+        if name.is_empty() {
+            out.push('$');
+            rest = after;
+            continue;
+        }
+        match var(name) {
+            Some(v) => out.push_str(&v),
+            None => return Err(name.to_string()),
+        }
+        rest = tail;
+    }
+    out.push_str(rest);
+    Ok(out)
 }
 
 /// Splits a colon-separated path, keeping Windows drive letters (`C:\x`) whole.
@@ -613,11 +664,28 @@ pub fn split_path(s: &str) -> Vec<&str> {
 
 #[cfg(test)]
 mod tests {
-    use super::split_path;
+    use super::{expand_env, split_path};
 
     #[test]
     fn paths_split_on_colons() {
         assert_eq!(split_path("a:b:&:@"), vec!["a", "b", "&", "@"]);
+    }
+
+    #[test]
+    fn search_path_entries_expand_environment_variables() {
+        let var = |n: &str| (n == "RMANTREE").then(|| "/opt/pixar".to_string());
+        assert_eq!(
+            expand_env("${RMANTREE}/lib/shaders", var),
+            Ok("/opt/pixar/lib/shaders".into())
+        );
+        assert_eq!(
+            expand_env("$RMANTREE/lib", var),
+            Ok("/opt/pixar/lib".into())
+        );
+        assert_eq!(expand_env("plain/dir", var), Ok("plain/dir".into()));
+        assert_eq!(expand_env("a$/b", var), Ok("a$/b".into()));
+        assert_eq!(expand_env("a${x", var), Ok("a${x".into()));
+        assert_eq!(expand_env("${HOME}/x", var), Err("HOME".into()));
         assert_eq!(split_path("C:\\x:/y"), vec!["C:\\x", "/y"]);
         assert_eq!(split_path(""), vec![""]);
     }
