@@ -724,10 +724,16 @@ impl ZBuffer {
             }
         }
         // Moving grids test their samples time slot by time slot.
-        let bins = (moving && cfg.time_slots > 1).then(|| {
+        // Cells (pixels × slots) are held to about a million (4 MB of counts) for large
+        // buckets, never below one slot per sample of a pixel.
+        let pixels = lay.width * lay.height;
+        let slots = cfg
+            .time_slots
+            .min((MAX_TIME_CELLS / pixels.max(1)).max(spp));
+        let bins = (moving && slots > 1).then(|| {
             let (cols, w) = (lay.cols, lay.width);
             scratch.bins.build(
-                cfg.time_slots,
+                slots,
                 lay.width * lay.height,
                 &times[..n],
                 &b.x,
@@ -1758,6 +1764,10 @@ fn for_samples_in_lens_cells(
     }
     true
 }
+
+/// Pixel × time-slot cells a bucket's time bins may hold (more slots than samples per pixel
+/// only while under this).
+const MAX_TIME_CELLS: usize = 1 << 20;
 
 /// Width and height (pixels) a group's box must exceed for its swept region to be used.
 const SWEEP_MIN: f32 = 3.0;
