@@ -509,6 +509,13 @@ fn time_slots_skip_only_samples_that_cannot_be_hit() {
             // Moving diagonally while it shrinks: each slot's box is mostly empty, the
             // swept band is not (about 100×; 54× with boxes of as many slots as samples).
             ("diagonal", DIAGONAL.to_string(), 90.0),
+            // Through a lens too: the time window grown by the most the lens can shift it
+            // (about 88×; 46× when a lens turned the window off).
+            (
+                "diagonal through a lens",
+                DIAGONAL.replacen("WorldBegin", "DepthOfField 2.8 0.3 5\nWorldBegin", 1),
+                75.0,
+            ),
             // One sample a pixel still has its 64 time slots (about 35×; there was one).
             (
                 "diagonal 1x1",

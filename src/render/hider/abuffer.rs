@@ -918,8 +918,8 @@ fn fragment_grid_blurred(
         let lens_bound = super::LensBound::new(g, &corner, dof.as_ref());
         let keys = super::KeyCorners::new(g, &corner);
         // A moving micropolygon: each pixel row only across the region it sweeps over the
-        // shutter, and (without a lens) each pixel's cells only at the times it can be
-        // there — both conservative, as the Z-buffer's time slots (see `timebins`).
+        // shutter, and each pixel's cells only at the times it can be there — both
+        // conservative, as the Z-buffer's time slots (see `timebins`).
         let sweep = g.motion.as_ref().and_then(|_| {
             let ends = [
                 super::timebins::corners(g, &corner, 0.0),
@@ -929,6 +929,10 @@ fn fragment_grid_blurred(
                 super::timebins::bound_and_pad(g, &corner, &ends, 0.0, 1.0, dof.as_ref())?;
             super::timebins::sweep_between(g, &corner, &ends, 0.0, 1.0, pad)
         });
+        let lens_pad = g
+            .motion
+            .as_ref()
+            .and_then(|_| super::timebins::lens_pad(g, &corner, dof.as_ref()));
         for py in py0..=py1 {
             let (mut qx0, mut qx1) = (px0, px1);
             if let Some(sw) = &sweep {
@@ -939,15 +943,16 @@ fn fragment_grid_blurred(
                 qx1 = qx1.min(floor_i32(hi));
             }
             for px in qx0..=qx1 {
-                let (ta, tb) = match (&g.motion, &dof) {
-                    (Some(_), None) => {
+                let (ta, tb) = match &g.motion {
+                    Some(_) => {
                         let pixel = [px as f32, py as f32, px as f32 + 1.0, py as f32 + 1.0];
-                        match super::timebins::time_window(g, &corner, pixel) {
+                        match super::timebins::time_window_through_lens(g, &corner, pixel, lens_pad)
+                        {
                             Some(w) => w,
                             None => continue,
                         }
                     }
-                    _ => (f32::NEG_INFINITY, f32::INFINITY),
+                    None => (f32::NEG_INFINITY, f32::INFINITY),
                 };
                 b.micro_pixels += 1;
                 let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;

@@ -414,6 +414,31 @@ pub fn time_window(g: &ShadedGrid, corner: &[usize; 4], w: [f32; 4]) -> Option<(
     (ta <= tb).then_some((ta as f32, tb as f32))
 }
 
+/// The most a lens position can shift micropolygon `corner` on each axis over the whole
+/// shutter (the pad of its whole-shutter bound); `[0, 0]` without a lens, None when the pad
+/// cannot be had (a position not finite).
+pub fn lens_pad(g: &ShadedGrid, corner: &[usize; 4], dof: Option<&Dof>) -> Option<[f32; 2]> {
+    if dof.is_none() {
+        return Some([0.0, 0.0]);
+    }
+    let ends = [corners(g, corner, 0.0), corners(g, corner, 1.0)];
+    bound_and_pad(g, corner, &ends, 0.0, 1.0, dof).map(|(_, pad)| pad)
+}
+
+/// [`time_window`] through any lens position: window `w` grown by the [`lens_pad`] `pad`
+/// (all times when it is None).
+pub fn time_window_through_lens(
+    g: &ShadedGrid,
+    corner: &[usize; 4],
+    w: [f32; 4],
+    pad: Option<[f32; 2]>,
+) -> Option<(f32, f32)> {
+    match pad {
+        Some([rx, ry]) => time_window(g, corner, [w[0] - rx, w[1] - ry, w[2] + rx, w[3] + ry]),
+        None => Some((f32::NEG_INFINITY, f32::INFINITY)),
+    }
+}
+
 /// Calls `f` with the corners (raster positions, depths) at both ends and at every motion
 /// key strictly between them: between those each corner moves on a straight segment. None
 /// for a still grid.

@@ -1651,13 +1651,10 @@ fn slot_boxes(
     out.clear();
     let slots = bins.slots();
     // Only the groups of the times it can be in `bx`: a micropolygon crossing many buckets
-    // is in each for a few of its groups (under depth of field, all).
-    let (ta, tb) = match dof {
-        Some(_) => (f32::NEG_INFINITY, f32::INFINITY),
-        None => match timebins::time_window(g, corner, bx) {
-            Some(w) => w,
-            None => return true,
-        },
+    // is in each for a few of its groups.
+    let pad = timebins::lens_pad(g, corner, dof);
+    let Some((ta, tb)) = timebins::time_window_through_lens(g, corner, bx, pad) else {
+        return true;
     };
     // A sample's slot is monotonic in its time, so those that can be hit lie in slots
     // ka..=kb; group q holds slots q·slots/groups ..= (q + 1)·slots/groups − 1.
