@@ -920,19 +920,20 @@ fn fragment_grid_blurred(
         // A moving micropolygon: each pixel row only across the region it sweeps over the
         // shutter, and each pixel's cells only at the times it can be there — both
         // conservative, as the Z-buffer's time slots (see `timebins`).
-        let sweep = g.motion.as_ref().and_then(|_| {
+        // The whole shutter's bound pad is the lens pad's too (`timebins::lens_pad`).
+        let (mut sweep, mut lens_pad) = (None, None);
+        if g.motion.is_some() {
             let ends = [
                 super::timebins::corners(g, &corner, 0.0),
                 super::timebins::corners(g, &corner, 1.0),
             ];
-            let (_, pad) =
-                super::timebins::bound_and_pad(g, &corner, &ends, 0.0, 1.0, dof.as_ref())?;
-            super::timebins::sweep_between(g, &corner, &ends, 0.0, 1.0, pad)
-        });
-        let lens_pad = g
-            .motion
-            .as_ref()
-            .and_then(|_| super::timebins::lens_pad(g, &corner, dof.as_ref()));
+            if let Some((_, pad)) =
+                super::timebins::bound_and_pad(g, &corner, &ends, 0.0, 1.0, dof.as_ref())
+            {
+                sweep = super::timebins::sweep_between(g, &corner, &ends, 0.0, 1.0, pad);
+                lens_pad = Some(if dof.is_some() { pad } else { [0.0, 0.0] });
+            }
+        }
         for py in py0..=py1 {
             let (mut qx0, mut qx1) = (px0, px1);
             if let Some(sw) = &sweep {
@@ -943,16 +944,18 @@ fn fragment_grid_blurred(
                 qx1 = qx1.min(floor_i32(hi));
             }
             for px in qx0..=qx1 {
-                let (ta, tb) = match &g.motion {
-                    Some(_) => {
-                        let pixel = [px as f32, py as f32, px as f32 + 1.0, py as f32 + 1.0];
-                        match super::timebins::time_window_through_lens(g, &corner, pixel, lens_pad)
-                        {
-                            Some(w) => w,
-                            None => continue,
-                        }
-                    }
-                    None => (f32::NEG_INFINITY, f32::INFINITY),
+                let pixel = [px as f32, py as f32, px as f32 + 1.0, py as f32 + 1.0];
+                let window = super::timebins::grown_by_lens(pixel, lens_pad);
+                let (ta, tb) = match (window, &keys) {
+                    (None, _) => (f32::NEG_INFINITY, f32::INFINITY),
+                    (Some(w), Some(k)) => match k.time_window(w) {
+                        Some(t) => t,
+                        None => continue,
+                    },
+                    (Some(w), None) => match super::timebins::time_window(g, &corner, w) {
+                        Some(t) => t,
+                        None => continue,
+                    },
                 };
                 b.micro_pixels += 1;
                 let pix = (py - rect.y0) as usize * rw + (px - rect.x0) as usize;

@@ -239,6 +239,11 @@ impl<'a> KeyCorners<'a> {
         Some(k)
     }
 
+    /// [`timebins::time_window`] from the gathered corners.
+    pub fn time_window(&self, w: [f32; 4]) -> Option<(f32, f32)> {
+        timebins::time_window_of(self.times, |k| self.xy[k], w)
+    }
+
     /// The corners at `time` through `lens`, as [`corners_at`].
     #[inline]
     pub fn at(

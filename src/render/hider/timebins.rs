@@ -353,14 +353,23 @@ pub fn sweep_between(
 /// is grown by a pixel (and the positions' size · 10⁻⁴) and the interval by 10⁻⁴ of the
 /// segment, far beyond the rounding of the positions and of a sample's `f`.
 pub fn time_window(g: &ShadedGrid, corner: &[usize; 4], w: [f32; 4]) -> Option<(f32, f32)> {
+    match g.motion.as_deref() {
+        Some(mo) => time_window_of(&mo.times, |k| corner.map(|c| mo.xy[k][c]), w),
+        None => Some((f32::NEG_INFINITY, f32::INFINITY)),
+    }
+}
+
+/// [`time_window`] of a micropolygon whose corners at key k (of `times`) are `key_xy(k)`.
+pub fn time_window_of(
+    times: &[f32],
+    key_xy: impl Fn(usize) -> [[f32; 2]; 4],
+    w: [f32; 4],
+) -> Option<(f32, f32)> {
     const ALWAYS: Option<(f32, f32)> = Some((f32::NEG_INFINITY, f32::INFINITY));
-    let Some(mo) = g.motion.as_deref() else {
-        return ALWAYS;
-    };
-    let keys = mo.times.len();
+    let keys = times.len();
     let boxes = |k: usize| {
         let mut c = CornerBox::EMPTY;
-        c.add(&corner.map(|c| mo.xy[k][c]), &[0.0; 4]);
+        c.add(&key_xy(k), &[0.0; 4]);
         c
     };
     let (mut ta, mut tb) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -391,7 +400,7 @@ pub fn time_window(g: &ShadedGrid, corner: &[usize; 4], w: [f32; 4]) -> Option<(
         }
         let (f0, f1) = (f0 - 1e-4, f1 + 1e-4);
         if f0 <= f1 && f1 >= 0.0 && f0 <= 1.0 {
-            let (t0, t1) = (mo.times[k] as f64, mo.times[k + 1] as f64);
+            let (t0, t1) = (times[k] as f64, times[k + 1] as f64);
             // Times before the first key are the first key's; after the last, the last's.
             let lo = if k == 0 && f0 <= 0.0 {
                 f64::NEG_INFINITY
@@ -425,18 +434,10 @@ pub fn lens_pad(g: &ShadedGrid, corner: &[usize; 4], dof: Option<&Dof>) -> Optio
     bound_and_pad(g, corner, &ends, 0.0, 1.0, dof).map(|(_, pad)| pad)
 }
 
-/// [`time_window`] through any lens position: window `w` grown by the [`lens_pad`] `pad`
-/// (all times when it is None).
-pub fn time_window_through_lens(
-    g: &ShadedGrid,
-    corner: &[usize; 4],
-    w: [f32; 4],
-    pad: Option<[f32; 2]>,
-) -> Option<(f32, f32)> {
-    match pad {
-        Some([rx, ry]) => time_window(g, corner, [w[0] - rx, w[1] - ry, w[2] + rx, w[3] + ry]),
-        None => Some((f32::NEG_INFINITY, f32::INFINITY)),
-    }
+/// Window `w` grown by the [`lens_pad`] `pad`, for a time window through any lens position;
+/// None (test all times) when there is no pad.
+pub fn grown_by_lens(w: [f32; 4], pad: Option<[f32; 2]>) -> Option<[f32; 4]> {
+    pad.map(|[rx, ry]| [w[0] - rx, w[1] - ry, w[2] + rx, w[3] + ry])
 }
 
 /// Calls `f` with the corners (raster positions, depths) at both ends and at every motion

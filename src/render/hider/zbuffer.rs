@@ -1652,8 +1652,10 @@ fn slot_boxes(
     let slots = bins.slots();
     // Only the groups of the times it can be in `bx`: a micropolygon crossing many buckets
     // is in each for a few of its groups.
-    let pad = timebins::lens_pad(g, corner, dof);
-    let Some((ta, tb)) = timebins::time_window_through_lens(g, corner, bx, pad) else {
+    let window = timebins::grown_by_lens(bx, timebins::lens_pad(g, corner, dof));
+    let Some((ta, tb)) = window.map_or(Some((f32::NEG_INFINITY, f32::INFINITY)), |w| {
+        timebins::time_window(g, corner, w)
+    }) else {
         return true;
     };
     // A sample's slot is monotonic in its time, so those that can be hit lie in slots
