@@ -12,6 +12,9 @@ use std::sync::{Arc, Mutex, RwLock};
 
 use miette::{LabeledSpan, MietteError, NamedSource, SourceCode, SourceSpan, SpanContents};
 
+mod excerpt;
+use excerpt::Excerpt;
+
 /// A byte range in one registered source file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Span {
@@ -178,15 +181,30 @@ impl Diag {
     /// A miette report with the source of the primary label's file attached.
     pub fn to_report(&self, sources: &SourceMap, count: usize) -> miette::Report {
         let file = self.primary_span().and_then(|s| sources.get(s.file));
-        let labels = self
+        let len = file.as_ref().map(|f| f.text.len()).unwrap_or(0);
+        let spans: Vec<(usize, usize, &String)> = self
             .labels
             .iter()
             .filter(|(s, _)| Some(s.file) == self.primary_span().map(|p| p.file))
             .map(|(s, text)| {
-                let len = file.as_ref().map(|f| f.text.len()).unwrap_or(0);
                 let start = (s.start as usize).min(len);
                 let end = (s.end as usize).min(len).max(start);
-                LabeledSpan::new(Some(text.clone()), start, end - start)
+                (start, end, text)
+            })
+            .collect();
+        // A very long line is shown as a window around the labels (see `excerpt`).
+        let excerpt = file.as_ref().and_then(|f| {
+            let ranges: Vec<(usize, usize)> = spans.iter().map(|s| (s.0, s.1)).collect();
+            Excerpt::new(&f.name, &f.text, &ranges)
+        });
+        let labels = spans
+            .iter()
+            .map(|&(start, end, text)| match &excerpt {
+                Some(x) => {
+                    let (a, b) = (x.map(start), x.map(end));
+                    LabeledSpan::new(Some(text.clone()), a, b.max(a) - a)
+                }
+                None => LabeledSpan::new(Some(text.clone()), start, end - start),
             })
             .collect();
         let mut message = self.message.clone();
@@ -199,7 +217,11 @@ impl Diag {
             severity: self.severity,
             help: self.help.clone(),
             labels,
-            source: file.map(|f| SourceText(NamedSource::new(f.name.clone(), f.text.clone()))),
+            source: match excerpt {
+                Some(x) => Some(SourceText::Excerpt(x)),
+                None => file
+                    .map(|f| SourceText::Whole(NamedSource::new(f.name.clone(), f.text.clone()))),
+            },
         };
         miette::Report::new(rep)
     }
@@ -226,8 +248,12 @@ impl Diag {
     }
 }
 
+/// A report's source: the whole file, or an excerpt of its very long lines.
 #[derive(Debug)]
-struct SourceText(NamedSource<Arc<str>>);
+enum SourceText {
+    Whole(NamedSource<Arc<str>>),
+    Excerpt(Excerpt),
+}
 
 impl SourceCode for SourceText {
     fn read_span<'a>(
@@ -236,8 +262,10 @@ impl SourceCode for SourceText {
         context_lines_before: usize,
         context_lines_after: usize,
     ) -> Result<Box<dyn SpanContents<'a> + 'a>, MietteError> {
-        self.0
-            .read_span(span, context_lines_before, context_lines_after)
+        match self {
+            SourceText::Whole(s) => s.read_span(span, context_lines_before, context_lines_after),
+            SourceText::Excerpt(x) => x.read_span(span, context_lines_before, context_lines_after),
+        }
     }
 }
 

@@ -65,3 +65,22 @@ fn light_without_handle() {
         "WorldBegin\nLightSource \"pointlight\" \"intensity\" 5\nWorldEnd\n"
     ));
 }
+
+#[test]
+fn a_very_long_line_is_quoted_as_a_window_around_the_label() {
+    // Exporters write a request's sixty parameters on one line; a report shows the part
+    // around its label, with the file's own line and column.
+    let pad: String = (0..80).map(|i| format!("\"float p{i}\" [{i}] ")).collect();
+    let line = format!("Sphere 1 -1 1 360 {pad}\"temperature\" [1 2 3 4] {pad}");
+    let col = line.find("\"temperature\"").unwrap() + 1;
+    let out = render(&format!("WorldBegin\n{line}\nWorldEnd\n"));
+    assert!(out.contains(&format!("scene.rib:2:{col}")), "{out}");
+    assert!(out.contains("\"temperature\" [1 2 3 4]"), "{out}");
+    assert!(out.contains('…'), "{out}");
+    assert!(
+        out.contains(" 1 │ WorldBegin") && out.contains(" 3 │ WorldEnd"),
+        "{out}"
+    );
+    let widest = out.lines().map(|l| l.chars().count()).max().unwrap_or(0);
+    assert!(widest < 200, "a line of {widest} characters:\n{out}");
+}
