@@ -188,6 +188,44 @@ fn output_is_identical_for_any_thread_count_and_bucket_size() {
 }
 
 #[test]
+fn displacement_that_traces_while_the_ray_geometry_is_built_on_several_threads() {
+    // Twelve displaced spheres (their ray dicing shared among the build's threads) whose
+    // displacement shader casts rays; ray-traced shadows make the first bucket build the ray
+    // geometry. Must finish, and give the same picture on any thread count.
+    let spheres: String = (0..12)
+        .map(|i| {
+            format!(
+                "AttributeBegin\nTranslate {} {} 6\nSphere 0.4 -0.4 0.4 360\nAttributeEnd\n",
+                (i % 4) as f32 - 1.5,
+                (i / 4) as f32 - 1.0
+            )
+        })
+        .collect();
+    let rib = format!(
+        r#"Format 32 32 1
+Projection "orthographic"
+ScreenWindow -3 3 -3 3
+WorldBegin
+LightSource "shadowpoint" 1 "intensity" 100 "from" [0 0 0] "shadowname" "raytrace"
+AttributeBegin
+  Surface "matte"
+  {plane}
+AttributeEnd
+Attribute "displacementbound" "float sphere" [0.1]
+Displacement "tracedisp"
+Surface "matte"
+{spheres}
+WorldEnd
+"#,
+        plane = square(8.0, 10.0)
+    );
+    let one = render_with(&rib, 1, 16);
+    for threads in [2, 4] {
+        assert!(render_with(&rib, threads, 8) == one, "{threads} threads");
+    }
+}
+
+#[test]
 fn occlusion_of_an_open_plane_is_zero_and_inside_a_closed_box_one() {
     let open = format!(
         r#"Format 16 16 1

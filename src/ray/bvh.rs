@@ -4,8 +4,9 @@
 //! array) with the grid and quad index they came from. Output: closest-hit and all-hits
 //! queries along a ray segment, and closest hits of many rays with their walks interleaved
 //! (`interleave`).
-//! Invariants: the build is sequential and depends only on the input order, so the tree (and
-//! every hit) is the same whatever the thread count; nodes are 8 wide (a binned-SAH binary
+//! Invariants: the build depends only on the input order, so the tree (and every hit) is the
+//! same whatever the thread count (the binary tree's halves may be built on threads of their
+//! own, `sah`); nodes are 8 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to eight
 //! children, tested together, quantised to one 64-byte cache line, see `qbox`, with the
 //! children's indices on a second line; leaves of up to 8 quads, their SAH cost counted in
@@ -28,6 +29,7 @@ use glam::Vec3;
 use super::{memhint, qbox};
 
 mod interleave;
+mod sah;
 
 pub use interleave::WalkStats;
 
@@ -275,8 +277,9 @@ struct Node2 {
 
 impl Bvh {
     /// Builds the tree: a binned-SAH binary tree (sweeping 16 bins on each axis, partitioning
-    /// in place), collapsed into 8-wide nodes. Sequential and a function of the input order
-    /// alone (see the module invariants).
+    /// in place; `sah`, its large halves on threads of their own up to rayon's thread count),
+    /// collapsed into 8-wide nodes. A function of the input order alone (see the module
+    /// invariants).
     pub fn build(quads: Vec<Quad>, verts: Vec<Vec3>) -> Bvh {
         let n = quads.len();
         if n == 0 {
@@ -292,132 +295,8 @@ impl Bvh {
                 }
             })
             .collect();
-        let cent: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
-        let mut order: Vec<u32> = (0..n as u32).collect();
-        let mut nodes: Vec<Node2> = Vec::with_capacity(2 * n / 3 + 1);
-        nodes.push(Node2 {
-            bb: Aabb::EMPTY,
-            first: 0,
-            count: 0,
-        });
-        let mut stack = vec![(0usize, 0usize, n)];
-        while let Some((ni, s, e)) = stack.pop() {
-            let mut bb = Aabb::EMPTY;
-            let mut cb = Aabb::EMPTY;
-            for &k in &order[s..e] {
-                bb.grow(&boxes[k as usize]);
-                cb.grow_point(cent[k as usize]);
-            }
-            let count = e - s;
-            let make_leaf = |nodes: &mut Vec<Node2>| {
-                nodes[ni] = Node2 {
-                    bb,
-                    first: s as u32,
-                    count: count as u32,
-                };
-            };
-            if count <= 2 {
-                make_leaf(&mut nodes);
-                continue;
-            }
-            // The best split over the three axes.
-            let ext = cb.max - cb.min;
-            let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, last bin on the left)
-                                                            // One pass bins every item on the three axes (an axis of no extent puts every
-                                                            // item in its bin 0, where no split is possible).
-            let scales: [f32; 3] = std::array::from_fn(|a| {
-                if ext[a] > 0.0 && ext[a].is_finite() {
-                    BINS as f32 * (1.0 - 1e-6) / ext[a]
-                } else {
-                    0.0
-                }
-            });
-            let mut bins = [[(Aabb::EMPTY, 0u32); BINS]; 3];
-            for &k in &order[s..e] {
-                let c = cent[k as usize] - cb.min;
-                let bx = &boxes[k as usize];
-                for axis in 0..3 {
-                    let i = ((c[axis] * scales[axis]) as usize).min(BINS - 1);
-                    let bin = &mut bins[axis][i];
-                    bin.0.grow(bx);
-                    bin.1 += 1;
-                }
-            }
-            for axis in 0..3 {
-                if scales[axis] == 0.0 {
-                    continue;
-                }
-                let b = &bins[axis];
-                let mut right_area = [0f32; BINS];
-                let mut right_count = [0u32; BINS];
-                let mut acc = Aabb::EMPTY;
-                let mut cnt = 0;
-                for i in (1..BINS).rev() {
-                    acc.grow(&b[i].0);
-                    cnt += b[i].1;
-                    right_area[i] = acc.area();
-                    right_count[i] = cnt;
-                }
-                let mut acc = Aabb::EMPTY;
-                let mut cnt = 0;
-                for i in 0..BINS - 1 {
-                    acc.grow(&b[i].0);
-                    cnt += b[i].1;
-                    if cnt == 0 || right_count[i + 1] == 0 {
-                        continue;
-                    }
-                    let cost =
-                        acc.area() * groups(cnt) + right_area[i + 1] * groups(right_count[i + 1]);
-                    if cost < best.0 {
-                        best = (cost, axis, i);
-                    }
-                }
-            }
-            let area = bb.area().max(f32::MIN_POSITIVE);
-            let leaf_cost = groups(count as u32);
-            let split_cost = TRAVERSAL_COST + best.0 / area;
-            let mid = if best.0.is_finite() && (split_cost < leaf_cost || count > MAX_LEAF) {
-                // In-place partition by the chosen bin (deterministic: depends only on the
-                // order so far).
-                let axis = best.1;
-                let (lo, scale) = (cb.min[axis], scales[axis]);
-                let left_of = |k: u32| {
-                    (((cent[k as usize][axis] - lo) * scale) as usize).min(BINS - 1) <= best.2
-                };
-                let (mut i, mut j) = (s, e);
-                while i < j {
-                    if left_of(order[i]) {
-                        i += 1;
-                    } else {
-                        j -= 1;
-                        order.swap(i, j);
-                    }
-                }
-                i
-            } else if count <= MAX_LEAF {
-                make_leaf(&mut nodes);
-                continue;
-            } else {
-                // All centroids coincide: halve the range.
-                s + count / 2
-            };
-            let left = nodes.len();
-            let blank = Node2 {
-                bb: Aabb::EMPTY,
-                first: 0,
-                count: 0,
-            };
-            nodes.push(blank);
-            nodes.push(blank);
-            nodes[ni] = Node2 {
-                bb,
-                first: left as u32,
-                count: 0,
-            };
-            stack.push((left + 1, mid, e));
-            stack.push((left, s, mid));
-        }
-        drop((boxes, cent));
+        let (nodes, order) = sah::build(&boxes, rayon::current_num_threads());
+        drop(boxes);
         let sorted: Vec<Quad> = order.iter().map(|&k| quads[k as usize]).collect();
         drop((quads, order));
         // The walks read the nodes and leaves at random: on huge pages where the system
@@ -1190,6 +1069,60 @@ mod tests {
             ],
             grid,
         )
+    }
+
+    #[test]
+    fn the_tree_is_the_same_for_any_thread_count() {
+        // Large enough for the halves under the root to be built on threads of their own.
+        let mut rnd = signed_rng(7);
+        let mut cases = vec![random_soup(&mut rnd, 5000, 50.0, 1.0)];
+        cases.push(random_soup(&mut rnd, 200_000, 100.0, 2.0));
+        // A field of grids: shared corners, flat grids (an axis of no extent), and a run of
+        // copies of one quad (coincident centroids).
+        let (mut quads, mut verts) = (Vec::new(), Vec::new());
+        for g in 0..40u32 {
+            let (base, side) = (verts.len() as u32, 60u32);
+            for j in 0..side {
+                for i in 0..side {
+                    let z = if g % 3 == 0 { 0.0 } else { (i as f32).sin() };
+                    verts.push(Vec3::new(
+                        i as f32 * 0.1 + g as f32 * 7.0,
+                        j as f32 * 0.1,
+                        z,
+                    ));
+                }
+            }
+            for j in 0..side - 1 {
+                for i in 0..side - 1 {
+                    let (k, index) = (base + j * side + i, j * (side - 1) + i);
+                    quads.push(Quad {
+                        k,
+                        row: side,
+                        grid: g,
+                        index,
+                    });
+                }
+            }
+        }
+        quads.extend(std::iter::repeat(quads[5]).take(300));
+        cases.push((quads, verts));
+        for (quads, verts) in &cases {
+            let built = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
+                let tree = pool
+                    .unwrap()
+                    .install(|| Bvh::build(quads.clone(), verts.clone()));
+                (format!("{:?}", tree.nodes), tree.leaves, tree.root_leaf)
+            };
+            let one = built(1);
+            for threads in [2, 3, 8] {
+                assert!(
+                    built(threads) == one,
+                    "{} quads, {threads} threads",
+                    quads.len()
+                );
+            }
+        }
     }
 
     #[test]

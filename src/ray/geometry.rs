@@ -195,7 +195,7 @@ fn visibility(prim: &Primitive, prman_style: bool) -> (bool, bool) {
 pub fn build(
     scene: &Scene,
     camera: &Camera,
-    displace: &dyn Fn(usize, &mut Grid),
+    displace: &(dyn Fn(usize, &mut Grid) + Sync),
     diags: &Diagnostics,
 ) -> RayScene {
     let prman_style = scene.primitives.iter().any(|p| {
@@ -229,92 +229,28 @@ pub fn build(
         (scene_bound.max - scene_bound.min).length().max(1e-6)
     };
     let min_dist = (0.05 * diag).max(camera.near.max(1e-6));
+    // Each primitive diced on its own (in parallel where threads are free), then joined in
+    // primitive order: the same ray geometry whatever the thread count.
+    let threads = rayon::current_num_threads().min(all.len()).max(1);
+    let parts = dice_all(all, threads, &|prim, surfs, vis| {
+        dice_primitive(
+            scene, camera, &rate_of, min_dist, prim, surfs, vis, displace,
+        )
+    });
     let mut out = RayScene::default();
-    let mut quads = Vec::new();
-    let mut verts: Vec<Vec3> = Vec::new();
-    for (prim, surfs, (trace, shadows)) in all {
-        let first_grid = out.grids.len();
-        let a = &scene.primitives[prim].attributes;
-        let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
-            a.shading_rate.clamp(0.05, 1e4)
-        } else {
-            1.0
-        };
-        // Ray grids are coarser than camera grids: hits are shaded where they land (with the
-        // interpolated normal), so the tessellation only has to hold the silhouette.
-        let ray_rate = user_rate(a).unwrap_or(rate * 4.0);
-        // Displacement puts detail between the diced points: such surfaces dice at the full
-        // rate; others only as finely as their curvature needs.
-        let displaced = a.displacement.is_some();
-        let mut stack: Vec<(Box<dyn Surface>, u32)> = surfs.into_iter().map(|s| (s, 0)).collect();
-        // Depth-first in a fixed order: children are visited in the order split() gives them.
-        stack.reverse();
-        while let Some((s, depth)) = stack.pop() {
-            let b = s.bound();
-            if b.is_empty() || !b.min.is_finite() || !b.max.is_finite() {
-                continue;
-            }
-            let dice = if s.diceable() {
-                rate_of.dice(&*s, &b, ray_rate, min_dist, displaced)
-            } else {
-                None
-            };
-            let (nu, nv) = match dice {
-                Some((nu, nv)) if nu <= MAX_SIDE && nv <= MAX_SIDE => (nu, nv),
-                Some((nu, nv)) if depth >= MAX_DEPTH => (nu.min(64), nv.min(64)),
-                _ if depth >= MAX_DEPTH && s.diceable() => (8, 8),
-                _ if depth >= MAX_DEPTH => continue,
-                _ => {
-                    let mut kids = s.split();
-                    kids.reverse();
-                    stack.extend(kids.into_iter().map(|k| (k, depth + 1)));
-                    continue;
-                }
-            };
-            let mut grid = s.dice(nu + 1, nv + 1);
-            if grid.nu < 2 || grid.nv < 2 || grid.p.len() != grid.nu * grid.nv {
-                continue;
-            }
-            for (i, p) in grid.i.iter_mut().zip(&grid.p) {
-                *i = if camera.perspective {
-                    *p
-                } else {
-                    Vec3::new(0.0, 0.0, p.z)
-                };
-            }
-            displace(prim, &mut grid);
-            if grid.p.iter().any(|p| !p.is_finite()) {
-                continue;
-            }
-            let gi = out.grids.len() as u32;
-            let (gu, gv) = (grid.nu, grid.nv);
-            let base = verts.len();
-            verts.extend_from_slice(&grid.p);
-            for j in 0..gv - 1 {
-                for i in 0..gu - 1 {
-                    quads.push(Quad {
-                        k: (base + j * gu + i) as u32,
-                        row: gu as u32,
-                        grid: gi,
-                        index: (j * (gu - 1) + i) as u32,
-                    });
-                }
-            }
-            out.micropolygons += (gu - 1) * (gv - 1);
-            out.grids.push(RayGrid {
-                prim,
-                grid,
-                first: 0,
-                cs: Tint::Uniform(Vec3::ONE),
-                os: Tint::Uniform(Vec3::ONE),
-                trace,
-                shadows,
-                area_light: a.area_light,
-                media: a.interior.is_some() || a.exterior.is_some(),
-            });
-        }
-        out.crack_fills +=
-            fill_cracks(&out.grids[first_grid..], first_grid, &mut quads, &mut verts);
+    let mut quads = Vec::with_capacity(parts.iter().map(|p| p.quads.len()).sum());
+    let mut verts: Vec<Vec3> = Vec::with_capacity(parts.iter().map(|p| p.verts.len()).sum());
+    for part in parts {
+        let (kbase, gbase) = (verts.len() as u32, out.grids.len() as u32);
+        quads.extend(part.quads.iter().map(|q| Quad {
+            k: q.k + kbase,
+            grid: q.grid + gbase,
+            ..*q
+        }));
+        verts.extend_from_slice(&part.verts);
+        out.grids.extend(part.grids);
+        out.micropolygons += part.micropolygons;
+        out.crack_fills += part.crack_fills;
     }
     // The shading data side by side (see HitVertex); the grids' own arrays are freed.
     let total: usize = out.grids.iter().map(|g| g.grid.p.len()).sum();
@@ -353,6 +289,167 @@ pub fn build(
     }
     out.bound = (!scene_bound.is_empty()).then_some(scene_bound);
     out.bvh = Bvh::build(quads, verts);
+    out
+}
+
+/// One primitive's ray grids, their quads and vertices (numbered from 0: the join offsets
+/// them), and its counts.
+#[derive(Default)]
+struct Part {
+    grids: Vec<RayGrid>,
+    quads: Vec<Quad>,
+    verts: Vec<Vec3>,
+    micropolygons: usize,
+    crack_fills: usize,
+}
+
+/// A primitive to dice: its index, its surfaces and its ray visibility.
+type Prim = (usize, Vec<Box<dyn Surface>>, (bool, bool));
+
+/// `dice` over every primitive on up to `threads` threads (each takes the next primitive
+/// not yet taken); the parts in primitive order.
+fn dice_all(
+    all: Vec<Prim>,
+    threads: usize,
+    dice: &(dyn Fn(usize, Vec<Box<dyn Surface>>, (bool, bool)) -> Part + Sync),
+) -> Vec<Part> {
+    if threads < 2 {
+        return all.into_iter().map(|(p, s, v)| dice(p, s, v)).collect();
+    }
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let n = all.len();
+    let work: Vec<Mutex<Option<Prim>>> = all.into_iter().map(|w| Mutex::new(Some(w))).collect();
+    let done: Vec<Mutex<Option<Part>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let next = AtomicUsize::new(0);
+    let run = || loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        if i >= n {
+            break;
+        }
+        let taken = work[i].lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some((p, s, v)) = taken {
+            let part = dice(p, s, v);
+            *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(part);
+        }
+    };
+    // Plain threads, not rayon: render threads wait on this build, and a rayon task taken up
+    // while joining could be one of theirs, asking for the geometry being built.
+    std::thread::scope(|sc| {
+        let helpers: Vec<_> = (1..threads).map(|_| sc.spawn(run)).collect();
+        run();
+        for h in helpers {
+            if let Err(e) = h.join() {
+                std::panic::resume_unwind(e);
+            }
+        }
+    });
+    done.into_iter()
+        .map(|d| {
+            d.into_inner()
+                .unwrap_or_else(|e| e.into_inner())
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
+/// Dices one primitive's surfaces for rays (depth first in a fixed order) and closes the
+/// cracks between its grids.
+#[allow(clippy::too_many_arguments)]
+fn dice_primitive(
+    scene: &Scene,
+    camera: &Camera,
+    rate_of: &RateModel,
+    min_dist: f32,
+    prim: usize,
+    surfs: Vec<Box<dyn Surface>>,
+    (trace, shadows): (bool, bool),
+    displace: &(dyn Fn(usize, &mut Grid) + Sync),
+) -> Part {
+    let mut out = Part::default();
+    let (mut quads, mut verts) = (Vec::new(), Vec::new());
+    let a = &scene.primitives[prim].attributes;
+    let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
+        a.shading_rate.clamp(0.05, 1e4)
+    } else {
+        1.0
+    };
+    // Ray grids are coarser than camera grids: hits are shaded where they land (with the
+    // interpolated normal), so the tessellation only has to hold the silhouette.
+    let ray_rate = user_rate(a).unwrap_or(rate * 4.0);
+    // Displacement puts detail between the diced points: such surfaces dice at the full
+    // rate; others only as finely as their curvature needs.
+    let displaced = a.displacement.is_some();
+    let mut stack: Vec<(Box<dyn Surface>, u32)> = surfs.into_iter().map(|s| (s, 0)).collect();
+    // Depth-first in a fixed order: children are visited in the order split() gives them.
+    stack.reverse();
+    while let Some((s, depth)) = stack.pop() {
+        let b = s.bound();
+        if b.is_empty() || !b.min.is_finite() || !b.max.is_finite() {
+            continue;
+        }
+        let dice = if s.diceable() {
+            rate_of.dice(&*s, &b, ray_rate, min_dist, displaced)
+        } else {
+            None
+        };
+        let (nu, nv) = match dice {
+            Some((nu, nv)) if nu <= MAX_SIDE && nv <= MAX_SIDE => (nu, nv),
+            Some((nu, nv)) if depth >= MAX_DEPTH => (nu.min(64), nv.min(64)),
+            _ if depth >= MAX_DEPTH && s.diceable() => (8, 8),
+            _ if depth >= MAX_DEPTH => continue,
+            _ => {
+                let mut kids = s.split();
+                kids.reverse();
+                stack.extend(kids.into_iter().map(|k| (k, depth + 1)));
+                continue;
+            }
+        };
+        let mut grid = s.dice(nu + 1, nv + 1);
+        if grid.nu < 2 || grid.nv < 2 || grid.p.len() != grid.nu * grid.nv {
+            continue;
+        }
+        for (i, p) in grid.i.iter_mut().zip(&grid.p) {
+            *i = if camera.perspective {
+                *p
+            } else {
+                Vec3::new(0.0, 0.0, p.z)
+            };
+        }
+        displace(prim, &mut grid);
+        if grid.p.iter().any(|p| !p.is_finite()) {
+            continue;
+        }
+        let gi = out.grids.len() as u32;
+        let (gu, gv) = (grid.nu, grid.nv);
+        let base = verts.len();
+        verts.extend_from_slice(&grid.p);
+        for j in 0..gv - 1 {
+            for i in 0..gu - 1 {
+                quads.push(Quad {
+                    k: (base + j * gu + i) as u32,
+                    row: gu as u32,
+                    grid: gi,
+                    index: (j * (gu - 1) + i) as u32,
+                });
+            }
+        }
+        out.micropolygons += (gu - 1) * (gv - 1);
+        out.grids.push(RayGrid {
+            prim,
+            grid,
+            first: 0,
+            cs: Tint::Uniform(Vec3::ONE),
+            os: Tint::Uniform(Vec3::ONE),
+            trace,
+            shadows,
+            area_light: a.area_light,
+            media: a.interior.is_some() || a.exterior.is_some(),
+        });
+    }
+    out.crack_fills = fill_cracks(&out.grids, 0, &mut quads, &mut verts);
+    out.quads = quads;
+    out.verts = verts;
     out
 }
 

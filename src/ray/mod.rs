@@ -39,8 +39,9 @@ pub struct RayCache {
 }
 
 impl RayCache {
-    /// The ray scene, building it with `build` the first time (sequentially: the build never
-    /// re-enters rayon, so a worker thread waiting here cannot deadlock).
+    /// The ray scene, building it with `build` the first time (the build never re-enters
+    /// rayon — its parallel parts run on plain scoped threads — so a worker thread waiting
+    /// here cannot deadlock).
     pub fn get_or_build(&self, build: impl FnOnce() -> RayScene) -> Arc<RayScene> {
         self.cell.get_or_init(|| Arc::new(build())).clone()
     }

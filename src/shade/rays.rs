@@ -85,7 +85,13 @@ impl<'a> Tracer<'a, '_> {
         let (sys, scene, camera) = (self.sys, self.scene, self.camera);
         Some(sys.rays.get_or_build(|| {
             BUILDING.with(|b| b.set(true));
-            let displace = |prim: usize, grid: &mut Grid| sys.displace(scene, camera, prim, grid);
+            // Displacement may run on the build's own helper threads: a shader there that
+            // traces must not wait for the geometry it is helping to build either.
+            let displace = |prim: usize, grid: &mut Grid| {
+                let was = BUILDING.with(|b| b.replace(true));
+                sys.displace(scene, camera, prim, grid);
+                BUILDING.with(|b| b.set(was));
+            };
             let mut rs = crate::ray::geometry::build(scene, camera, &displace, sys.diags);
             rs.shade_as = shading_classes(sys, scene, &rs);
             BUILDING.with(|b| b.set(false));
