@@ -201,23 +201,13 @@ fn displacement_that_traces_while_the_ray_geometry_is_built_on_several_threads()
             )
         })
         .collect();
-    let rib = format!(
-        r#"Format 32 32 1
-Projection "orthographic"
-ScreenWindow -3 3 -3 3
-WorldBegin
-LightSource "shadowpoint" 1 "intensity" 100 "from" [0 0 0] "shadowname" "raytrace"
-AttributeBegin
-  Surface "matte"
-  {plane}
-AttributeEnd
-Attribute "displacementbound" "float sphere" [0.1]
-Displacement "tracedisp"
-Surface "matte"
-{spheres}
-WorldEnd
-"#,
-        plane = square(8.0, 10.0)
+    // The shadow scene's plane and light, its sphere joined by the displaced ones.
+    let rib = shadow_scene(32).replace(
+        "WorldEnd",
+        &format!(
+            "Attribute \"displacementbound\" \"float sphere\" [0.1]\n\
+             Displacement \"tracedisp\"\nSurface \"matte\"\n{spheres}WorldEnd"
+        ),
     );
     let one = render_with(&rib, 1, 16);
     for threads in [2, 4] {
