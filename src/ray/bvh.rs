@@ -8,8 +8,8 @@
 //! same whatever the thread count (the binary tree's halves may be built on threads of their
 //! own, `sah`); nodes are 8 wide (a binned-SAH binary
 //! tree, 16 bins on each axis, collapsed so that each node holds the boxes of up to eight
-//! children, tested together, quantised to one 64-byte cache line, see `qbox`, with the
-//! children's indices on a second line; leaves of up to 8 quads, their SAH cost counted in
+//! children, tested together, as exact `f32` rows on three 64-byte cache lines, with the
+//! children's indices on a fourth; leaves of up to 8 quads, their SAH cost counted in
 //! groups of four, the groups the leaf test takes at once on x86-64, see `quad4`, each leaf
 //! one block holding its quads' corners itself, see [`Bvh::leaves`]); a quad is
 //! intersected, watertight, as the two triangles `(v00 v10 v11)` and `(v00 v11 v01)` and
@@ -26,7 +26,7 @@
 
 use glam::Vec3;
 
-use super::{memhint, qbox};
+use super::memhint;
 
 mod interleave;
 mod sah;
@@ -59,48 +59,45 @@ impl Quad {
 /// Children a node holds.
 const WIDTH: usize = 8;
 
-/// An 8-wide node in two 64-byte cache lines. The first holds all the slab test reads: the
-/// node's low corner, a power-of-two quantum per axis and the boxes of up to eight children
-/// side by side (lane `i` of each row) in 8-bit steps of the quantum from that corner (see
-/// `qbox`: the dequantised planes enclose each child's exact box), so one ray tests all
-/// eight with the same few vector instructions (AVX2; two SSE halves' worth otherwise). The
-/// second holds the children themselves, read for those in reach.
+/// An 8-wide node in four 64-byte cache lines. The first three hold all the slab test
+/// reads: the exact boxes of up to eight children side by side (lane `i` of each row), as
+/// `f32` rows, so one ray tests all eight with the same few vector instructions (AVX2; two
+/// SSE halves' worth otherwise) and no decoding. The fourth holds the children themselves,
+/// read for those in reach.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node8 {
-    /// The node's low corner: step 0 on each axis.
-    origin: [f32; 3],
-    /// Per axis the quantum's biased exponent (`qbox::quantum`).
-    exp: [u8; 3],
-    /// A bit per lane holding a child (the others are never visited).
-    valid: u8,
-    /// Steps per child lane: rows 0–2 the low x, y, z, rows 3–5 the high ones.
-    q: [[u8; WIDTH]; 6],
+    /// The children's boxes: rows 0–2 the low x, y, z, rows 3–5 the high ones (an empty
+    /// lane: +∞ low, −∞ high, and never visited anyway, see `valid`).
+    b: [[f32; WIDTH]; 6],
     /// Interior child: node index. Leaf child: its block's first word in [`Bvh::leaves`].
     child: [u32; WIDTH],
     /// Leaf child: its quads (at most `MAX_LEAF`, low byte) and its block's words the walk
     /// reads (high byte, see [`Bvh::leaves`]); 0 for an interior child and an empty lane.
     count: [u16; WIDTH],
-    /// Per axis the quantum itself, `qbox::quantum(exp)` (read by the vector slab test,
-    /// which then broadcasts it instead of rebuilding it from the exponent's bits).
-    scale: [f32; 3],
+    /// A bit per lane holding a child (the others are never visited).
+    valid: u8,
 }
 
 const _: () = assert!(
-    std::mem::size_of::<Node8>() == 128
-        && std::mem::offset_of!(Node8, child) == 64
+    std::mem::size_of::<Node8>() == 256
+        && std::mem::offset_of!(Node8, child) == 192
         && MAX_LEAF <= u8::MAX as usize
 );
 
 impl Node8 {
     const EMPTY: Node8 = Node8 {
-        origin: [0.0; 3],
-        exp: [1; 3],
-        valid: 0,
-        q: [[0; WIDTH]; 6],
+        b: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
         child: [0; WIDTH],
         count: [0; WIDTH],
-        scale: [0.0; 3],
+        valid: 0,
     };
 }
 
@@ -381,21 +378,11 @@ impl Bvh {
         let me = self.nodes.len();
         self.nodes.push(Node8::EMPTY);
         let mut node = Node8::EMPTY;
-        let mut bb = Aabb::EMPTY;
-        for &k in &kids {
-            bb.grow(&nodes[k].bb);
-        }
-        node.origin = bb.min.to_array();
-        for axis in 0..3 {
-            node.exp[axis] = qbox::exponent(bb.min[axis], bb.max[axis]);
-            node.scale[axis] = qbox::quantum(node.exp[axis]);
-        }
         for (lane, &k) in kids.iter().enumerate() {
             let c = &nodes[k];
             for axis in 0..3 {
-                let (o, e) = (node.origin[axis], node.exp[axis]);
-                node.q[axis][lane] = qbox::step_down(o, e, c.bb.min[axis]);
-                node.q[3 + axis][lane] = qbox::step_up(o, e, c.bb.max[axis]);
+                node.b[axis][lane] = c.bb.min[axis];
+                node.b[3 + axis][lane] = c.bb.max[axis];
             }
             node.valid |= 1 << lane;
             if c.count > 0 {
@@ -509,7 +496,7 @@ impl Bvh {
         )
     }
 
-    /// Asks for the cache lines of a pushed child (an interior node's two, or a leaf's
+    /// Asks for the cache lines of a pushed child (an interior node's four, or a leaf's
     /// block: the part its test reads and the ids, read on a hit, which otherwise were a
     /// miss the walk waited for; rays bench, medians of 5 interleaved pairs: 2.41 → 2.46 M
     /// shaded, 3.07 → 3.12 M shadow rays/s): a later visit then finds them on the way. No
@@ -517,9 +504,14 @@ impl Bvh {
     #[inline(always)]
     fn prefetch(&self, child: u32, count: u32) {
         if count == 0 {
-            let p = self.nodes.as_ptr().wrapping_add(child as usize);
-            memhint::prefetch(p);
-            memhint::prefetch(p.cast::<u8>().wrapping_add(64));
+            let p = self
+                .nodes
+                .as_ptr()
+                .wrapping_add(child as usize)
+                .cast::<u8>();
+            for line in 0..4 {
+                memhint::prefetch(p.wrapping_add(64 * line));
+            }
         } else {
             let p = self.leaves.as_ptr().wrapping_add(child as usize);
             memhint::prefetch_span(p, (count >> 8) as usize + 2 * (count & 0xff) as usize);
@@ -778,11 +770,16 @@ impl LeafRay {
     }
 }
 
-/// A ray prepared for the slab test: the reciprocal direction and the origin scaled by it
-/// (a plane `p` is crossed at `p · inv − oi`).
+/// A ray prepared for the slab test: the reciprocal direction, the origin scaled by it (a
+/// plane `p` is crossed at `p · inv − oi`), and per axis which of a node's rows holds the
+/// near sides and which the far ones (chosen once per ray by the direction's sign).
 struct SlabRay {
     inv: [f32; 3],
     oi: [f32; 3],
+    /// Byte offsets in [`Node8::b`] of the rows the ray enters by (x, y, z) and leaves by
+    /// (x, y, z): the low sides' rows where the reciprocal is positive, the high ones' where
+    /// it is negative.
+    row: [u32; 6],
 }
 
 impl SlabRay {
@@ -798,7 +795,14 @@ impl SlabRay {
         };
         let inv = [1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z)];
         let oi = [o.x * inv[0], o.y * inv[1], o.z * inv[2]];
-        SlabRay { inv, oi }
+        const ROW: u32 = (4 * WIDTH) as u32;
+        let near = |a: usize| ROW * (a as u32 + 3 * u32::from(inv[a].is_sign_negative()));
+        let far = |a: usize| ROW * (a as u32 + 3 * u32::from(!inv[a].is_sign_negative()));
+        SlabRay {
+            inv,
+            oi,
+            row: [near(0), near(1), near(2), far(0), far(1), far(2)],
+        }
     }
 }
 
@@ -807,12 +811,10 @@ impl SlabRay {
 /// the same order as the portable form (`vminps`/`vmaxps` return their second operand
 /// exactly where `vmin`/`vmax` do), so the same children are visited.
 ///
-/// Each box side is first dequantised to the `f32` plane the build checked (`qbox::plane`),
-/// then crossed as an exact box's side would be (`p · inv − oi`, both rounded monotonically
-/// in `p`), so a quantised box, enclosing the exact one, is entered no later and left no
-/// earlier. Per axis the near side is the smaller crossing and the far side the larger (for
-/// a box with `lo ≤ hi` that is picking the low or high side by the direction's sign; empty
-/// lanes are masked out by the node's `valid` bits instead).
+/// Each box side is crossed at `p · inv − oi` (rounded monotonically in `p`). Per axis the
+/// near side is the low one where the direction is positive and the high one where it is
+/// negative (for a box with `lo ≤ hi` the smaller crossing, as a `min` of the two would
+/// give; empty lanes are masked out by the node's `valid` bits), the far side the other.
 #[inline(always)]
 fn slab8<const AVX2: bool>(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
     #[cfg(target_arch = "x86_64")]
@@ -828,33 +830,23 @@ fn slab8<const AVX2: bool>(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32
 #[inline(always)]
 unsafe fn slab8_avx2(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
     use std::arch::x86_64::*;
-    // SAFETY (of the loads): each reads 8 bytes of a row of `q`, inside the node; the store
-    // writes a [f32; 8].
-    let q: *const u8 = n.q.as_ptr().cast();
-    let cross = |row: usize, a: usize| {
-        let steps = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
-            q.add(row * WIDTH).cast(),
-        )));
-        let p = _mm256_add_ps(
-            _mm256_set1_ps(n.origin[a]),
-            _mm256_mul_ps(steps, _mm256_set1_ps(n.scale[a])),
-        );
+    let base: *const u8 = n.b.as_ptr().cast();
+    let cross = |k: usize, a: usize| {
+        // SAFETY: `row[k]` is the offset of one of the six 32-byte rows of `b` (see
+        // `SlabRay::new`), 32-byte aligned in the 64-byte aligned node.
+        let p = _mm256_load_ps(base.add(r.row[k] as usize).cast());
         _mm256_sub_ps(
             _mm256_mul_ps(p, _mm256_set1_ps(r.inv[a])),
             _mm256_set1_ps(r.oi[a]),
         )
     };
-    let (lx, hx) = (cross(0, 0), cross(3, 0));
-    let (ly, hy) = (cross(1, 1), cross(4, 1));
-    let (lz, hz) = (cross(2, 2), cross(5, 2));
+    let (nx, ny, nz) = (cross(0, 0), cross(1, 1), cross(2, 2));
+    let (fx, fy, fz) = (cross(3, 0), cross(4, 1), cross(5, 2));
     let t0 = _mm256_max_ps(
-        _mm256_max_ps(_mm256_min_ps(lx, hx), _mm256_min_ps(ly, hy)),
-        _mm256_max_ps(_mm256_min_ps(lz, hz), _mm256_set1_ps(tmin)),
+        _mm256_max_ps(nx, ny),
+        _mm256_max_ps(nz, _mm256_set1_ps(tmin)),
     );
-    let f = _mm256_min_ps(
-        _mm256_min_ps(_mm256_max_ps(lx, hx), _mm256_max_ps(ly, hy)),
-        _mm256_max_ps(lz, hz),
-    );
+    let f = _mm256_min_ps(_mm256_min_ps(fx, fy), fz);
     let t1 = _mm256_min_ps(
         _mm256_mul_ps(f, _mm256_set1_ps(1.000_000_24)),
         _mm256_set1_ps(tmax),
@@ -878,19 +870,16 @@ fn vmax(a: [f32; WIDTH], b: [f32; WIDTH]) -> [f32; WIDTH] {
 /// [`slab8`] lane by lane.
 #[inline(always)]
 fn slab8_portable(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; WIDTH]) {
-    let cross = |row: usize, a: usize| -> [f32; WIDTH] {
-        std::array::from_fn(|i| {
-            qbox::plane(n.origin[a], n.exp[a], n.q[row][i]) * r.inv[a] - r.oi[a]
-        })
+    let cross = |k: usize, a: usize| -> [f32; WIDTH] {
+        // (`row[k] / 32` is a row index below 6 by construction; the `% 6` only spares a
+        // bounds check.)
+        let p = &n.b[(r.row[k] as usize / (4 * WIDTH)) % 6];
+        std::array::from_fn(|i| p[i] * r.inv[a] - r.oi[a])
     };
-    let (lx, hx) = (cross(0, 0), cross(3, 0));
-    let (ly, hy) = (cross(1, 1), cross(4, 1));
-    let (lz, hz) = (cross(2, 2), cross(5, 2));
-    let t0 = vmax(
-        vmax(vmin(lx, hx), vmin(ly, hy)),
-        vmax(vmin(lz, hz), [tmin; WIDTH]),
-    );
-    let f = vmin(vmin(vmax(lx, hx), vmax(ly, hy)), vmax(lz, hz));
+    let (nx, ny, nz) = (cross(0, 0), cross(1, 1), cross(2, 2));
+    let (fx, fy, fz) = (cross(3, 0), cross(4, 1), cross(5, 2));
+    let t0 = vmax(vmax(nx, ny), vmax(nz, [tmin; WIDTH]));
+    let f = vmin(vmin(fx, fy), fz);
     // Widened by 2 ulps (Ize 2013): a ray grazing a box face is never lost to rounding.
     let t1 = vmin(std::array::from_fn(|i| f[i] * 1.000_000_24), [tmax; WIDTH]);
     let mut mask = 0;
@@ -1340,8 +1329,8 @@ mod tests {
         assert_eq!(hits, 6);
     }
 
-    /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to
-    /// lie inside every dequantised box on the way down.
+    /// The exact box of the quads under lane `lane` of node `n`, checked (recursively) to be
+    /// the box stored for that lane on the way down (enclosing its quads, and no larger).
     fn enclosed(bvh: &Bvh, n: usize, lane: usize) -> Aabb {
         let node = &bvh.nodes[n];
         let mut exact = Aabb::EMPTY;
@@ -1364,22 +1353,25 @@ mod tests {
             }
         }
         for a in 0..3 {
-            let (o, e) = (node.origin[a], node.exp[a]);
-            assert_eq!(node.scale[a].to_bits(), qbox::quantum(e).to_bits());
-            let lo = qbox::plane(o, e, node.q[a][lane]);
-            let hi = qbox::plane(o, e, node.q[3 + a][lane]);
+            let (lo, hi) = (node.b[a][lane], node.b[3 + a][lane]);
             assert!(
                 lo <= exact.min[a] && hi >= exact.max[a],
-                "node {n} lane {lane} axis {a}"
+                "node {n} lane {lane} axis {a}: box does not enclose its quads"
+            );
+            assert_eq!(
+                (lo.to_bits(), hi.to_bits()),
+                (exact.min[a].to_bits(), exact.max[a].to_bits()),
+                "node {n} lane {lane} axis {a}: box not tight"
             );
         }
         exact
     }
 
-    /// Every quad lies inside the dequantised boxes of all its ancestors, in a tree over
-    /// quads from tiny to huge, flat ones and ones far from the origin.
+    /// Every child's stored box is the exact box of the quads under it, in a tree over
+    /// quads from tiny to huge, flat ones and ones far from the origin; empty lanes are
+    /// empty boxes and not valid.
     #[test]
-    fn quantised_boxes_enclose_their_quads() {
+    fn child_boxes_are_the_exact_boxes_of_their_quads() {
         let mut h = 99u32;
         let mut rnd = || {
             h = crate::pattern::hash::hash_u32(h);
@@ -1410,6 +1402,13 @@ mod tests {
             }
         }
         assert!(total.max.x - total.min.x > 1e7);
+        for node in &bvh.nodes {
+            for l in 0..WIDTH {
+                if node.valid & (1 << l) == 0 {
+                    assert!((0..3).all(|a| node.b[a][l] > node.b[3 + a][l]));
+                }
+            }
+        }
     }
 
     /// The AVX2 slab test gives the portable one's mask and entry distances bit for bit, on
@@ -1430,6 +1429,9 @@ mod tests {
             let mut d = Vec3::new(rnd(), rnd(), rnd());
             if r % 7 == 0 {
                 d.y = 0.0;
+            } else if r % 11 == 0 {
+                // (A negative zero: the high sides are the near ones.)
+                d.x = -0.0;
             }
             let ray = SlabRay::new(o, d);
             let (tmin, tmax) = if r % 3 == 0 {

@@ -9,8 +9,7 @@
 //! a thread or a bucket.
 //!
 //! Files: `bvh` (binned-SAH BVH over micropolygons; `bvh/interleave` walks many rays at
-//! once), `qbox` (its nodes' 8-bit quantised child boxes), `quad4` (its leaves' quad test
-//! four quads at a time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area
+//! once), `quad4` (its leaves' quad test four quads at a time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area
 //! lights' geometry, sampled by area), `memhint` (prefetches and huge pages for the large
 //! arrays the walks and hit shading read at random).
 
@@ -18,7 +17,6 @@ pub mod area;
 pub mod bvh;
 pub mod geometry;
 pub(crate) mod memhint;
-mod qbox;
 #[cfg(target_arch = "x86_64")]
 mod quad4;
 

@@ -205,27 +205,41 @@ pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
         return out;
     }
     let base = verts.as_ptr();
-    // Per lane and corner: the corner's first float. Missing lanes read corner 0 and are
-    // masked off at the end.
-    let mut off = [[0usize; 4]; 4];
-    let mut active = 0u32;
-    for (l, &q) in quads.iter().take(4).enumerate() {
-        let c = q.to_le_bytes().map(|b| 3 * b as usize);
-        // A corner's 16-byte load reads the float after it: in range up to the padding.
-        if c.iter().all(|&f| f + 4 <= verts.len()) {
-            off[l] = c;
-            active |= 1 << l;
-        }
-    }
-    if active == 0 {
-        return out;
-    }
-    // SAFETY: SSE is baseline; every load reads the 16 bytes from float offset f with
-    // f + 4 <= verts.len() (checked above, or f = 0 with verts.len() >= 4).
+    let n = quads.len().min(4);
+    // SAFETY: SSE2 is baseline; every load below reads the 16 bytes from float offset f with
+    // f + 4 <= verts.len(): f = 3c for a corner c <= (verts.len() − 4) / 3 (checked here),
+    // or f = 0 (verts.len() >= 4).
     unsafe {
+        // The lanes' corner words (missing lanes: corner 0 four times).
+        let word = |l: usize| quads.get(l).copied().unwrap_or(0);
+        let w = [word(0), word(1), word(2), word(3)];
+        let words = _mm_loadu_si128(w.as_ptr().cast());
+        // A corner's 16-byte load reads the float after it: in range up to the padding.
+        // Per byte c <= lim (unsigned), then per lane all four.
+        let lim = _mm_set1_epi8(((verts.len() - 4) / 3).min(255) as u8 as i8);
+        let in_range = _mm_cmpeq_epi8(_mm_max_epu8(words, lim), lim);
+        let lane_ok = _mm_cmpeq_epi32(in_range, _mm_set1_epi32(-1));
+        let active = _mm_movemask_ps(_mm_castsi128_ps(lane_ok)) as u32 & ((1u32 << n) - 1);
+        if active == 0 {
+            return out;
+        }
+        // Per lane and corner the corner's first float, 3c (16 bits: no overflow); lanes
+        // out of range read corner 0 and are masked off at the end.
+        let c = _mm_and_si128(words, lane_ok);
+        let zero = _mm_setzero_si128();
+        let (lo, hi) = (_mm_unpacklo_epi8(c, zero), _mm_unpackhi_epi8(c, zero));
+        let mut off = [0u16; 16];
+        _mm_storeu_si128(
+            off.as_mut_ptr().cast(),
+            _mm_add_epi16(_mm_add_epi16(lo, lo), lo),
+        );
+        _mm_storeu_si128(
+            off.as_mut_ptr().add(8).cast(),
+            _mm_add_epi16(_mm_add_epi16(hi, hi), hi),
+        );
         // The four corners in the ray frame, each as (x, y, z) vectors across the lanes.
         let corner = |c: usize| -> [__m128; 3] {
-            let ld = |l: usize| _mm_loadu_ps(base.add(off[l][c]));
+            let ld = |l: usize| _mm_loadu_ps(base.add(usize::from(off[4 * l + c])));
             let (p0, p1, p2, p3) = (ld(0), ld(1), ld(2), ld(3));
             // Transpose: lanes become quads.
             let t0 = _mm_unpacklo_ps(p0, p1); // x0 x1 y0 y1
@@ -363,5 +377,32 @@ mod tests {
             hits > 1000 && edges > 100,
             "{hits} hits, {edges} at corners"
         );
+        // A quad naming a corner past the list (or past its padding) is never hit, and the
+        // lanes beside it are as before; rays straight down through the middle of the grid.
+        let past = 36u8; // the 36 corners are 0…35
+        let mut beside = 0;
+        for (r, &(x, y)) in [(0.5, 0.5), (0.3, 0.1), (0.9, 0.7), (0.1, 0.9)]
+            .iter()
+            .enumerate()
+        {
+            let wt = WtRay::new(Vec3::new(x, y, 1.0), Vec3::new(0.001, 0.002, -1.0));
+            let w4 = WtRay4::new(&wt);
+            for s in 0..quads.len() - 3 {
+                let mut group: Vec<u32> = quads[s..s + 4].to_vec();
+                let mut bad = group[1].to_le_bytes();
+                bad[r % 4] = if r % 2 == 0 { u8::MAX } else { past };
+                group[1] = u32::from_le_bytes(bad);
+                let got = quads4(&group, &flat, &w4, &wt, 0.0, f32::INFINITY);
+                assert_eq!(got.mask & 2, 0, "ray {r} group {s}");
+                for l in [0, 2, 3] {
+                    let want =
+                        intersect_quad_wt(leaf_corners(group[l], &flat).unwrap(), &wt, 0.0, 1e30);
+                    let have = (got.mask & (1 << l) != 0).then(|| got.t[l].to_bits());
+                    assert_eq!(have, want.map(|w| w.0.to_bits()), "ray {r} group {s}");
+                    beside += usize::from(have.is_some());
+                }
+            }
+        }
+        assert!(beside >= 4, "{beside} hits beside a bad quad");
     }
 }

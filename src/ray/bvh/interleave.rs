@@ -331,7 +331,7 @@ impl Bvh {
 pub struct WalkStats {
     /// Walks (rays).
     pub rays: u64,
-    /// Interior nodes visited (their slab tests: two cache lines each).
+    /// Interior nodes visited (their slab tests: four cache lines each).
     pub nodes: u64,
     /// Leaves tested, the quads in them, and the bytes of their blocks the tests read.
     pub leaves: u64,
