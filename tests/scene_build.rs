@@ -475,6 +475,10 @@ fn read_archive_from_disk_with_cycle_detection() {
         errs[0]
     );
     assert!(errs[1].contains("cannot find archive \"missing.rib\""));
+    // The scene's folder is also the base folder: named once in the help.
+    let help = diags.snapshot()[1].0.help.clone().unwrap_or_default();
+    let folder = dir.display().to_string();
+    assert_eq!(help.matches(folder.as_str()).count(), 1, "{help}");
     assert_eq!(scenes[0].primitives.len(), 3);
     assert!(matches!(
         *scenes[0].primitives[1].geometry,

@@ -134,6 +134,9 @@ impl Builder<'_> {
         if let Some(b) = &self.ctx.base_dir {
             dirs.push(b.clone());
         }
+        // Each folder once (the scene's folder is often also the base: "searched: ., .").
+        let mut seen = std::collections::HashSet::new();
+        dirs.retain(|d| seen.insert(d.clone()));
         let searched = dirs.iter().map(|d| d.display().to_string()).collect();
         // Exact names first; then one differing only in case (a scene written on a file system
         // that ignores case, where its `ReadArchive "Cube.rib"` found `cube.rib`).

@@ -462,7 +462,7 @@ fn on_path(program: &str) -> Option<PathBuf> {
         .find(|c| c.is_file())
 }
 
-fn searched_help(searched: &[String]) -> String {
+pub(super) fn searched_help(searched: &[String]) -> String {
     if searched.is_empty() {
         "check the path".into()
     } else {

@@ -125,14 +125,7 @@ impl Builder<'_> {
     ) {
         let (found, searched) = self.find_procedural(name, true, span);
         let Some(path) = found else {
-            let help = if searched.is_empty() {
-                "check the path".to_string()
-            } else {
-                format!(
-                    "searched: {} (add a folder with `Option \"searchpath\" \"procedural\"`)",
-                    searched.join(", ")
-                )
-            };
+            let help = super::procedural::searched_help(&searched);
             let d = Diag::error(
                 "scene::procedural",
                 format!("cannot find the DynamicLoad library `{name}`"),
