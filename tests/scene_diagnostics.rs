@@ -65,3 +65,24 @@ fn light_without_handle() {
         "WorldBegin\nLightSource \"pointlight\" \"intensity\" 5\nWorldEnd\n"
     ));
 }
+
+// Found by fuzzing (fuzz3): thousands of `AttributeBegin`s without their ends gave an error
+// each (5000 took half a minute to print). The innermost eight are reported one by one, the
+// rest together at the outermost.
+#[test]
+fn many_blocks_closed_at_once() {
+    let text = format!(
+        "WorldBegin\n{}Sphere 1 -1 1 360\nWorldEnd\n",
+        "AttributeBegin\n".repeat(11) + "TransformBegin\n"
+    );
+    insta::assert_snapshot!(render(&text));
+}
+
+#[test]
+fn many_blocks_never_closed() {
+    let text = format!(
+        "WorldBegin\n{}Sphere 1 -1 1 360\n",
+        "AttributeBegin\nTransformBegin\n".repeat(6)
+    );
+    insta::assert_snapshot!(render(&text));
+}
