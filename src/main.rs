@@ -516,7 +516,10 @@ fn report(diags: &Diagnostics, sources: &SourceMap, quiet: bool, verbose: bool) 
                 }
             }
         }
-        eprintln!("{:?}", d.to_report(sources, *count));
+        // Rendered whole, then written at once: stderr is unbuffered, and the report's
+        // formatter writes a character at a time (a system call each).
+        let text = format!("{:?}", d.to_report(sources, *count));
+        eprintln!("{text}");
     }
     if !quiet && (errors > 0 || warnings > 0) {
         eprintln!("{errors} error(s), {warnings} warning(s)");

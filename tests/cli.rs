@@ -371,3 +371,43 @@ fn an_exported_package_with_the_authors_absolute_paths_renders_from_its_own_fold
     // The sphere (read through both archives) is lit in the middle.
     assert!(img.get_pixel(8, 8)[0] > 40, "{:?}", img.get_pixel(8, 8));
 }
+
+/// The floats of a 32-bit float TIFF.
+fn float_tiff(path: &std::path::Path) -> Vec<f32> {
+    let mut d = tiff::decoder::Decoder::new(std::fs::File::open(path).unwrap()).unwrap();
+    match d.read_image().unwrap() {
+        tiff::decoder::DecodingResult::F32(v) => v,
+        _ => panic!("not a float TIFF"),
+    }
+}
+
+// Found by fuzzing (fuzz3): shader parameters mutated to 1e38 gave infinite pixels in float
+// pictures. Shaders' own NaN and infinities are caught when shaded; an imager shader writes
+// the film directly and Exposure's gain can carry a value past the float range.
+#[test]
+fn no_picture_holds_nan_or_infinite_values() {
+    let dir = tmpdir("nonfinite");
+    std::fs::write(
+        dir.join("blowup.sl"),
+        "imager blowup(float k = 1e38) { Ci = color(k * 10, 0, 0); }\n",
+    )
+    .unwrap();
+    let scene = |first: &str, name: &str| {
+        format!(
+            "{first}\nFormat 8 8 1\nDisplay \"{name}\" \"tiff\" \"rgba\"\nQuantize \"rgba\" 0 0 0 0\n\
+             Projection \"orthographic\"\nWorldBegin\nSurface \"constant\"\nColor 100 50 25\n\
+             Polygon \"P\" [-2 -2 1  2 -2 1  2 2 1  -2 2 1]\nWorldEnd\n"
+        )
+    };
+    for (first, name) in [
+        ("Imager \"blowup\"", "imager.tif"),
+        ("Exposure 1e38 1", "exposure.tif"),
+    ] {
+        let (code, err) = run_stdin(&["render", "--shaders", "."], &scene(first, name), &dir);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("NaN or infinite"), "{name}: {err}");
+        let px = float_tiff(&dir.join(name));
+        assert_eq!(px.len(), 8 * 8 * 4);
+        assert!(px.iter().all(|v| v.is_finite()), "{name}: {px:?}");
+    }
+}

@@ -164,6 +164,50 @@ fn a_clamped_march_step_ends_the_loop() {
     assert!(m[1] > 1.0 && m[1] < 1.0051, "{m:?}");
 }
 
+// Found by fuzzing (fuzz3): an fBm whose octave count was mutated to 1e39, called at each
+// step of a volume march, ran the loop limit at every call (64 times a grid: minutes for one
+// sphere). A loop stopped at the limit is skipped at its later executions in the run.
+const CALLED: &str = "float endless(float k)
+{
+    float i, s = 0;
+    for (i = 0; i < k; i += 1)
+        s += 1;
+    return s;
+}
+surface called(float octaves = 1e39)
+{
+    float j, acc = 0;
+    for (j = 0; j < 50; j += 1)
+        acc += endless(octaves);
+    Ci = color(acc / 1000, j / 50, 0);
+}
+";
+
+#[test]
+fn a_loop_stopped_at_the_limit_is_not_run_again_in_the_same_grid() {
+    let dir = shader_dir("hang_called", &[("called.sl", CALLED)]);
+    let rib = square_scene(r#"Option "limits" "loopiterations" [1000]"#, "called");
+    let (film, diags, sources) = common::render_rib_with(&rib, &[dir], &Default::default());
+    let warns: Vec<_> = diags
+        .iter()
+        .filter(|(d, _)| d.code == "shade::runaway_loop")
+        .collect();
+    // One warning, at the endless loop (line 4), once per grid: not once per call.
+    assert_eq!(warns.len(), 1, "{diags:#?}");
+    let (w, times) = warns[0];
+    assert!(w.message.contains("ran 1000 iterations"), "{}", w.message);
+    assert_eq!(sources.line_col(w.primary_span().expect("a span")).0, 4);
+    let grids = 1; // a 16 x 16 square at shading rate 1 is one grid
+    assert_eq!(*times, grids, "{diags:#?}");
+    // The first call counted to 1000; the outer loop ran its 50 steps to the end.
+    for px in common::film_rgb(&film).chunks_exact(3) {
+        assert!(
+            (px[0] - 1.0).abs() < 1e-4 && (px[1] - 1.0).abs() < 1e-4,
+            "{px:?}"
+        );
+    }
+}
+
 fn limit_warnings(diags: &[(Diag, usize)]) -> Vec<String> {
     find(diags, "render::limits")
         .iter()

@@ -84,3 +84,24 @@ fn a_very_long_line_is_quoted_as_a_window_around_the_label() {
     let widest = out.lines().map(|l| l.chars().count()).max().unwrap_or(0);
     assert!(widest < 200, "a line of {widest} characters:\n{out}");
 }
+
+// Found by fuzzing (fuzz3): thousands of `AttributeBegin`s without their ends gave an error
+// each (5000 took half a minute to print). The innermost eight are reported one by one, the
+// rest together at the outermost.
+#[test]
+fn many_blocks_closed_at_once() {
+    let text = format!(
+        "WorldBegin\n{}Sphere 1 -1 1 360\nWorldEnd\n",
+        "AttributeBegin\n".repeat(11) + "TransformBegin\n"
+    );
+    insta::assert_snapshot!(render(&text));
+}
+
+#[test]
+fn many_blocks_never_closed() {
+    let text = format!(
+        "WorldBegin\n{}Sphere 1 -1 1 360\n",
+        "AttributeBegin\nTransformBegin\n".repeat(6)
+    );
+    insta::assert_snapshot!(render(&text));
+}

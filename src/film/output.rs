@@ -230,7 +230,43 @@ pub(super) fn prepared(band: Film, opts: &Options) -> Film {
     changed.unwrap_or(band)
 }
 
-/// Exposure then the imager, on a copy only when something changes.
+/// Sets the NaN and infinite values of every channel but depth (`z`, +∞ where nothing was
+/// seen, by convention) to 0; returns how many there were. Shaders' NaN and infinite colours
+/// are caught when shaded, but finite ones near the float range (a parameter set to 1e38) can
+/// overflow the pixel filter's sums, an `Exposure` gain can carry a value past it, and an
+/// imager shader writes the film directly: no picture may hold such values.
+pub fn clear_non_finite(film: &mut Film) -> usize {
+    let n = film.channels();
+    let z = film.channel("z");
+    if n == 0 {
+        return 0;
+    }
+    let mut count = 0;
+    for px in film.data.chunks_exact_mut(n) {
+        for (c, v) in px.iter_mut().enumerate() {
+            if !v.is_finite() && Some(c) != z {
+                *v = 0.0;
+                count += 1;
+            }
+        }
+    }
+    count
+}
+
+/// Whether [`clear_non_finite`] has anything to do.
+fn has_non_finite(film: &Film) -> bool {
+    let n = film.channels();
+    let z = film.channel("z");
+    n > 0
+        && film.data.chunks_exact(n).any(|px| {
+            px.iter()
+                .enumerate()
+                .any(|(c, v)| !v.is_finite() && Some(c) != z)
+        })
+}
+
+/// Exposure then the imager, on a copy only when something changes; then NaN or infinite
+/// values are written as 0 with a warning (see [`clear_non_finite`]).
 fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, Film> {
     let [gain, gamma] = opts.exposure;
     let mut img = Cow::Borrowed(film);
@@ -262,6 +298,19 @@ fn prepare<'a>(film: &'a Film, opts: &Options, diags: &Diagnostics) -> Cow<'a, F
                 .maybe_label(imager.span, "this Imager"),
             );
         }
+    }
+    if has_non_finite(&img) {
+        let count = clear_non_finite(img.to_mut());
+        diags.report(
+            Diag::warning(
+                "film::non_finite",
+                format!("{count} pixel value(s) were NaN or infinite; they are written as 0"),
+            )
+            .help(
+                "a shader's colours near the float range (e.g. a parameter of 1e38) overflow \
+                 the pixel filter, as can an Exposure gain or an Imager shader's result",
+            ),
+        );
     }
     img
 }

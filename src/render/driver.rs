@@ -1348,7 +1348,9 @@ fn render_inner(
     let max_grid = options
         .user_floats("limits:gridsize")
         .and_then(|f| f.first())
-        .map_or(DEFAULT_GRID, |&g| super::limits::grid_size(g, diags));
+        .map_or(DEFAULT_GRID, |&g| {
+            super::limits::grid_size(g, DEFAULT_GRID, diags)
+        });
     let (eye_split_limit, eye_splits_asked) = super::limits::eye_splits(
         options
             .user_floats("limits:eyesplits")

@@ -96,6 +96,57 @@ pub(super) enum BlockKind {
     Procedural,
 }
 
+/// Most blocks reported one by one when one request (or the end of the stream) closes many
+/// at once; the rest are reported together ([`Unclosed`]). A stream of 5000
+/// `AttributeBegin`s without their ends printed 5000 errors, for half a minute.
+pub(super) const MAX_BLOCK_REPORTS: usize = 8;
+
+/// The blocks closed beyond [`MAX_BLOCK_REPORTS`] at one request: how many of each kind, and
+/// the outermost's opener (they are closed innermost first).
+#[derive(Default)]
+pub(super) struct Unclosed {
+    reported: usize,
+    counts: Vec<(BlockKind, usize)>,
+    outermost: Option<Span>,
+}
+
+impl Unclosed {
+    /// Whether the block closing now is reported on its own; if not it is counted.
+    pub(super) fn report_one(&mut self, b: &Block) -> bool {
+        if self.reported < MAX_BLOCK_REPORTS {
+            self.reported += 1;
+            return true;
+        }
+        match self.counts.iter_mut().find(|(k, _)| *k == b.kind) {
+            Some((_, n)) => *n += 1,
+            None => self.counts.push((b.kind, 1)),
+        }
+        self.outermost = Some(b.span);
+        false
+    }
+
+    /// One error for the blocks counted, `what` saying what happened to them ("are never
+    /// closed"); None when every block was reported on its own.
+    pub(super) fn summary(&self, what: &str) -> Option<Diag> {
+        let total: usize = self.counts.iter().map(|(_, n)| n).sum();
+        let span = self.outermost?;
+        let kinds = self
+            .counts
+            .iter()
+            .map(|(k, n)| format!("{n} `{}`", k.begin()))
+            .collect::<Vec<_>>()
+            .join(", ");
+        Some(
+            Diag::error(
+                "scene::nesting",
+                format!("{total} more blocks ({kinds}) {what}"),
+            )
+            .label(span, "the outermost of them is opened here")
+            .help("each `…Begin` needs its `…End`"),
+        )
+    }
+}
+
 impl BlockKind {
     pub(super) fn begin(self) -> &'static str {
         match self {
@@ -533,20 +584,26 @@ impl<'a> Builder<'a> {
         if let Some(def) = self.defining.take() {
             let _ = def;
         }
+        let mut unclosed = Unclosed::default();
         while let Some(b) = self.blocks.pop() {
-            self.report(
-                Diag::error(
-                    "scene::nesting",
-                    format!("`{}` is never closed by `{}`", b.kind.begin(), b.kind.end()),
-                )
-                .label(b.span, "opened here")
-                .help(format!("add `{}` at the end of the block", b.kind.end())),
-            );
+            if unclosed.report_one(&b) {
+                self.report(
+                    Diag::error(
+                        "scene::nesting",
+                        format!("`{}` is never closed by `{}`", b.kind.begin(), b.kind.end()),
+                    )
+                    .label(b.span, "opened here")
+                    .help(format!("add `{}` at the end of the block", b.kind.end())),
+                );
+            }
             if b.kind == BlockKind::World {
                 self.close_world(b);
             } else {
                 self.gs = b.saved;
             }
+        }
+        if let Some(d) = unclosed.summary("are never closed") {
+            self.report(d);
         }
         if let Some(first) = self.orphans.first() {
             // Aqsis and Pixie report every request here as out of context; one message says
@@ -695,8 +752,13 @@ impl<'a> Builder<'a> {
             return None;
         }
         // Blocks opened after the one being closed are closed with it (and reported).
+        let mut unclosed = Unclosed::default();
         while self.blocks.len() > pos + 1 {
             let inner = self.blocks.pop()?;
+            if !unclosed.report_one(&inner) {
+                self.unwind_block(inner);
+                continue;
+            }
             self.report(
                 Diag::error(
                     "scene::nesting",
@@ -712,6 +774,10 @@ impl<'a> Builder<'a> {
                 .help(format!("add `{}` before it", inner.kind.end())),
             );
             self.unwind_block(inner);
+        }
+        if let Some(d) = unclosed.summary(&format!("are still open; `{}` closes them", kind.end()))
+        {
+            self.report(d.label(call.span(), format!("closes the `{}`", kind.begin())));
         }
         self.blocks.pop()
     }

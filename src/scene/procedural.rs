@@ -288,8 +288,13 @@ impl Builder<'_> {
                 );
             }
         }
+        let mut unclosed = super::builder::Unclosed::default();
         while self.blocks.len() > depth {
             let Some(b) = self.blocks.pop() else { break };
+            if !unclosed.report_one(&b) {
+                self.unwind_block(b);
+                continue;
+            }
             self.report(
                 Diag::error(
                     "scene::nesting",
@@ -306,6 +311,9 @@ impl Builder<'_> {
                 )),
             );
             self.unwind_block(b);
+        }
+        if let Some(d) = unclosed.summary("in a procedural's output are never closed") {
+            self.report(d);
         }
         self.expanding.pop();
         if let Some(b) = self.blocks.pop() {

@@ -386,8 +386,12 @@ pub struct Exec<'a> {
     pub current_light: Option<usize>,
     iterations: u64,
     /// Most iterations one execution of a loop statement may run (`Option "limits"
-    /// "loopiterations"`); the whole run may loop 64 times that.
+    /// "loopiterations"`); the whole run may loop [`RUN_LOOP_FACTOR`] times that.
     pub loop_limit: u64,
+    /// The loop statements the guard stopped at the limit in this run: their later executions in it
+    /// (an endless fBm called at each step of a march) are skipped, so a runaway loop
+    /// costs its limit once per grid, not once per call.
+    runaway: Vec<Span>,
     /// The specular exponent is this over `roughness` (see [`crate::shade::ops::spec_exponent`]):
     /// [`SPEC_SCALE_TIGHT`] unless the scene asks for RISpec's highlight.
     pub spec_scale: f32,
@@ -532,9 +536,17 @@ impl LightResult {
 /// The default of [`Exec::sparse`] for new executions (tests turn it off to compare).
 pub static SPARSE_LANES: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
 
-/// Default for [`Exec::loop_limit`]: far beyond any real shader's loop (a ray march at the
-/// smallest step real shaders use runs some ten thousand steps).
-pub const DEFAULT_LOOP_LIMIT: u64 = 1_000_000;
+/// Default for [`Exec::loop_limit`]: ten times any real shader's loop (a ray march at the
+/// smallest step real shaders use runs some ten thousand steps). Each iteration runs over the
+/// whole grid: an fBm whose octave count is 1e9 costs some 4 µs an iteration on a grid of 170
+/// points, so a million iterations a grid made a 64 × 48 picture of 28 grids take two minutes.
+pub const DEFAULT_LOOP_LIMIT: u64 = 100_000;
+
+/// A shader run (one grid) may loop this many times [`Exec::loop_limit`] in all its loop
+/// statements together. Nested loops of real shaders (a march of ten thousand steps calling
+/// an fBm of a dozen octaves) stay below it; an endless loop in a function called from many
+/// places must not cost the limit at each call.
+pub const RUN_LOOP_FACTOR: u64 = 16;
 
 /// `specular()`'s exponent times `roughness` by default: the tight highlight of BMRT with its
 /// `"prmanspecular"` on (Aqsis's `roughness/8` emulates the same), which most published
@@ -644,6 +656,7 @@ impl<'a> Exec<'a> {
             current_light: None,
             iterations: 0,
             loop_limit: DEFAULT_LOOP_LIMIT,
+            runaway: Vec::new(),
             spec_scale: SPEC_SCALE_TIGHT,
             bits_pool: spare.bits,
             idx_pool: spare.idx,
@@ -963,10 +976,15 @@ impl<'a> Exec<'a> {
             span,
             compact,
         } = code;
+        if self.runaway.contains(&span) {
+            // Stopped by the guard earlier in this run (and reported then): it would run
+            // to the limit again.
+            return;
+        }
         self.push_frame(FrameKind::Loop);
         let mut live = self.mask_like(mask);
         let mut scratch = self.mask_like(mask);
-        let total_limit = self.loop_limit.saturating_mul(64);
+        let total_limit = self.loop_limit.saturating_mul(RUN_LOOP_FACTOR);
         let mut count: u64 = done;
         let mut snapshot: Option<(Vec<Slot>, Vec<bool>)> = None;
         loop {
@@ -1204,7 +1222,12 @@ impl<'a> Exec<'a> {
     }
 
     /// The warning of a loop stopped by the guard; the points still in it keep their values.
-    fn runaway_loop(&self, span: Span, count: u64, stuck: bool) {
+    fn runaway_loop(&mut self, span: Span, count: u64, stuck: bool) {
+        // A loop stopped for want of progress cost little, and may progress at its next
+        // execution (other arguments); one stopped at the limit is skipped from now on.
+        if !stuck && !self.runaway.contains(&span) {
+            self.runaway.push(span);
+        }
         let what = if stuck {
             format!("this loop stopped making progress (an iteration changed nothing) after {count} iterations")
         } else {
