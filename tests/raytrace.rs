@@ -536,6 +536,33 @@ fn ray_geometry(prim: &str) -> (usize, std::sync::Arc<arbor::ray::RayScene>) {
 }
 
 #[test]
+fn an_orthographic_window_onto_a_large_scene_dices_it_for_rays_as_a_view_of_the_whole() {
+    // RISpec's default projection under a scene written for a perspective camera: a 2-unit
+    // window onto a 600-unit displaced room. Rays see the whole room; diced at the window's
+    // 300 pixels per unit it was billions of micropolygons (gigabytes, minutes). Now as a
+    // view fitting the room across twice the image: a million or so at most.
+    let rib = r#"Format 600 600 1
+WorldBegin
+Attribute "displacementbound" "float sphere" [1]
+Displacement "dented"
+Surface "matte"
+Translate 0 0 300
+Polygon "P" [-300 -300 300  300 -300 300  300 300 300  -300 300 300]
+Patch "bilinear" "P" [-300 -300 -300  300 -300 -300  -300 -300 300  300 -300 300]
+Sphere 50 -50 50 360
+WorldEnd
+"#;
+    let rs = with_tracer(rib, common::stdlib_options(&[]), |t| {
+        t.geometry().expect("ray geometry")
+    });
+    assert!(
+        rs.micropolygons > 1000 && rs.micropolygons < 2_000_000,
+        "{} ray micropolygons",
+        rs.micropolygons
+    );
+}
+
+#[test]
 fn ray_geometry_is_watertight_where_grids_of_different_rates_meet() {
     // A sphere close to the camera and a tilted torus split into pieces diced at different
     // rates (T-junctions along their shared edges): rays from all around aimed at points

@@ -205,7 +205,7 @@ pub fn build(
             .and_then(|v| v.data.floats().first().copied())
             .is_some_and(|v| v != 0.0)
     });
-    let rate_of = RateModel::new(camera);
+    let mut rate_of = RateModel::new(camera);
     // The scene's size sets a floor on the distance used for the dicing rate.
     let mut all: Vec<(usize, Vec<Box<dyn Surface>>, (bool, bool))> = Vec::new();
     let mut scene_bound = Bound::EMPTY;
@@ -229,6 +229,7 @@ pub fn build(
         (scene_bound.max - scene_bound.min).length().max(1e-6)
     };
     let min_dist = (0.05 * diag).max(camera.near.max(1e-6));
+    rate_of.fit_scene(camera, diag);
     // Each primitive diced on its own (in parallel where threads are free), then joined in
     // primitive order: the same ray geometry whatever the thread count.
     let threads = rayon::current_num_threads().min(all.len()).max(1);
@@ -468,6 +469,9 @@ struct RateModel {
     /// Raster pixels per camera-space unit at distance 1 (perspective) or anywhere (ortho).
     ppu: f32,
     perspective: bool,
+    /// Orthographic views: the most pixels per unit rays need, those of a view that fits the
+    /// whole scene across twice the image (at least 1024 pixels; see [`RateModel::dice`]).
+    ortho_ppu: f32,
 }
 
 impl RateModel {
@@ -483,7 +487,13 @@ impl RateModel {
                 100.0
             },
             perspective: camera.perspective,
+            ortho_ppu: f32::INFINITY,
         }
+    }
+
+    /// Sets the orthographic cap for a scene `diag` across (camera space) seen by `camera`.
+    fn fit_scene(&mut self, camera: &Camera, diag: f32) {
+        self.ortho_ppu = 2.0 * camera.xres.max(camera.yres).max(512) as f32 / diag;
     }
 
     /// Micropolygons along u and v for a surface, from a 5 × 5 trial dice: edges of about
@@ -514,14 +524,18 @@ impl RateModel {
             ulen = ulen.max(lu);
             vlen = vlen.max(lv);
         }
-        let dist = if self.perspective {
+        let edge = if self.perspective {
             // Distance from the eye (the origin) to the bound.
             let c = Vec3::ZERO.clamp(b.min, b.max);
-            c.length().max(min_dist)
+            rate.sqrt() * c.length().max(min_dist) / self.ppu
         } else {
-            1.0
+            // No finer than a view that fits the whole scene across twice the image: an
+            // orthographic view of a small window onto a large scene (RISpec's default
+            // projection under a scene written for a perspective one) would otherwise dice
+            // everything, seen only by rays, at the window's pixel size (gigabytes of
+            // micropolygons).
+            rate.sqrt() / self.ppu.min(self.ortho_ppu)
         };
-        let edge = rate.sqrt() * dist / self.ppu;
         let mut nu = (ulen / edge).ceil().clamp(1.0, 1e6);
         let mut nv = (vlen / edge).ceil().clamp(1.0, 1e6);
         if !displaced {
