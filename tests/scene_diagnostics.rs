@@ -105,3 +105,14 @@ fn many_blocks_never_closed() {
     );
     insta::assert_snapshot!(render(&text));
 }
+
+#[test]
+fn an_absurd_area_light_sample_count_is_held_with_a_warning() {
+    // Found by fuzzing (fuzz3): 2^31 samples, silently held at 4096, took minutes at 64x48.
+    let out = render(
+        "WorldBegin\nAttribute \"light\" \"nsamples\" [2147483648]\n\
+         AreaLightSource \"arealight\" 1\nSphere 1 -1 1 360\nWorldEnd\n",
+    );
+    assert!(out.contains("is held at 1024"), "{out}");
+    assert!(out.contains("scene.rib:3:1"), "{out}");
+}

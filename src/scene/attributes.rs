@@ -15,6 +15,8 @@ use crate::diag::Diag;
 use super::builder::{BlockKind, Builder, PendingLight};
 use super::params::ParamUse;
 use super::table::{Call, PArg};
+/// Most samples of an area light (`Attribute "light" "nsamples"`) a shaded point takes.
+const MAX_LIGHT_SAMPLES: u32 = 1024;
 use super::types::*;
 
 /// The standard bases (RISpec Appendix F), row-major as in RIB.
@@ -178,13 +180,26 @@ impl Builder<'_> {
                 .get("autoshadows:shadowmapname")
                 .and_then(|p| p.data.strings().first().cloned())
                 .is_some_and(|s| !s.is_empty());
-        let samples = self
+        let asked = self
             .attrs()
             .user
             .get("light:nsamples")
             .and_then(|p| p.data.floats().first().copied())
-            .filter(|n| n.is_finite() && *n >= 1.0)
-            .map_or(1, |n| n.min(4096.0) as u32);
+            .filter(|n| n.is_finite() && *n >= 1.0);
+        let samples = asked.map_or(1, |n| n.min(MAX_LIGHT_SAMPLES as f32) as u32);
+        if asked.is_some_and(|n| n > MAX_LIGHT_SAMPLES as f32) {
+            // Each sample is a light run and, with shadows, a ray per shaded point.
+            let d = Diag::warning(
+                "scene::limit",
+                format!(
+                    "`Attribute \"light\" \"nsamples\"` of {} is held at {MAX_LIGHT_SAMPLES}",
+                    asked.unwrap_or(0.0)
+                ),
+            )
+            .label(call.span(), "this light")
+            .help("BMRT scenes use 1 to 64 samples; a soft area light looks smooth at 256");
+            self.report(d);
+        }
         if self.world.is_none() {
             // RenderMan Companion style: a light before WorldBegin lives in camera space and
             // shines in every world of its frame (or of the whole file outside frames).
