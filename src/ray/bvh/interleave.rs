@@ -292,7 +292,7 @@ impl Bvh {
                     stats.leaf_bytes += 4 * u64::from(count >> 8);
                 }
                 let (ray, best) = (l.ray, &mut l.best);
-                let stop = self.leaf(
+                let stop = self.leaf::<AVX2>(
                     first,
                     count,
                     &l.wt,
