@@ -442,9 +442,10 @@ impl Bvh {
     }
 
     /// Tests the quads of a leaf in order; true when `on_hit` asked to stop.
+    /// (`AVX2` is for the x86-64 form's sake.)
     #[cfg(not(target_arch = "x86_64"))]
     #[inline]
-    fn leaf(
+    fn leaf<const AVX2: bool>(
         &self,
         first: u32,
         count: u32,
@@ -470,10 +471,12 @@ impl Bvh {
     }
 
     /// Tests the quads of a leaf, four at a time (see `quad4::leaf`); true when `on_hit`
-    /// asked to stop.
+    /// asked to stop. `AVX2`: the caller runs code compiled for AVX2 (only where the CPU has
+    /// it), so the test is called in its AVX form directly, and this block is inlined into
+    /// the walk (no call of its own, no run-time check of the CPU).
     #[cfg(target_arch = "x86_64")]
-    #[inline]
-    fn leaf(
+    #[inline(always)]
+    fn leaf<const AVX2: bool>(
         &self,
         first: u32,
         count: u32,
@@ -485,15 +488,15 @@ impl Bvh {
         let Some(b) = self.block(first, count) else {
             return false;
         };
-        super::quad4::leaf(
-            b.quads,
-            b.verts,
-            &ray.w4,
-            &ray.wt,
-            tmin,
-            tmax,
-            &mut |l, t, a, bb, tm| on_hit(b.id(l), t, a, bb, tm),
-        )
+        let on = &mut |l, t, a, bb, tm: &mut f32| on_hit(b.id(l), t, a, bb, tm);
+        if AVX2 {
+            // SAFETY: `AVX2` is only set in code run where the CPU has AVX2 (hence AVX).
+            unsafe {
+                super::quad4::leaf_avx_known(b.quads, b.verts, &ray.w4, &ray.wt, tmin, tmax, on)
+            }
+        } else {
+            super::quad4::leaf(b.quads, b.verts, &ray.w4, &ray.wt, tmin, tmax, on)
+        }
     }
 
     /// Asks for the cache lines of a pushed child (an interior node's four, or a leaf's
@@ -640,20 +643,23 @@ impl Bvh {
         }
         let wt = LeafRay::new_known::<AVX2>(o, d);
         if self.nodes.is_empty() {
-            self.leaf(0, self.root_leaf, &wt, tmin, tmax, on_hit);
+            self.leaf::<AVX2>(0, self.root_leaf, &wt, tmin, tmax, on_hit);
             return;
         }
         let rb = SlabRay::new(o, d);
         let mut stack = Stack::new();
         let mut cur = 0u32;
         loop {
-            let n = &self.nodes[cur as usize];
+            debug_assert!((cur as usize) < self.nodes.len());
+            // SAFETY: as in the interleaved step: the root, or an interior child of a valid
+            // lane, always a node `collapse` pushed.
+            let n = unsafe { self.nodes.get_unchecked(cur as usize) };
             if let Some((c, count)) = self.visit::<ORDERED, AVX2>(n, &rb, tmin, *tmax, &mut stack) {
                 if count == 0 {
                     cur = c;
                     continue;
                 }
-                if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
+                if self.leaf::<AVX2>(c, count, &wt, tmin, tmax, on_hit) {
                     return;
                 }
             }
@@ -667,7 +673,7 @@ impl Bvh {
                     continue;
                 }
                 if count > 0 {
-                    if self.leaf(c, count, &wt, tmin, tmax, on_hit) {
+                    if self.leaf::<AVX2>(c, count, &wt, tmin, tmax, on_hit) {
                         return;
                     }
                     continue;
@@ -896,14 +902,34 @@ fn slab8_portable(n: &Node8, r: &SlabRay, tmin: f32, tmax: f32) -> (u32, [f32; W
 #[derive(Clone, Copy)]
 pub(crate) struct WtRay {
     pub(crate) o: Vec3,
-    /// The axes that become x, y and z (a permutation of 0, 1, 2).
-    pub(crate) k: [usize; 3],
+    /// The axes that become x, y and z (a permutation of 0, 1, 2) as its place in
+    /// [`WtRay::PERMS`], `2 kz + swapped` (see [`WtRay::k`]): the leaf test dispatches on it
+    /// with one table jump instead of comparing whole arrays, and the ray is smaller to set
+    /// up and copy.
+    pub(crate) perm: u8,
     /// The shear: a vertex `v` maps to `(A[kx] − Sx A[kz], A[ky] − Sy A[kz], Sz A[kz])`
     /// with `A = v − o`.
     pub(crate) s: [f32; 3],
 }
 
 impl WtRay {
+    /// The axis permutations `[kx, ky, kz]`, numbered `2 kz + swapped` (x and y swapped for
+    /// a negative dominant component).
+    pub(crate) const PERMS: [[usize; 3]; 6] = [
+        [1, 2, 0],
+        [2, 1, 0],
+        [2, 0, 1],
+        [0, 2, 1],
+        [0, 1, 2],
+        [1, 0, 2],
+    ];
+
+    /// The axes that become x, y and z.
+    #[inline(always)]
+    pub(crate) fn k(&self) -> [usize; 3] {
+        WtRay::PERMS[usize::from(self.perm) % 6]
+    }
+
     #[inline]
     pub(crate) fn new(o: Vec3, d: Vec3) -> WtRay {
         let a = d.abs();
@@ -917,13 +943,14 @@ impl WtRay {
         // (kz + 1) % 3 and (kz + 2) % 3, without the divisions' remainders.
         let mut kx = [1, 2, 0][kz];
         let mut ky = [2, 0, 1][kz];
-        if d[kz] < 0.0 {
+        let swapped = d[kz] < 0.0;
+        if swapped {
             std::mem::swap(&mut kx, &mut ky);
         }
         let dz = if d[kz] == 0.0 { 1e-30 } else { d[kz] };
         WtRay {
             o,
-            k: [kx, ky, kz],
+            perm: 2 * kz as u8 + u8::from(swapped),
             s: [d[kx] / dz, d[ky] / dz, 1.0 / dz],
         }
     }
@@ -933,7 +960,7 @@ impl WtRay {
     #[inline(always)]
     fn xform(&self, v: Vec3) -> [f32; 3] {
         let a = v - self.o;
-        let [kx, ky, kz] = self.k;
+        let [kx, ky, kz] = self.k();
         let az = a[kz];
         [
             a[kx] - self.s[0] * az,
@@ -1567,13 +1594,13 @@ mod tests {
             Vec3::new(1.0, 2.0, -3.0),
         ] {
             let w = WtRay::new(Vec3::ZERO, d);
-            let kz = w.k[2];
+            let kz = w.k()[2];
             let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
             if d[kz] < 0.0 {
                 std::mem::swap(&mut kx, &mut ky);
             }
             assert_eq!(d.abs().max_element(), d[kz].abs());
-            assert_eq!(w.k, [kx, ky, kz]);
+            assert_eq!(w.k(), [kx, ky, kz]);
         }
     }
 }

@@ -135,12 +135,44 @@ pub(crate) fn leaf(
             }
         };
     }
-    match wt.k {
-        [1, 2, 0] => go!(1, 2, 0),
-        [2, 1, 0] => go!(2, 1, 0),
-        [2, 0, 1] => go!(2, 0, 1),
-        [0, 2, 1] => go!(0, 2, 1),
-        [0, 1, 2] => go!(0, 1, 2),
+    // (`WtRay::perm` numbers the permutations in this order, see `WtRay::PERMS`.)
+    match wt.perm {
+        0 => go!(1, 2, 0),
+        1 => go!(2, 1, 0),
+        2 => go!(2, 0, 1),
+        3 => go!(0, 2, 1),
+        4 => go!(0, 1, 2),
+        _ => go!(1, 0, 2),
+    }
+}
+
+/// [`leaf`] where the caller knows the CPU has AVX: the permutation's variant compiled for
+/// AVX, without the check (one function: the walk calls it directly).
+///
+/// # Safety
+/// The CPU must have AVX.
+#[target_feature(enable = "avx")]
+pub(crate) unsafe fn leaf_avx_known(
+    quads: &[u32],
+    verts: &[f32],
+    w4: &WtRay4,
+    wt: &WtRay,
+    tmin: f32,
+    tmax: &mut f32,
+    on_hit: &mut OnHit,
+) -> bool {
+    macro_rules! go {
+        ($kx:literal, $ky:literal, $kz:literal) => {
+            leaf_k::<$kx, $ky, $kz>(quads, verts, w4, wt, tmin, tmax, on_hit)
+        };
+    }
+    // (The order of `WtRay::PERMS`.)
+    match wt.perm {
+        0 => go!(1, 2, 0),
+        1 => go!(2, 1, 0),
+        2 => go!(2, 0, 1),
+        3 => go!(0, 2, 1),
+        4 => go!(0, 1, 2),
         _ => go!(1, 0, 2),
     }
 }
@@ -299,7 +331,7 @@ pub(crate) fn group4<const KX: usize, const KY: usize, const KZ: usize>(
 /// [`group4`] for the ray's axis permutation (tests).
 #[cfg(test)]
 fn quads4(quads: &[u32], verts: &[f32], w4: &WtRay4, wt: &WtRay, tmin: f32, tmax: f32) -> Hits4 {
-    match wt.k {
+    match wt.k() {
         [1, 2, 0] => group4::<1, 2, 0>(quads, verts, w4, wt, tmin, tmax),
         [2, 1, 0] => group4::<2, 1, 0>(quads, verts, w4, wt, tmin, tmax),
         [2, 0, 1] => group4::<2, 0, 1>(quads, verts, w4, wt, tmin, tmax),
