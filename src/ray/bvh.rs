@@ -650,10 +650,7 @@ impl Bvh {
         let mut stack = Stack::new();
         let mut cur = 0u32;
         loop {
-            debug_assert!((cur as usize) < self.nodes.len());
-            // SAFETY: as in the interleaved step: the root, or an interior child of a valid
-            // lane, always a node `collapse` pushed.
-            let n = unsafe { self.nodes.get_unchecked(cur as usize) };
+            let n = &self.nodes[cur as usize];
             if let Some((c, count)) = self.visit::<ORDERED, AVX2>(n, &rb, tmin, *tmax, &mut stack) {
                 if count == 0 {
                     cur = c;

@@ -264,11 +264,7 @@ impl Bvh {
     ) -> bool {
         match l.step {
             Step::Node(c) => {
-                debug_assert!((c as usize) < self.nodes.len());
-                // SAFETY: `c` is the root (the tree has nodes) or an interior child of a
-                // valid lane, which `Bvh::collapse` numbered as a node it pushed (the bounds
-                // checks were about 1 % of the walk's instructions).
-                let n = unsafe { self.nodes.get_unchecked(c as usize) };
+                let n = &self.nodes[c as usize];
                 let depth = l.stack.len();
                 let next = self.visit::<ORDERED, AVX2>(n, &l.rb, l.tmin, l.tmax, &mut l.stack);
                 if STATS {
