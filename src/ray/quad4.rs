@@ -17,6 +17,21 @@ use std::arch::x86_64::*;
 
 use super::bvh::{intersect_quad_wt, leaf_corners, WtRay};
 
+/// `$go!(kx, ky, kz)` for the ray's axis permutation number (`WtRay::perm` numbers the
+/// permutations in this order, see `WtRay::PERMS`).
+macro_rules! by_perm {
+    ($perm:expr, $go:ident) => {
+        match $perm {
+            0 => $go!(1, 2, 0),
+            1 => $go!(2, 1, 0),
+            2 => $go!(2, 0, 1),
+            3 => $go!(0, 2, 1),
+            4 => $go!(0, 1, 2),
+            _ => $go!(1, 0, 2),
+        }
+    };
+}
+
 /// A [`WtRay`]'s origin and shear splatted across four lanes.
 #[derive(Clone, Copy)]
 pub(crate) struct WtRay4 {
@@ -135,15 +150,7 @@ pub(crate) fn leaf(
             }
         };
     }
-    // (`WtRay::perm` numbers the permutations in this order, see `WtRay::PERMS`.)
-    match wt.perm {
-        0 => go!(1, 2, 0),
-        1 => go!(2, 1, 0),
-        2 => go!(2, 0, 1),
-        3 => go!(0, 2, 1),
-        4 => go!(0, 1, 2),
-        _ => go!(1, 0, 2),
-    }
+    by_perm!(wt.perm, go)
 }
 
 /// [`leaf`] where the caller knows the CPU has AVX: the permutation's variant compiled for
@@ -166,15 +173,7 @@ pub(crate) unsafe fn leaf_avx_known(
             leaf_k::<$kx, $ky, $kz>(quads, verts, w4, wt, tmin, tmax, on_hit)
         };
     }
-    // (The order of `WtRay::PERMS`.)
-    match wt.perm {
-        0 => go!(1, 2, 0),
-        1 => go!(2, 1, 0),
-        2 => go!(2, 0, 1),
-        3 => go!(0, 2, 1),
-        4 => go!(0, 1, 2),
-        _ => go!(1, 0, 2),
-    }
+    by_perm!(wt.perm, go)
 }
 
 /// [`leaf_k`] compiled for AVX (VEX encodings of the same SSE operations: no FMA, so the
