@@ -235,6 +235,56 @@ mod tests {
     }
 
     #[test]
+    fn any_spans_over_any_text_never_panic() {
+        // Long and short lines, CRLF endings, multi-byte characters where cuts fall, spans
+        // anywhere (across lines, empty, past the end): an excerpt or none, offsets in range.
+        let mut h = 12345u32;
+        let mut rnd = |n: usize| {
+            h = h.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (h >> 8) as usize % n.max(1)
+        };
+        let pieces = ["abc ", "é", "“x”", "\r\n", "\n", "[1 2 3] ", "\"name\" "];
+        for _ in 0..300 {
+            let mut text = String::new();
+            for _ in 0..rnd(400) {
+                let p = pieces[rnd(pieces.len())];
+                for _ in 0..1 + rnd(8) {
+                    text.push_str(p);
+                }
+            }
+            let spans: Vec<(usize, usize)> = (0..1 + rnd(3))
+                .map(|_| {
+                    let a = rnd(text.len() + 10);
+                    (a, a + rnd(300))
+                })
+                .collect();
+            let clamped: Vec<(usize, usize)> = spans
+                .iter()
+                .map(|&(a, b)| (a.min(text.len()), b.min(text.len())))
+                .collect();
+            // The whole report, through miette's renderer.
+            let sm = crate::diag::SourceMap::new();
+            let f = sm.add("f.rib", text.as_str());
+            let sink = crate::diag::Diagnostics::new();
+            let mut d = crate::diag::Diag::warning("x::y", "m");
+            for &(a, b) in &spans {
+                d = d.label(crate::diag::Span::new(f, a, b), "here");
+            }
+            sink.report(d);
+            let _ = sink.render_plain(&sm);
+            if let Some(e) = Excerpt::new("f", &text, &clamped) {
+                for &(a, b) in &clamped {
+                    let (x, y) = (e.map(a), e.map(b));
+                    assert!(x <= e.text.len() && y <= e.text.len());
+                    let len = y.max(x) - x;
+                    let _ = e.read_span(&SourceSpan::from((x, len)), 0, 0).unwrap();
+                    let _ = e.read_span(&SourceSpan::from((x, len)), 1, 1).unwrap();
+                }
+            }
+        }
+    }
+
+    #[test]
     fn a_long_line_is_cut_around_its_label_and_keeps_file_positions() {
         let long = format!(
             "LightSource \"l\" 1 {} \"snx\" [\"a\"] {}",
