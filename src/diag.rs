@@ -197,14 +197,13 @@ impl Diag {
             let ranges: Vec<(usize, usize)> = spans.iter().map(|s| (s.0, s.1)).collect();
             Excerpt::new(&f.name, &f.text, &ranges)
         });
+        // A file offset where the report's source has it.
+        let at = |p: usize| excerpt.as_ref().map_or(p, |x| x.map(p));
         let labels = spans
             .iter()
-            .map(|&(start, end, text)| match &excerpt {
-                Some(x) => {
-                    let (a, b) = (x.map(start), x.map(end));
-                    LabeledSpan::new(Some(text.clone()), a, b.max(a) - a)
-                }
-                None => LabeledSpan::new(Some(text.clone()), start, end - start),
+            .map(|&(start, end, text)| {
+                let (a, b) = (at(start), at(end));
+                LabeledSpan::new(Some(text.clone()), a, b.max(a) - a)
             })
             .collect();
         let mut message = self.message.clone();

@@ -43,8 +43,8 @@ pub struct Excerpt {
     lines: Vec<Line>,
 }
 
-/// A file line: byte range without its line ending, and its index.
-fn line_of(text: &str, pos: usize) -> (usize, usize, usize) {
+/// The file line holding byte `pos`: its byte range without its line ending.
+fn line_of(text: &str, pos: usize) -> (usize, usize) {
     let b = text.as_bytes();
     let pos = pos.min(b.len());
     let start = b[..pos]
@@ -58,8 +58,7 @@ fn line_of(text: &str, pos: usize) -> (usize, usize, usize) {
     if end > start && b[end - 1] == b'\r' {
         end -= 1;
     }
-    let index = b[..start].iter().filter(|&&c| c == b'\n').count();
-    (start, end, index)
+    (start, end)
 }
 
 fn floor_boundary(text: &str, mut i: usize) -> usize {
@@ -88,7 +87,7 @@ impl Excerpt {
         let lo = spans.iter().map(|s| s.0).min()?.min(text.len());
         let hi = spans.iter().map(|s| s.1.max(s.0)).max()?.min(text.len());
         // The file lines shown: the labels' lines and CONTEXT lines either side.
-        let (mut pos, _, _) = line_of(text, lo);
+        let (mut pos, _) = line_of(text, lo);
         for _ in 0..CONTEXT {
             if pos == 0 {
                 break;
@@ -96,11 +95,17 @@ impl Excerpt {
             pos = line_of(text, pos - 1).0;
         }
         let last = line_of(text, hi).0;
+        // The first shown line's index (counted once: files can be large).
+        let mut index = text.as_bytes()[..pos]
+            .iter()
+            .filter(|&&c| c == b'\n')
+            .count();
         let mut ranges: Vec<(usize, usize, usize)> = Vec::new();
         let mut after = 0;
         loop {
-            let (s, e, i) = line_of(text, pos);
-            ranges.push((s, e, i));
+            let (s, e) = line_of(text, pos);
+            ranges.push((s, e, index));
+            index += 1;
             if s > last {
                 after += 1;
             }

@@ -236,15 +236,11 @@ pub(super) fn prepared(band: Film, opts: &Options) -> Film {
 /// overflow the pixel filter's sums, an `Exposure` gain can carry a value past it, and an
 /// imager shader writes the film directly: no picture may hold such values.
 pub fn clear_non_finite(film: &mut Film) -> usize {
-    let n = film.channels();
-    let z = film.channel("z");
-    if n == 0 {
-        return 0;
-    }
+    let (n, z) = (film.channels(), film.channel("z"));
     let mut count = 0;
-    for px in film.data.chunks_exact_mut(n) {
+    for px in film.data.chunks_exact_mut(n.max(1)) {
         for (c, v) in px.iter_mut().enumerate() {
-            if !v.is_finite() && Some(c) != z {
+            if cleared(c, *v, z) {
                 *v = 0.0;
                 count += 1;
             }
@@ -253,16 +249,19 @@ pub fn clear_non_finite(film: &mut Film) -> usize {
     count
 }
 
+/// Whether channel `c`'s value `v` is one [`clear_non_finite`] clears (`z`: the depth
+/// channel, whose +∞ is meant).
+#[inline]
+fn cleared(c: usize, v: f32, z: Option<usize>) -> bool {
+    !v.is_finite() && Some(c) != z
+}
+
 /// Whether [`clear_non_finite`] has anything to do.
 fn has_non_finite(film: &Film) -> bool {
-    let n = film.channels();
-    let z = film.channel("z");
-    n > 0
-        && film.data.chunks_exact(n).any(|px| {
-            px.iter()
-                .enumerate()
-                .any(|(c, v)| !v.is_finite() && Some(c) != z)
-        })
+    let (n, z) = (film.channels(), film.channel("z"));
+    film.data
+        .chunks_exact(n.max(1))
+        .any(|px| px.iter().enumerate().any(|(c, &v)| cleared(c, v, z)))
 }
 
 /// Exposure then the imager, on a copy only when something changes; then NaN or infinite

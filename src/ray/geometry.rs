@@ -205,7 +205,6 @@ pub fn build(
             .and_then(|v| v.data.floats().first().copied())
             .is_some_and(|v| v != 0.0)
     });
-    let mut rate_of = RateModel::new(camera);
     // The scene's size sets a floor on the distance used for the dicing rate.
     let mut all: Vec<(usize, Vec<Box<dyn Surface>>, (bool, bool))> = Vec::new();
     let mut scene_bound = Bound::EMPTY;
@@ -229,7 +228,7 @@ pub fn build(
         (scene_bound.max - scene_bound.min).length().max(1e-6)
     };
     let min_dist = (0.05 * diag).max(camera.near.max(1e-6));
-    rate_of.fit_scene(camera, diag);
+    let rate_of = RateModel::new(camera, diag);
     // Each primitive diced on its own (in parallel where threads are free), then joined in
     // primitive order: the same ray geometry whatever the thread count.
     let threads = rayon::current_num_threads().min(all.len()).max(1);
@@ -317,41 +316,30 @@ fn dice_all(
     if threads < 2 {
         return all.into_iter().map(|(p, s, v)| dice(p, s, v)).collect();
     }
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    use std::sync::Mutex;
-    let n = all.len();
-    let work: Vec<Mutex<Option<Prim>>> = all.into_iter().map(|w| Mutex::new(Some(w))).collect();
-    let done: Vec<Mutex<Option<Part>>> = (0..n).map(|_| Mutex::new(None)).collect();
-    let next = AtomicUsize::new(0);
-    let run = || loop {
-        let i = next.fetch_add(1, Ordering::Relaxed);
-        if i >= n {
-            break;
-        }
-        let taken = work[i].lock().unwrap_or_else(|e| e.into_inner()).take();
-        if let Some((p, s, v)) = taken {
-            let part = dice(p, s, v);
-            *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(part);
+    // Each thread takes the next primitive not yet taken and keeps its parts numbered.
+    let queue = std::sync::Mutex::new(all.into_iter().enumerate());
+    let run = || {
+        let mut mine = Vec::new();
+        loop {
+            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+            let Some((i, (p, s, v))) = next else {
+                return mine;
+            };
+            mine.push((i, dice(p, s, v)));
         }
     };
     // Plain threads, not rayon: render threads wait on this build, and a rayon task taken up
     // while joining could be one of theirs, asking for the geometry being built.
-    std::thread::scope(|sc| {
+    let mut parts = std::thread::scope(|sc| {
         let helpers: Vec<_> = (1..threads).map(|_| sc.spawn(run)).collect();
-        run();
+        let mut parts = run();
         for h in helpers {
-            if let Err(e) = h.join() {
-                std::panic::resume_unwind(e);
-            }
+            parts.extend(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
         }
+        parts
     });
-    done.into_iter()
-        .map(|d| {
-            d.into_inner()
-                .unwrap_or_else(|e| e.into_inner())
-                .unwrap_or_default()
-        })
-        .collect()
+    parts.sort_unstable_by_key(|&(i, _)| i);
+    parts.into_iter().map(|(_, part)| part).collect()
 }
 
 /// Dices one primitive's surfaces for rays (depth first in a fixed order) and closes the
@@ -368,7 +356,6 @@ fn dice_primitive(
     displace: &(dyn Fn(usize, &mut Grid) + Sync),
 ) -> Part {
     let mut out = Part::default();
-    let (mut quads, mut verts) = (Vec::new(), Vec::new());
     let a = &scene.primitives[prim].attributes;
     let rate = if a.shading_rate.is_finite() && a.shading_rate > 0.0 {
         a.shading_rate.clamp(0.05, 1e4)
@@ -423,11 +410,11 @@ fn dice_primitive(
         }
         let gi = out.grids.len() as u32;
         let (gu, gv) = (grid.nu, grid.nv);
-        let base = verts.len();
-        verts.extend_from_slice(&grid.p);
+        let base = out.verts.len();
+        out.verts.extend_from_slice(&grid.p);
         for j in 0..gv - 1 {
             for i in 0..gu - 1 {
-                quads.push(Quad {
+                out.quads.push(Quad {
                     k: (base + j * gu + i) as u32,
                     row: gu as u32,
                     grid: gi,
@@ -448,9 +435,7 @@ fn dice_primitive(
             media: a.interior.is_some() || a.exterior.is_some(),
         });
     }
-    out.crack_fills = fill_cracks(&out.grids, 0, &mut quads, &mut verts);
-    out.quads = quads;
-    out.verts = verts;
+    out.crack_fills = fill_cracks(&out.grids, 0, &mut out.quads, &mut out.verts);
     out
 }
 
@@ -475,7 +460,8 @@ struct RateModel {
 }
 
 impl RateModel {
-    fn new(camera: &Camera) -> RateModel {
+    /// The model for `camera` over a scene `diag` across (camera space).
+    fn new(camera: &Camera, diag: f32) -> RateModel {
         let m: Mat4 = camera.raster_from_camera();
         let a = m.project_point3(Vec3::new(0.0, 0.0, 1.0));
         let b = m.project_point3(Vec3::new(1.0, 0.0, 1.0));
@@ -487,13 +473,8 @@ impl RateModel {
                 100.0
             },
             perspective: camera.perspective,
-            ortho_ppu: f32::INFINITY,
+            ortho_ppu: 2.0 * camera.xres.max(camera.yres).max(512) as f32 / diag,
         }
-    }
-
-    /// Sets the orthographic cap for a scene `diag` across (camera space) seen by `camera`.
-    fn fit_scene(&mut self, camera: &Camera, diag: f32) {
-        self.ortho_ppu = 2.0 * camera.xres.max(camera.yres).max(512) as f32 / diag;
     }
 
     /// Micropolygons along u and v for a surface, from a 5 × 5 trial dice: edges of about

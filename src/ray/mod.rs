@@ -9,9 +9,10 @@
 //! a thread or a bucket.
 //!
 //! Files: `bvh` (binned-SAH BVH over micropolygons; `bvh/interleave` walks many rays at
-//! once), `quad4` (its leaves' quad test four quads at a time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area
-//! lights' geometry, sampled by area), `memhint` (prefetches and huge pages for the large
-//! arrays the walks and hit shading read at random).
+//! once, `bvh/sah` builds its binary tree), `quad4` (its leaves' quad test four quads at a
+//! time, SSE), `geometry` (ray dicing, visibility attributes), `area` (area lights' geometry,
+//! sampled by area), `memhint` (prefetches and huge pages for the large arrays the walks and
+//! hit shading read at random).
 
 pub mod area;
 pub mod bvh;

@@ -15,9 +15,10 @@ use crate::diag::Diag;
 use super::builder::{BlockKind, Builder, PendingLight};
 use super::params::ParamUse;
 use super::table::{Call, PArg};
+use super::types::*;
+
 /// Most samples of an area light (`Attribute "light" "nsamples"`) a shaded point takes.
 const MAX_LIGHT_SAMPLES: u32 = 1024;
-use super::types::*;
 
 /// The standard bases (RISpec Appendix F), row-major as in RIB.
 pub fn named_basis(name: &str) -> Option<[f32; 16]> {
@@ -187,14 +188,11 @@ impl Builder<'_> {
             .and_then(|p| p.data.floats().first().copied())
             .filter(|n| n.is_finite() && *n >= 1.0);
         let samples = asked.map_or(1, |n| n.min(MAX_LIGHT_SAMPLES as f32) as u32);
-        if asked.is_some_and(|n| n > MAX_LIGHT_SAMPLES as f32) {
+        if let Some(n) = asked.filter(|&n| n > MAX_LIGHT_SAMPLES as f32) {
             // Each sample is a light run and, with shadows, a ray per shaded point.
             let d = Diag::warning(
                 "scene::limit",
-                format!(
-                    "`Attribute \"light\" \"nsamples\"` of {} is held at {MAX_LIGHT_SAMPLES}",
-                    asked.unwrap_or(0.0)
-                ),
+                format!("`Attribute \"light\" \"nsamples\"` of {n} is held at {MAX_LIGHT_SAMPLES}"),
             )
             .label(call.span(), "this light")
             .help("BMRT scenes use 1 to 64 samples; a soft area light looks smooth at 256");
